@@ -1,0 +1,24 @@
+// nerfstudio / instant-ngp `transforms.json`: per-frame camera-to-world 4x4 matrices in OpenGL
+// camera axes (x right, y up, z backwards), intrinsics shared at the top level or per frame.
+//
+// Conversions: R_opencv = R_opengl * diag(1, -1, -1). nerfstudio's cx, cy follow COLMAP's pixel
+// convention (pixel centres at +0.5), so 0.5 is subtracted on reading and added on writing.
+// An image's name is its `file_path` with a leading "./" and the directory common to all frames
+// (typically "images/") removed; that directory, relative to the JSON file, is the image root.
+#pragma once
+
+#include <string>
+
+#include "core/types.h"
+
+namespace raytime {
+
+// Errors name the file, the frame index and what was expected (e.g. a 3x3 transform_matrix).
+void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses);
+
+// Writes shared intrinsics at the top level when every image uses the same camera, per-frame
+// otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Atomic.
+void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
+                         const std::string& image_prefix = "images/");
+
+}  // namespace raytime

@@ -1,0 +1,75 @@
+// Rigid and similarity transforms, SO(3) exp/log and the Umeyama fit (SPEC §2, §6).
+//
+// Naming: a transform is named by its direction, `b_from_a` maps points in frame a to frame b.
+// A camera pose is `world_from_cam`: its rotation is the camera-to-world rotation R_i (columns are
+// the camera axes in world) and its translation is the camera centre O_i in world coordinates.
+// Quaternions are Eigen's: memory order (x, y, z, w), constructor order (w, x, y, z).
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <vector>
+
+namespace raytime {
+
+struct Rigid3 {
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+
+  Rigid3() = default;
+  Rigid3(const Eigen::Quaterniond& q, const Eigen::Vector3d& t) : rotation(q), translation(t) {}
+
+  Eigen::Vector3d operator*(const Eigen::Vector3d& x) const { return rotation * x + translation; }
+  Rigid3 operator*(const Rigid3& o) const {
+    return Rigid3(rotation * o.rotation, rotation * o.translation + translation);
+  }
+  Rigid3 Inverse() const {
+    const Eigen::Quaterniond inv = rotation.conjugate();
+    return Rigid3(inv, -(inv * translation));
+  }
+  Eigen::Matrix3d RotationMatrix() const { return rotation.toRotationMatrix(); }
+  Eigen::Matrix<double, 3, 4> Matrix3x4() const;
+};
+
+// x_b = scale * R * x_a + t.
+struct Sim3 {
+  double scale = 1.0;
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+
+  Eigen::Vector3d operator*(const Eigen::Vector3d& x) const {
+    return scale * (rotation * x) + translation;
+  }
+  // Applies the similarity to a camera pose world_from_cam: the centre moves as a point, the
+  // orientation is rotated; scale does not enter the rotation.
+  Rigid3 TransformPose(const Rigid3& world_from_cam) const;
+  Sim3 Inverse() const;
+};
+
+// Nearest rotation in Frobenius norm (SVD, determinant +1). Files carry 6 decimals; an
+// unprojected matrix alone reads as ~0.03° of error (SPEC §2).
+Eigen::Matrix3d Orthonormalize(const Eigen::Matrix3d& m);
+
+// SO(3) exponential of a rotation vector (axis * angle, radians) and its logarithm (shorter arc).
+Eigen::Matrix3d ExpSO3(const Eigen::Vector3d& omega);
+Eigen::Vector3d LogSO3(const Eigen::Matrix3d& rotation);
+
+// Angle of a rotation in radians, via atan2 of sin and cos so small angles keep full precision
+// (SPEC §6: not acos).
+double RotationAngle(const Eigen::Matrix3d& rotation);
+double RotationAngle(const Eigen::Quaterniond& rotation);
+// Angle between two rotations, radians.
+double RotationDistance(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);
+
+enum class AlignmentKind { kSim3, kSE3, kNone };
+
+// Least-squares transform mapping `source` points onto `target` (Umeyama 1991). kSE3 fixes the
+// scale at 1, kNone returns the identity. Requires >= 3 non-collinear points for kSim3/kSE3;
+// throws std::invalid_argument otherwise.
+Sim3 FitAlignment(const std::vector<Eigen::Vector3d>& source,
+                  const std::vector<Eigen::Vector3d>& target, AlignmentKind kind);
+
+double DegreesFromRadians(double radians);
+double RadiansFromDegrees(double degrees);
+
+}  // namespace raytime

@@ -1,0 +1,80 @@
+#include "core/types.h"
+
+#include <algorithm>
+#include <set>
+
+#include "core/error.h"
+
+namespace raytime {
+
+int ImageSet::Find(const std::string& name) const {
+  for (size_t i = 0; i < images.size(); ++i) {
+    if (images[i].name == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+const char* PoseRoleName(PoseRole role) {
+  switch (role) {
+    case PoseRole::kGroundTruth:
+      return "ground_truth";
+    case PoseRole::kPrior:
+      return "prior";
+    case PoseRole::kRefined:
+      return "refined";
+  }
+  return "unknown";
+}
+
+PoseRole PoseRoleFromName(const std::string& name) {
+  if (name == "ground_truth") return PoseRole::kGroundTruth;
+  if (name == "prior") return PoseRole::kPrior;
+  if (name == "refined") return PoseRole::kRefined;
+  throw InputError("unknown pose role '" + name + "' (expected ground_truth, prior or refined)");
+}
+
+NameJoin JoinNames(const std::vector<std::string>& left, const std::vector<std::string>& right) {
+  const std::set<std::string> l(left.begin(), left.end()), r(right.begin(), right.end());
+  NameJoin join;
+  std::set_intersection(l.begin(), l.end(), r.begin(), r.end(), std::back_inserter(join.both));
+  std::set_difference(l.begin(), l.end(), r.begin(), r.end(), std::back_inserter(join.only_left));
+  std::set_difference(r.begin(), r.end(), l.begin(), l.end(), std::back_inserter(join.only_right));
+  return join;
+}
+
+namespace {
+std::string FirstNames(const std::vector<std::string>& names) {
+  std::string out;
+  for (size_t i = 0; i < names.size() && i < 5; ++i) out += (i ? ", " : "") + names[i];
+  if (names.size() > 5) out += ", ...";
+  return out;
+}
+}  // namespace
+
+std::string NameJoin::Describe(const std::string& left, const std::string& right) const {
+  std::string out;
+  if (!only_left.empty()) {
+    out += std::to_string(only_left.size()) + " name(s) only in " + left + ": " +
+           FirstNames(only_left);
+  }
+  if (!only_right.empty()) {
+    if (!out.empty()) out += "; ";
+    out += std::to_string(only_right.size()) + " name(s) only in " + right + ": " +
+           FirstNames(only_right);
+  }
+  return out;
+}
+
+std::vector<std::string> Names(const PoseSet& poses) {
+  std::vector<std::string> names;
+  for (const auto& [name, pose] : poses.world_from_cam) names.push_back(name);
+  return names;
+}
+
+std::vector<std::string> Names(const ImageSet& images) {
+  std::vector<std::string> names;
+  for (const auto& image : images.images) names.push_back(image.name);
+  return names;
+}
+
+}  // namespace raytime
