@@ -1,0 +1,51 @@
+// Perturbation of ground-truth poses into a synthetic prior (SPEC §6; paper §4.8 "Basin of
+// convergence"). Deterministic for a given seed.
+#pragma once
+
+#include <string>
+
+#include "core/types.h"
+
+namespace raytime {
+
+struct PerturbationOptions {
+  // "iid": every frame rotated by exactly level_deg about a uniform random axis and its centre
+  // moved by level_deg * translation_per_deg in a uniform random direction.
+  // "random_walk": a per-frame random walk whose mean per-frame magnitude equals the i.i.d. one.
+  // "kidnap": frames split into three contiguous segments (name order), each moved rigidly by
+  // one i.i.d. draw at the level.
+  std::string mode = "iid";
+  double level_deg = 0.0;  // degrees
+  // Centre displacement per degree of rotation: metres when translation_unit is "metres", else a
+  // fraction of the median camera-to-scene distance (data README: 1.25 % per degree).
+  double translation_per_deg = 0.0125;
+  std::string translation_unit = "scene_fraction";  // "scene_fraction" or "metres"
+  // Median camera-to-scene distance, metres; 0 estimates it from the ground truth as the median
+  // distance from each centre to the point nearest all optical axes.
+  double scene_distance_m = 0.0;
+  int seed = 0;
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("mode", mode);
+    v("level_deg", level_deg);
+    v("translation_per_deg", translation_per_deg);
+    v("translation_unit", translation_unit);
+    v("scene_distance_m", scene_distance_m);
+    v("seed", seed);
+  }
+};
+
+struct PerturbationSummary {
+  double translation_m = 0.0;     // centre displacement magnitude used at this level, metres
+  double scene_distance_m = 0.0;  // given or estimated
+};
+
+// Validates the options (InputError naming the bad key) and returns the perturbed poses.
+PoseSet PerturbPoses(const PoseSet& ground_truth, const PerturbationOptions& options,
+                     PerturbationSummary* summary = nullptr);
+
+// Median distance from each camera centre to the least-squares point nearest all optical axes.
+double EstimateSceneDistance(const PoseSet& poses);
+
+}  // namespace raytime

@@ -1,0 +1,1 @@
+#include "evaluate/pose_errors.h"

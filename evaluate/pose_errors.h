@@ -1,0 +1,61 @@
+// Pose errors of an estimate against ground truth after Sim(3), SE(3) or no alignment
+// (SPEC §6; paper §4.1 Setup, §4.9 "Refinement in the prior's own frame").
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/geometry.h"
+#include "core/types.h"
+
+namespace raytime {
+
+struct PoseErrorOptions {
+  // "sim3" (Umeyama on camera centres, with scale: the standard protocol), "se3", or "none"
+  // (the prior's own metric frame).
+  std::string alignment = "sim3";
+  // Success: mean rotation error below this, degrees (paper §4.8: 1°).
+  double success_rotation_deg = 1.0;
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("alignment", alignment);
+    v("success_rotation_deg", success_rotation_deg);
+  }
+};
+
+struct FrameError {
+  std::string name;
+  double rotation_deg = 0.0;  // angle of R_gt^-1 R_est after alignment (atan2)
+  double centre_m = 0.0;      // |C_est - C_gt| after alignment, ground-truth units
+};
+
+struct PoseErrorSummary {
+  std::string alignment;
+  int num_frames = 0;
+  double mean_rotation_deg = 0.0;
+  double median_rotation_deg = 0.0;
+  double mean_centre_m = 0.0;
+  double median_centre_m = 0.0;
+  // Centre errors divided by the scene scale (median distance of the ground-truth centres from
+  // their centroid), so scenes of different size compare.
+  double scene_scale_m = 0.0;
+  double mean_centre_relative = 0.0;
+  double median_centre_relative = 0.0;
+  bool success = false;
+  Sim3 gt_from_estimate;  // the fitted alignment (identity for "none")
+  std::vector<FrameError> frames;
+  std::vector<std::string> only_in_estimate;      // reported, never silently dropped
+  std::vector<std::string> only_in_ground_truth;
+
+  nlohmann::json ToJson(bool with_frames = true) const;
+};
+
+AlignmentKind AlignmentKindFromName(const std::string& name);  // throws InputError
+
+// Joins by image name; needs at least 3 common frames for sim3/se3 (InputError otherwise).
+PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& ground_truth,
+                                   const PoseErrorOptions& options);
+
+}  // namespace raytime
