@@ -69,6 +69,16 @@ double RotationDistance(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b
   return RotationAngle(a.conjugate() * b);
 }
 
+namespace {
+// Umeyama's rotation is free about the line through collinear (or coincident) points, and
+// Eigen::umeyama then returns an arbitrary one instead of failing, so check the spread first.
+bool Collinear(const Eigen::Matrix3Xd& points) {
+  const Eigen::Matrix3Xd centred = points.colwise() - points.rowwise().mean();
+  const Eigen::Vector3d singular = Eigen::JacobiSVD<Eigen::Matrix3Xd>(centred).singularValues();
+  return !(singular(1) > 1e-9 * singular(0));
+}
+}  // namespace
+
 Sim3 FitAlignment(const std::vector<Eigen::Vector3d>& source,
                   const std::vector<Eigen::Vector3d>& target, AlignmentKind kind) {
   if (source.size() != target.size()) {
@@ -83,6 +93,9 @@ Sim3 FitAlignment(const std::vector<Eigen::Vector3d>& source,
   for (size_t i = 0; i < source.size(); ++i) {
     src.col(i) = source[i];
     dst.col(i) = target[i];
+  }
+  if (Collinear(src) || Collinear(dst)) {
+    throw std::invalid_argument("FitAlignment: points are collinear, the rotation is undetermined");
   }
   const Eigen::Matrix4d t = Eigen::umeyama(src, dst, kind == AlignmentKind::kSim3);
   Sim3 sim;
