@@ -1,1 +1,204 @@
-int main() { return 0; }
+// The `raytime` command line: `run` for YAML pipelines, one subcommand per stage, `evaluate` on
+// any two pose files, and `resize-scene` for making small sample scenes.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <filesystem>
+#include <iostream>
+
+#include "core/error.h"
+#include "core/formats/dataset.h"
+#include "core/hdf5_store.h"
+#include "core/version.h"
+#include "evaluate/pose_errors.h"
+#include "pipelines/pipeline.h"
+#include "pipelines/resize_scene.h"
+#include "pipelines/stage.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+// Reads the poses of `path` in `format`; "hdf5" reads pose set `set` (or the only one there).
+PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& format,
+                               const std::string& set) {
+  if (format != "hdf5") return ReadPoseFile(format, path);
+  const Hdf5Reader reader(path);
+  std::string name = set;
+  if (name.empty()) {
+    const auto names = reader.PoseSetNames();
+    if (names.size() != 1) {
+      ThrowInput(path, 0, "holds " + std::to_string(names.size()) +
+                              " pose sets: choose one with --est-set/--gt-set");
+    }
+    name = names.front();
+  }
+  return reader.ReadPoseSet(name);
+}
+
+int RunEvaluateCommand(const std::string& est, const std::string& est_format,
+                       const std::string& est_set, const std::string& gt,
+                       const std::string& gt_format, const std::string& gt_set,
+                       const std::string& align, double success_deg, bool as_json) {
+  PoseErrorOptions options;
+  options.alignment = align;
+  options.success_rotation_deg = success_deg;
+  const PoseErrorSummary errors =
+      ComputePoseErrors(ReadPosesForEvaluation(est, est_format, est_set),
+                        ReadPosesForEvaluation(gt, gt_format, gt_set), options);
+  if (as_json) {
+    std::cout << errors.ToJson().dump(2) << "\n";
+    return 0;
+  }
+  std::printf("%-24s %12s %12s\n", "frame", "rot [deg]", "centre [m]");
+  for (const auto& frame : errors.frames) {
+    std::printf("%-24s %12.5f %12.5f\n", frame.name.c_str(), frame.rotation_deg, frame.centre_m);
+  }
+  std::printf("alignment %s, %d frames: rotation mean %.5f median %.5f deg; centre mean %.5f "
+              "median %.5f m; success (< %.2f deg): %s\n",
+              errors.alignment.c_str(), errors.num_frames, errors.mean_rotation_deg,
+              errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m,
+              success_deg, errors.success ? "yes" : "no");
+  for (const auto& name : errors.only_in_estimate) {
+    std::printf("not scored: %s has no ground truth\n", name.c_str());
+  }
+  for (const auto& name : errors.only_in_ground_truth) {
+    std::printf("not scored: %s is missing from the estimate\n", name.c_str());
+  }
+  return 0;
+}
+
+// `raytime <stage> --in A.h5 --in B.h5 --out OUT.h5 [--option value ...]`.
+void AddStageCommand(CLI::App& app, const std::string& type, std::vector<std::string>* inputs,
+                     std::string* output, std::unique_ptr<Stage>* holder) {
+  *holder = CreateStage(type);
+  CLI::App* command = app.add_subcommand(type, (*holder)->description() + " (one stage alone)");
+  command->add_option("--in", *inputs, "HDF5 files from earlier stages (artifacts are looked up "
+                                       "in them, later files win)");
+  command->add_option("--out", *output, "HDF5 file to write (default: ./<stage>.h5)");
+  (*holder)->BindCli(command);
+}
+
+int RunStageAlone(Stage& stage, const std::vector<std::string>& inputs, std::string output) {
+  if (output.empty()) output = stage.type() + ".h5";
+  StageContext context;
+  context.output_path = output;
+  context.workdir = fs::path(output).parent_path().string();
+  if (context.workdir.empty()) context.workdir = ".";
+  for (const auto& input : inputs) {
+    const Hdf5Reader reader(input);
+    if (reader.HasImages()) context.artifacts[kArtifactImages] = input;
+    for (const auto& name : reader.PoseSetNames()) context.artifacts[PoseArtifact(name)] = input;
+    if (reader.HasFeatures()) context.artifacts["features"] = input;
+    if (reader.HasMatches()) context.artifacts["matches"] = input;
+  }
+  std::cout << stage.Run(context).dump(2) << "\n";
+  return 0;
+}
+
+int Main(int argc, char** argv) {
+  CLI::App app{"raytime: triangulation-free bundle adjustment from coarse pose priors"};
+  app.set_version_flag("--version", std::string(Version()));
+  app.require_subcommand(1);
+  bool quiet = false;
+  app.add_flag("-q,--quiet", quiet, "Only print warnings and errors");
+
+  std::string pipeline_path, workdir;
+  std::vector<std::string> overrides;
+  bool force = false;
+  CLI::App* run = app.add_subcommand("run", "Run a YAML pipeline (resumes: unchanged stages are "
+                                            "skipped)");
+  run->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
+  run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
+  run->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
+  run->add_flag("--force", force, "Rerun every stage even when unchanged");
+
+  std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
+                   align = "sim3";
+  double success_deg = 1.0;
+  bool as_json = false;
+  CLI::App* evaluate = app.add_subcommand("evaluate", "Score a pose set against ground truth, "
+                                                      "joined by image name");
+  evaluate->add_option("--est", est, "Estimated poses (file or folder)")->required();
+  evaluate->add_option("--est-format", est_format, "colmap, nerfstudio, tum, strecha or hdf5")
+      ->capture_default_str();
+  evaluate->add_option("--est-set", est_set, "Pose set name in an HDF5 file");
+  evaluate->add_option("--gt", gt, "Ground-truth poses (file or folder)")->required();
+  evaluate->add_option("--gt-format", gt_format, "colmap, nerfstudio, tum, strecha or hdf5")
+      ->capture_default_str();
+  evaluate->add_option("--gt-set", gt_set, "Pose set name in an HDF5 file");
+  evaluate->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
+  evaluate->add_option("--success-deg", success_deg, "Success threshold on the mean rotation "
+                                                     "error, degrees")
+      ->capture_default_str();
+  evaluate->add_flag("--json", as_json, "Print JSON instead of a table");
+
+  DatasetOptions resize_input;
+  ResizeSceneOptions resize_options;
+  std::string resize_output;
+  CLI::App* resize = app.add_subcommand("resize-scene", "Write a downsampled copy of a dataset in "
+                                                        "the Strecha layout");
+  resize->add_option("--format", resize_input.format, "Input dataset format")
+      ->capture_default_str();
+  resize->add_option("--root", resize_input.root, "Input dataset root")->required();
+  resize->add_option("--out", resize_output, "Output scene folder")->required();
+  resize->add_option("--width", resize_options.width, "Output width, pixels")
+      ->capture_default_str();
+  resize->add_option("--jpeg-quality", resize_options.jpeg_quality)->capture_default_str();
+
+  std::map<std::string, std::unique_ptr<Stage>> stages;
+  std::vector<std::string> stage_inputs;
+  std::string stage_output;
+  for (const auto& type : StageTypes()) {
+    // `raytime evaluate` takes pose files in any format (HDF5 included) instead of --in/--out.
+    if (type == "evaluate") continue;
+    AddStageCommand(app, type, &stage_inputs, &stage_output, &stages[type]);
+  }
+
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
+  if (quiet) spdlog::set_level(spdlog::level::warn);
+
+  if (run->parsed()) {
+    PipelineSpec spec = LoadPipeline(pipeline_path);
+    for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
+    RunOptions options;
+    options.workdir = workdir;
+    options.force = force;
+    RunPipeline(spec, options);
+    return 0;
+  }
+  if (evaluate->parsed()) {
+    return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align,
+                              success_deg, as_json);
+  }
+  if (resize->parsed()) {
+    const int count = ResizeScene(resize_input, resize_output, resize_options);
+    spdlog::info("resize-scene: wrote {} images to {}", count, resize_output);
+    return 0;
+  }
+  for (auto& [type, stage] : stages) {
+    if (app.got_subcommand(type)) {
+      auto* typed = stage.get();
+      typed->Configure(YAML::Node(YAML::NodeType::Map), "command line");
+      return RunStageAlone(*typed, stage_inputs, stage_output);
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace raytime
+
+int main(int argc, char** argv) {
+  try {
+    return raytime::Main(argc, argv);
+  } catch (const raytime::InputError& e) {
+    spdlog::error("{}", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return 1;
+  }
+}

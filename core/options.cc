@@ -34,11 +34,12 @@ std::string NearestKey(const std::string& key, const std::vector<std::string>& c
 }
 
 std::string UnknownKeyMessage(const std::string& what, const std::string& key,
-                              const std::vector<std::string>& candidates) {
-  std::string message = "unknown key '" + key + "' in " + what;
+                              const std::vector<std::string>& candidates,
+                              const std::string& noun) {
+  std::string message = "unknown " + noun + " '" + key + "' in " + what;
   const std::string nearest = NearestKey(key, candidates);
   if (!nearest.empty()) message += " (did you mean '" + nearest + "'?)";
-  message += "; valid keys: ";
+  message += "; valid " + noun + "s: ";
   for (size_t i = 0; i < candidates.size(); ++i) message += (i ? ", " : "") + candidates[i];
   return message;
 }

@@ -28,9 +28,10 @@ namespace raytime {
 int EditDistance(const std::string& a, const std::string& b);
 // The candidate closest to `key`, or "" when none is plausibly meant (distance > half the key).
 std::string NearestKey(const std::string& key, const std::vector<std::string>& candidates);
-// "unknown key 'x' (did you mean 'y'?; valid keys: a, b, c)".
+// "unknown key 'x' in <what> (did you mean 'y'?); valid keys: a, b, c". `noun` replaces "key".
 std::string UnknownKeyMessage(const std::string& what, const std::string& key,
-                              const std::vector<std::string>& candidates);
+                              const std::vector<std::string>& candidates,
+                              const std::string& noun = "key");
 
 // "name (line N)" context for YAML nodes; line is 1-based, 0 when the node has no mark.
 int YamlLine(const YAML::Node& node);

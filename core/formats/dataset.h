@@ -1,0 +1,55 @@
+// Datasets (images + intrinsics + optional ground truth) and pose files in any supported format,
+// so a pipeline can be pointed at other data with `--set dataset.format=... dataset.root=...`.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/types.h"
+
+namespace raytime {
+
+struct DatasetOptions {
+  // "strecha" (ROOT/images + ROOT/gt_dense_cameras), "colmap" (ROOT/images + a sparse model whose
+  // poses are the ground truth) or "nerfstudio" (ROOT/transforms.json).
+  std::string format = "strecha";
+  std::string root;
+  // Image folder relative to root for "colmap" (default "images").
+  std::string images = "images";
+  // COLMAP model folder relative to root; "" tries sparse/0, sparse, then root itself.
+  std::string model;
+  // nerfstudio file relative to root.
+  std::string transforms = "transforms.json";
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("format", format);
+    v("root", root);
+    v("images", images);
+    v("model", model);
+    v("transforms", transforms);
+  }
+};
+
+struct Dataset {
+  ImageSet images;
+  std::optional<PoseSet> ground_truth;
+  std::vector<std::string> files;  // every file the dataset was read from (for content hashes)
+};
+
+// Loads the dataset and checks that every image file exists (InputError naming the first
+// missing one and how many are missing). Images are sorted by name.
+Dataset LoadDataset(const DatasetOptions& options);
+
+// The formats accepted by ReadPoseFile / WritePoseFile.
+extern const std::vector<std::string> kPoseFileFormats;
+
+// Reads the poses of a file or folder: "colmap" (model folder), "nerfstudio" (transforms.json),
+// "tum" (trajectory), "strecha" (scene root). `images`, when given, supplies the names for TUM
+// rows (in name order) and must join completely with the poses read (InputError listing names
+// that do not match).
+PoseSet ReadPoseFile(const std::string& format, const std::string& path,
+                     const ImageSet* images = nullptr);
+
+}  // namespace raytime

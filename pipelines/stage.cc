@@ -1,0 +1,43 @@
+#include "pipelines/stage.h"
+
+#include "core/error.h"
+
+namespace raytime {
+
+const std::string& StageContext::Require(const std::string& artifact) const {
+  const auto it = artifacts.find(artifact);
+  if (it == artifacts.end()) {
+    std::string have;
+    for (const auto& [name, file] : artifacts) have += (have.empty() ? "" : ", ") + name;
+    throw InputError("this stage needs '" + artifact +
+                     "', which no earlier stage produced (available: " +
+                     (have.empty() ? "none" : have) + ")");
+  }
+  return it->second;
+}
+
+}  // namespace raytime
+
+#include "core/hdf5_store.h"
+#include "pipelines/stages.h"
+
+namespace raytime {
+
+std::vector<std::string> StageTypes() { return {"dataset", "prior", "evaluate", "export"}; }
+
+std::unique_ptr<Stage> CreateStage(const std::string& type) {
+  if (type == "dataset") return CreateDatasetStage();
+  if (type == "prior") return CreatePriorStage();
+  if (type == "evaluate") return CreateEvaluateStage();
+  if (type == "export") return CreateExportStage();
+  throw InputError(UnknownKeyMessage("the pipeline", type, StageTypes(), "stage"));
+}
+
+Provenance MakeProvenance(Stage& stage) {
+  Provenance provenance;
+  provenance.stage = stage.type();
+  provenance.options = stage.OptionsJson();
+  return provenance;
+}
+
+}  // namespace raytime

@@ -1,0 +1,19 @@
+// Factories of the stage types the pipelines know. Each stage lives in its own file.
+#pragma once
+
+#include <memory>
+
+#include "pipelines/stage.h"
+
+namespace raytime {
+
+std::unique_ptr<Stage> CreateDatasetStage();
+std::unique_ptr<Stage> CreatePriorStage();
+std::unique_ptr<Stage> CreateEvaluateStage();
+std::unique_ptr<Stage> CreateExportStage();
+
+// Provenance for a pose set or group written by `stage`.
+struct Provenance;
+Provenance MakeProvenance(Stage& stage);
+
+}  // namespace raytime

@@ -1,0 +1,219 @@
+// End-to-end tests of `raytime run` through the real binary: the demo on the sample scene, a
+// shared Strecha scene, stage-by-stage skipping, overrides, sweeps, and clear errors on bad input.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+// Runs `raytime ARGS` from the source directory, so the configs' relative paths resolve.
+CommandResult Raytime(const std::string& args) {
+  const std::string command =
+      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>&1";
+  CommandResult result;
+  FILE* pipe = popen(command.c_str(), "r");
+  char buffer[4096];
+  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+json ReadJson(const fs::path& path) {
+  std::ifstream in(path);
+  return json::parse(in);
+}
+
+std::vector<std::string> StageStatuses(const json& summary) {
+  std::vector<std::string> statuses;
+  for (const auto& stage : summary["stages"]) statuses.push_back(stage["status"]);
+  return statuses;
+}
+
+class PipelineTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    workdir_ = fs::temp_directory_path() /
+               ("raytime_pipeline_test_" + std::to_string(::getpid()) + "_" +
+                ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(workdir_);
+    fs::create_directories(workdir_);
+  }
+  void TearDown() override { fs::remove_all(workdir_); }
+
+  std::string WriteFile(const std::string& name, const std::string& contents) {
+    const fs::path path = workdir_ / name;
+    std::ofstream(path) << contents;
+    return path.string();
+  }
+
+  fs::path workdir_;
+};
+
+TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
+  const std::string run_dir = (workdir_ / "demo").string();
+  CommandResult first = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  ASSERT_EQ(first.exit_code, 0) << first.output;
+  const json summary = ReadJson(fs::path(run_dir) / "summary.json");
+  EXPECT_EQ(summary["status"], "ok");
+  EXPECT_EQ(StageStatuses(summary),
+            (std::vector<std::string>{"ran", "ran", "ran", "ran"}));
+  // The demo perturbs every frame by exactly 4°: with no alignment each frame is 4° off.
+  const json& absolute = summary["metrics"]["prior"]["none"];
+  EXPECT_NEAR(absolute["mean_rotation_deg"].get<double>(), 4.0, 1e-9);
+  EXPECT_NEAR(absolute["median_rotation_deg"].get<double>(), 4.0, 1e-9);
+  EXPECT_EQ(absolute["num_frames"], 11);
+  EXPECT_GT(summary["metrics"]["prior"]["sim3"]["mean_rotation_deg"].get<double>(), 0.5);
+  EXPECT_TRUE(fs::exists(fs::path(run_dir) / "prior" / "images.txt"));
+  EXPECT_TRUE(fs::exists(fs::path(run_dir) / "prior_transforms.json"));
+
+  CommandResult second = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  ASSERT_EQ(second.exit_code, 0) << second.output;
+  EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
+            (std::vector<std::string>{"skipped", "skipped", "skipped", "skipped"}));
+
+  // Changing the prior's seed reruns the prior and what depends on it, not the dataset.
+  CommandResult third =
+      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+  ASSERT_EQ(third.exit_code, 0) << third.output;
+  EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
+            (std::vector<std::string>{"skipped", "ran", "ran", "ran"}));
+
+  // A damaged intermediate is rebuilt rather than trusted.
+  fs::resize_file(fs::path(run_dir) / "prior.h5", 100);
+  CommandResult fourth =
+      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+  ASSERT_EQ(fourth.exit_code, 0) << fourth.output;
+  EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
+            (std::vector<std::string>{"skipped", "ran", "skipped", "skipped"}));
+}
+
+TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
+  const fs::path scene = fs::path(RAYTIME_SHARED_DATA_DIR) / "strecha" / "entry-P10";
+  if (!fs::exists(scene)) GTEST_SKIP() << "shared data not available at " << scene;
+  const std::string run_dir = (workdir_ / "entry").string();
+  CommandResult result =
+      Raytime("run configs/demo.yaml --workdir " + run_dir +
+              " --set dataset.format=strecha --set dataset.root=" + scene.string() +
+              " --set prior.level_deg=0");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadJson(fs::path(run_dir) / "summary.json");
+  EXPECT_EQ(summary["metrics"]["prior"]["none"]["num_frames"], 10);
+  EXPECT_NEAR(summary["metrics"]["prior"]["none"]["mean_rotation_deg"].get<double>(), 0.0, 1e-9);
+  EXPECT_NEAR(summary["metrics"]["prior"]["sim3"]["mean_centre_m"].get<double>(), 0.0, 1e-9);
+}
+
+TEST_F(PipelineTest, SweepCollectsOneRowPerRun) {
+  const std::string pipeline = WriteFile("sweep.yaml", R"(
+name: small-sweep
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {mode: iid}
+  - evaluate: {poses: [prior], alignments: [none]}
+sweep:
+  prior.level_deg: [0, 2]
+  prior.seed: [0, 1]
+)");
+  const std::string run_dir = (workdir_ / "sweep").string();
+  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir);
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json rows = ReadJson(fs::path(run_dir) / "sweep.json");
+  ASSERT_EQ(rows.size(), 4u);
+  for (const auto& row : rows) {
+    EXPECT_EQ(row["status"], "ok");
+    const double level = std::stod(row["prior.level_deg"].get<std::string>());
+    EXPECT_NEAR(row["metrics.prior.none.mean_rotation_deg"].get<double>(), level, 1e-9);
+  }
+  std::ifstream csv(fs::path(run_dir) / "sweep.csv");
+  int lines = 0;
+  for (std::string line; std::getline(csv, line);) ++lines;
+  EXPECT_EQ(lines, 5);
+}
+
+TEST_F(PipelineTest, UnknownStageNamesLineAndNearestStage) {
+  const std::string pipeline = WriteFile("bad_stage.yaml", R"(dataset: {format: strecha, root: x}
+stages:
+  - prior: {}
+  - evalute: {}
+)");
+  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("did you mean 'evaluate'"), std::string::npos) << result.output;
+}
+
+TEST_F(PipelineTest, UnknownKeyNamesLineAndNearestKey) {
+  const std::string pipeline = WriteFile("bad_key.yaml", R"(dataset: {format: strecha, root: x}
+stages:
+  - prior:
+      level_degs: 4
+)");
+  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("did you mean 'level_deg'"), std::string::npos) << result.output;
+
+  CommandResult override_result = Raytime("run configs/demo.yaml --workdir " +
+                                          (workdir_ / "w").string() + " --set prior.sed=3");
+  EXPECT_EQ(override_result.exit_code, 2);
+  EXPECT_NE(override_result.output.find("did you mean 'seed'"), std::string::npos)
+      << override_result.output;
+  EXPECT_FALSE(fs::exists(workdir_ / "w"));
+}
+
+TEST_F(PipelineTest, WrongValueTypeIsReported) {
+  const std::string pipeline = WriteFile("bad_type.yaml", R"(dataset: {format: strecha, root: x}
+stages:
+  - prior: {level_deg: four}
+)");
+  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(pipeline + ":3:"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("must be a number"), std::string::npos) << result.output;
+}
+
+TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
+  const fs::path scene = workdir_ / "scene";
+  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
+           fs::copy_options::recursive);
+  fs::remove(scene / "images" / "0003.jpg");
+  const fs::path run_dir = workdir_ / "run";
+  CommandResult result = Raytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                 " --set dataset.root=" + scene.string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find("0003.jpg"), std::string::npos) << result.output;
+  EXPECT_TRUE(result.output.find("missing image") != std::string::npos ||
+              result.output.find("image not found") != std::string::npos)
+      << result.output;
+  EXPECT_FALSE(fs::exists(run_dir / "dataset.h5"));
+  for (const auto& entry : fs::directory_iterator(run_dir)) {
+    EXPECT_EQ(entry.path().filename().string().find(".tmp"), std::string::npos) << entry.path();
+  }
+  const json summary = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(summary["status"], "failed");
+}
+
+TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
+  const std::string run_dir = (workdir_ / "demo").string();
+  ASSERT_EQ(Raytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
+  CommandResult result = Raytime("evaluate --est " + run_dir +
+                                 "/prior --est-format colmap --gt data/sample/fountain-P11 "
+                                 "--gt-format strecha --align none --json");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json errors = json::parse(result.output);
+  EXPECT_NEAR(errors["mean_rotation_deg"].get<double>(), 4.0, 1e-6);
+}
+
+}  // namespace
