@@ -28,9 +28,9 @@ struct ColmapImage {
   uint32_t image_id = 0;
   std::string name;
   uint32_t camera_id = 0;
-  Rigid3 cam_from_world;                   // COLMAP stores world-to-camera (qvec, tvec)
-  std::vector<Eigen::Vector2d> points2D;   // COLMAP pixel convention
-  std::vector<uint64_t> point3D_ids;       // kInvalidPoint3DId where not triangulated
+  Rigid3 cam_from_world;                  // COLMAP stores world-to-camera (qvec, tvec)
+  std::vector<Eigen::Vector2d> points2D;  // COLMAP pixel convention
+  std::vector<uint64_t> point3D_ids;      // kInvalidPoint3DId where not triangulated
 };
 
 constexpr uint64_t kInvalidPoint3DId = std::numeric_limits<uint64_t>::max();
@@ -73,8 +73,9 @@ ColmapCamera ColmapFromIntrinsics(const CameraIntrinsics& intrinsics, uint32_t c
 // Images, intrinsics and poses of a model. Image ids are not kept: names are the join key.
 void FromColmapModel(const ColmapModel& model, ImageSet* images, PoseSet* poses);
 // A model with one camera per ImageSet camera and the poses of the named images (images
-// without a pose are left out). Image ids are 1-based positions in `images` so they agree with
-// a database exported from the same ImageSet; points3D is empty.
+// without a pose are left out; a pose without an image is an InputError). Image ids are 1-based
+// positions in `images` so they agree with a database exported from the same ImageSet; points3D is
+// empty.
 ColmapModel ToColmapModel(const ImageSet& images, const PoseSet& poses);
 
 }  // namespace raytime

@@ -17,7 +17,8 @@ namespace raytime {
 void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses);
 
 // Writes shared intrinsics at the top level when every image uses the same camera, per-frame
-// otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Atomic.
+// otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Images
+// without a pose are left out; a pose without an image is an InputError. Atomic.
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
                          const std::string& image_prefix = "images/");
 

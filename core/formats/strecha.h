@@ -21,7 +21,8 @@ StrechaCamera ReadStrechaCamera(const std::string& path);
 void WriteStrechaCamera(const std::string& path, const StrechaCamera& camera);  // atomic
 
 // Reads every ROOT/gt_dense_cameras/*.camera; each must have its image in ROOT/images (a missing
-// image is an InputError naming it). Images with identical intrinsics share one camera.
+// image is an InputError naming it, as is an image without a camera file). Images with
+// identical intrinsics share one camera.
 void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground_truth);
 
 }  // namespace raytime
