@@ -1,0 +1,117 @@
+// Prior-free poses from the match graph (SPEC §4; paper §4.8 "Refinement without an external
+// prior"): relative poses per verified pair, the pre-solve fragility flag, wrong-pair detection,
+// rotation averaging, then centres by LUD translation averaging or the look-at seed.
+//
+// The bootstrap never reads a pose prior or ground truth; gauge fits onto a prior live in
+// prior_repair.h and take the prior as an explicit argument.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "bootstrap/focal_search.h"
+#include "bootstrap/look_at_seed.h"
+#include "bootstrap/relative_pose.h"
+#include "bootstrap/rotation_averaging.h"
+#include "bootstrap/translation_averaging.h"
+#include "bootstrap/view_graph.h"
+#include "bootstrap/wrong_pairs.h"
+#include "core/hdf5_store.h"
+#include "core/types.h"
+
+namespace raytime {
+
+struct BootstrapOptions {
+  // Centres: "lud" (translation averaging over the two-view directions) or "look_at" (each
+  // camera at look_at_distance behind its optical axis; assumes a commonly faced object).
+  std::string positions = "lud";
+  // Only pairs whose rotation-averaging residual is at most this contribute a translation
+  // direction (paper §4.8: the 5° gate removes symmetric-structure outliers), degrees.
+  double direction_gate_deg = 5.0;
+  // Solve the final poses on the pairs the wrong-pair detector keeps; false solves on every
+  // usable pair (the paper's recipe) and only reports the verdicts.
+  bool filter_pairs = true;
+  // Pre-solve fragility flag: mean pairwise rotation-averaging residual over all usable pairs
+  // above this is fragile (paper §4.8: the band separates fragile scenes at ~10°), degrees.
+  double fragility_threshold_deg = 10.0;
+  // Unknown intrinsics: search a shared focal per camera, principal point at the image centre,
+  // no distortion (paper §4.8).
+  bool focal_search = false;
+
+  RelativePoseOptions relative_pose;
+  RotationAveragingOptions rotation_averaging;
+  TranslationAveragingOptions translation_averaging;
+  LookAtSeedOptions look_at;
+  FocalSearchOptions focal;
+  WrongPairOptions wrong_pairs;
+
+  // Flat keys (YAML key = field name; the sub-structs' names are unique).
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("positions", positions);
+    v("direction_gate_deg", direction_gate_deg);
+    v("filter_pairs", filter_pairs);
+    v("fragility_threshold_deg", fragility_threshold_deg);
+    v("focal_search", focal_search);
+    relative_pose.VisitFields(v);
+    rotation_averaging.VisitFields(v);
+    translation_averaging.VisitFields(v);
+    look_at.VisitFields(v);
+    focal.VisitFields(v);
+    wrong_pairs.VisitFields(v);
+  }
+};
+
+// Throws std::invalid_argument naming the bad option.
+void ValidateBootstrapOptions(const BootstrapOptions& options);
+
+struct FragilityReport {
+  double mean_residual_deg = 0.0;  // the statistic (paper §4.8)
+  double median_residual_deg = 0.0;
+  int num_pairs = 0;
+  double threshold_deg = 0.0;
+  bool fragile = false;
+};
+
+struct BootstrapResult {
+  std::vector<ViewGraphEdge> edges;       // one per verified pair with inliers
+  std::vector<CameraIntrinsics> cameras;  // intrinsics used (searched when focal_search)
+  std::vector<FocalSearchResult> focal_searches;
+  int num_pairs_input = 0;
+
+  FragilityReport fragility;
+  // Per edge: residual of the all-pairs rotation averaging the fragility flag is computed from
+  // (NaN for unusable pairs or pairs outside the largest component).
+  std::vector<double> fragility_residual_deg;
+  PairClassification pairs;  // verdicts and scores, one per edge
+
+  // The final solve (on the kept pairs when filter_pairs).
+  RotationAveragingResult rotations;
+  TranslationAveragingResult translations;  // positions "lud"
+  LookAtSeedResult look_at;                 // positions "look_at"
+  // Per image: camera-to-world rotation and centre; registered = in the rotation component.
+  std::vector<Eigen::Matrix3d> world_from_cam;
+  std::vector<Eigen::Vector3d> centres;
+  std::vector<bool> registered;
+  int num_registered = 0;
+  // "lud": registered images outside the translation component, placed by the look-at rule
+  // around the point nearest the optical axes of the placed ones.
+  int num_centres_filled = 0;
+
+  double relative_pose_seconds = 0.0;
+  double global_seconds = 0.0;
+};
+
+// Global poses from an estimated view graph (fills every field from `fragility` on).
+void SolveGlobalPoses(int num_images, const BootstrapOptions& options, BootstrapResult* result);
+
+// The whole bootstrap from features and verified matches. Throws std::invalid_argument on
+// inconsistent input or options.
+BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                             const std::vector<PairMatches>& matches,
+                             const BootstrapOptions& options);
+
+// The registered images' poses, keyed by image name.
+PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result);
+
+}  // namespace raytime

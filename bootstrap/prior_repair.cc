@@ -1,0 +1,113 @@
+#include "bootstrap/prior_repair.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+#include "bootstrap/stats.h"
+
+namespace raytime {
+namespace {
+
+constexpr int kWeiszfeldIterations = 100;
+constexpr double kWeiszfeldFloorRad = 1e-9;
+
+}  // namespace
+
+Eigen::Matrix3d MedianRotation(const std::vector<Eigen::Matrix3d>& rotations) {
+  if (rotations.empty()) throw std::invalid_argument("MedianRotation: no rotations");
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  for (const auto& r : rotations) sum += r;
+  Eigen::Matrix3d mean = Orthonormalize(sum);
+  for (int it = 0; it < kWeiszfeldIterations; ++it) {
+    Eigen::Vector3d numerator = Eigen::Vector3d::Zero();
+    double denominator = 0.0;
+    for (const auto& r : rotations) {
+      const Eigen::Vector3d v = LogSO3(mean.transpose() * r);
+      const double w = 1.0 / std::max(v.norm(), kWeiszfeldFloorRad);
+      numerator += w * v;
+      denominator += w;
+    }
+    const Eigen::Vector3d step = numerator / denominator;
+    mean = Orthonormalize(mean * ExpSO3(step));
+    if (step.norm() < 1e-12) break;
+  }
+  return mean;
+}
+
+Sim3 FitGaugeToPriorCentres(const std::vector<Eigen::Vector3d>& bootstrap_centres,
+                            const std::vector<Eigen::Vector3d>& prior_centres) {
+  return FitAlignment(bootstrap_centres, prior_centres, AlignmentKind::kSim3);
+}
+
+PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
+                        PriorRepairSummary* summary) {
+  std::vector<Eigen::Matrix3d> offsets;
+  for (const auto& [name, pose] : bootstrap.world_from_cam) {
+    const auto it = prior.world_from_cam.find(name);
+    if (it == prior.world_from_cam.end()) continue;
+    offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
+  }
+  if (offsets.empty()) {
+    throw std::invalid_argument(
+        "rotations-only repair: the bootstrap registered none of the prior's images");
+  }
+  const Eigen::Matrix3d prior_from_bootstrap = MedianRotation(offsets);
+  PoseSet repaired = prior;
+  PriorRepairSummary s;
+  s.mode = "rotations";
+  std::vector<double> change;
+  for (auto& [name, pose] : repaired.world_from_cam) {
+    const auto it = bootstrap.world_from_cam.find(name);
+    if (it == bootstrap.world_from_cam.end()) {
+      ++s.num_kept_prior;
+      continue;
+    }
+    const Eigen::Quaterniond rotation(
+        Orthonormalize(prior_from_bootstrap * it->second.RotationMatrix()));
+    change.push_back(DegreesFromRadians(RotationDistance(rotation, pose.rotation)));
+    pose.rotation = rotation;
+    ++s.num_repaired;
+  }
+  s.median_rotation_change_deg = FiniteMedian(change);
+  if (summary) *summary = s;
+  return repaired;
+}
+
+PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
+                             PriorRepairSummary* summary) {
+  std::vector<Eigen::Vector3d> source, target;
+  for (const auto& [name, pose] : bootstrap.world_from_cam) {
+    const auto it = prior.world_from_cam.find(name);
+    if (it == prior.world_from_cam.end()) continue;
+    source.push_back(pose.translation);
+    target.push_back(it->second.translation);
+  }
+  if (source.size() < 3) {
+    throw std::invalid_argument("full replacement: the bootstrap registered " +
+                                std::to_string(source.size()) +
+                                " of the prior's images, the Sim(3) gauge fit needs 3");
+  }
+  const Sim3 prior_from_bootstrap = FitGaugeToPriorCentres(source, target);
+  PoseSet replaced = prior;
+  PriorRepairSummary s;
+  s.mode = "replace";
+  s.scale = prior_from_bootstrap.scale;
+  std::vector<double> change;
+  for (auto& [name, pose] : replaced.world_from_cam) {
+    const auto it = bootstrap.world_from_cam.find(name);
+    if (it == bootstrap.world_from_cam.end()) {
+      ++s.num_kept_prior;
+      continue;
+    }
+    const Rigid3 mapped = prior_from_bootstrap.TransformPose(it->second);
+    change.push_back(DegreesFromRadians(RotationDistance(mapped.rotation, pose.rotation)));
+    pose = mapped;
+    ++s.num_repaired;
+  }
+  s.median_rotation_change_deg = FiniteMedian(change);
+  if (summary) *summary = s;
+  return replaced;
+}
+
+}  // namespace raytime

@@ -1,0 +1,50 @@
+// Gauge fits of bootstrap poses onto a given prior and the two repairs of a coarse prior (SPEC §4;
+// paper §4.8 "Basin of convergence": "Replacing the perturbed prior's rotations with
+// match-graph-averaged ones [...] and the prior translations kept, recovers 20 of 20 runs at 32°
+// [...] and full bootstrap replacement does the same at 64°").
+//
+// These are the only bootstrap functions that see a prior, and only as an explicit argument: the
+// bootstrap itself is computed from the match graph alone.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "core/geometry.h"
+#include "core/types.h"
+
+namespace raytime {
+
+// L1 (geodesic median) mean of rotations by Weiszfeld iterations in the tangent space (Hartley
+// et al., "L1 rotation averaging using the Weiszfeld algorithm", CVPR 2011), started from the
+// chordal mean. Robust to a minority of grossly wrong members. Throws on an empty list.
+Eigen::Matrix3d MedianRotation(const std::vector<Eigen::Matrix3d>& rotations);
+
+// Similarity mapping bootstrap centres onto prior centres (Umeyama, with scale), the gauge of a
+// bootstrap seed when a prior exists. Throws std::invalid_argument for fewer than 3 pairs or
+// collinear centres.
+Sim3 FitGaugeToPriorCentres(const std::vector<Eigen::Vector3d>& bootstrap_centres,
+                            const std::vector<Eigen::Vector3d>& prior_centres);
+
+struct PriorRepairSummary {
+  std::string mode;        // "rotations" or "replace"
+  int num_repaired = 0;    // images whose pose came from the bootstrap
+  int num_kept_prior = 0;  // images the bootstrap did not register: prior pose kept
+  double scale = 1.0;      // "replace": scale of the Sim(3) gauge fit
+  // Median angle between the repaired and the given prior rotations, degrees.
+  double median_rotation_change_deg = 0.0;
+};
+
+// Rotations-only repair: every registered image gets its averaged rotation, mapped into the
+// prior's frame by the median of R_prior_i R_bootstrap_i^T, and keeps its prior centre.
+PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
+                        PriorRepairSummary* summary = nullptr);
+
+// Full replacement: bootstrap poses mapped into the prior's frame by the Sim(3) fit of their
+// centres onto the prior centres. Needs >= 3 registered, non-collinear centres
+// (std::invalid_argument otherwise).
+PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
+                             PriorRepairSummary* summary = nullptr);
+
+}  // namespace raytime

@@ -1,0 +1,167 @@
+#include "bootstrap/relative_pose.h"
+
+#include <opengv/relative_pose/CentralRelativeAdapter.hpp>
+#include <opengv/sac/Ransac.hpp>
+#include <opengv/sac_problems/relative_pose/CentralRelativePoseSacProblem.hpp>
+#include <opengv/sac_problems/relative_pose/RotationOnlySacProblem.hpp>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "bootstrap/stats.h"
+#include "core/geometry.h"
+
+namespace raytime {
+namespace {
+
+using SacProblem = opengv::sac_problems::relative_pose::CentralRelativePoseSacProblem;
+using RotationSacProblem = opengv::sac_problems::relative_pose::RotationOnlySacProblem;
+
+SacProblem::algorithm_t AlgorithmFromName(const std::string& name) {
+  if (name == "stewenius") return SacProblem::STEWENIUS;
+  if (name == "nister") return SacProblem::NISTER;
+  throw std::invalid_argument("relative_pose.algorithm must be 'stewenius' or 'nister', got '" +
+                              name + "'");
+}
+
+}  // namespace
+
+void ValidateRelativePoseOptions(const RelativePoseOptions& options) {
+  AlgorithmFromName(options.algorithm);
+  if (!(options.max_error_px > 0)) {
+    throw std::invalid_argument("relative_pose.max_error_px must be > 0");
+  }
+  if (options.max_iterations < 1) {
+    throw std::invalid_argument("relative_pose.max_iterations must be >= 1");
+  }
+  if (!(options.confidence > 0 && options.confidence < 1)) {
+    throw std::invalid_argument("relative_pose.confidence must be in (0, 1)");
+  }
+  // Eight correspondences is OpenGV's five-point sample (5 + 3 for disambiguation).
+  if (options.min_inliers < 8)
+    throw std::invalid_argument("relative_pose.min_inliers must be >= 8");
+  if (!(options.pure_rotation_ratio > 0)) {
+    throw std::invalid_argument("relative_pose.pure_rotation_ratio must be > 0");
+  }
+  if (!(options.min_parallax_deg >= 0)) {
+    throw std::invalid_argument("relative_pose.min_parallax_deg must be >= 0");
+  }
+}
+
+RelativePoseResult EstimateRelativePose(const Eigen::Matrix3Xd& bearings1,
+                                        const Eigen::Matrix3Xd& bearings2, double focal_px,
+                                        const RelativePoseOptions& options) {
+  ValidateRelativePoseOptions(options);
+  if (bearings1.cols() != bearings2.cols()) {
+    throw std::invalid_argument("EstimateRelativePose: bearing sets differ in size");
+  }
+  if (!(focal_px > 0)) throw std::invalid_argument("EstimateRelativePose: focal_px must be > 0");
+  RelativePoseResult result;
+  const int n = static_cast<int>(bearings1.cols());
+  if (n < options.min_inliers) {
+    result.status = PairStatus::kTooFewInliers;
+    return result;
+  }
+
+  // The adapter keeps references (PLATFORM.md): these vectors outlive every use below.
+  opengv::bearingVectors_t rays1(n), rays2(n);
+  for (int k = 0; k < n; ++k) {
+    rays1[k] = bearings1.col(k).normalized();
+    rays2[k] = bearings2.col(k).normalized();
+  }
+  opengv::relative_pose::CentralRelativeAdapter adapter(rays1, rays2);
+  const double angle = std::atan(options.max_error_px / focal_px);
+
+  // Five-point essential matrix. OpenGV's model is cam1_from_cam2 (X1 = R X2 + t). RANSAC does
+  // not polish (PLATFORM.md); the polish is kept only when it loses no inlier, since the
+  // non-linear step can wander on near-degenerate pairs.
+  auto problem = std::make_shared<SacProblem>(adapter, AlgorithmFromName(options.algorithm),
+                                              /*randomSeed=*/false);
+  opengv::sac::Ransac<SacProblem> ransac;
+  ransac.sac_model_ = problem;
+  ransac.threshold_ = 2.0 * (1.0 - std::cos(angle));
+  ransac.max_iterations_ = options.max_iterations;
+  ransac.probability_ = options.confidence;
+  bool essential = ransac.computeModel();
+  opengv::transformation_t model = opengv::transformation_t::Zero();
+  std::vector<int> inliers;
+  if (essential) {
+    result.ransac_iterations = ransac.iterations_;
+    model = ransac.model_coefficients_;
+    inliers = ransac.inliers_;
+    opengv::transformation_t polished;
+    problem->optimizeModelCoefficients(inliers, model, polished);
+    if (polished.allFinite() && polished.col(3).norm() > 0) {
+      std::vector<int> polished_inliers;
+      problem->selectWithinDistance(polished, ransac.threshold_, polished_inliers);
+      if (polished_inliers.size() >= inliers.size()) {
+        model = polished;
+        inliers = std::move(polished_inliers);
+        result.polished = true;
+      }
+    }
+    essential = model.allFinite() && model.col(3).norm() > 0;
+  }
+  result.essential_inliers = essential ? static_cast<int>(inliers.size()) : 0;
+
+  // Rotation-only model: under a (near-)pure rotation the five-point problem is degenerate and
+  // its RANSAC scoring, which triangulates nearly parallel rays, is unreliable; this model needs
+  // no baseline. Its criterion is the single angle 1 - cos(ray 1, R ray 2), so the threshold
+  // allows the sum of the two per-image errors.
+  auto rotation_problem = std::make_shared<RotationSacProblem>(adapter, /*randomSeed=*/false);
+  opengv::sac::Ransac<RotationSacProblem> rotation_ransac;
+  rotation_ransac.sac_model_ = rotation_problem;
+  rotation_ransac.threshold_ = 1.0 - std::cos(2.0 * angle);
+  rotation_ransac.max_iterations_ = options.max_iterations;
+  rotation_ransac.probability_ = options.confidence;
+  Eigen::Matrix3d rotation_model = Eigen::Matrix3d::Identity();
+  std::vector<int> rotation_inliers;
+  if (rotation_ransac.computeModel()) {
+    rotation_problem->optimizeModelCoefficients(
+        rotation_ransac.inliers_, rotation_ransac.model_coefficients_, rotation_model);
+    rotation_problem->selectWithinDistance(rotation_model, rotation_ransac.threshold_,
+                                           rotation_inliers);
+    rotation_model = Orthonormalize(rotation_model);
+  }
+  result.rotation_inliers = static_cast<int>(rotation_inliers.size());
+
+  const bool rotation_explains_all =
+      result.rotation_inliers > 0 &&
+      result.rotation_inliers >= options.pure_rotation_ratio * result.essential_inliers;
+  if (!essential && !rotation_explains_all) return result;
+  Eigen::Matrix3d cam1_from_cam2;
+  if (rotation_explains_all) {
+    cam1_from_cam2 = rotation_model;
+    inliers = rotation_inliers;
+    result.translation = Eigen::Vector3d::Zero();
+  } else {
+    cam1_from_cam2 = Orthonormalize(model.leftCols<3>());
+    result.translation = -(cam1_from_cam2.transpose() * model.col(3)).normalized();
+  }
+  result.rotation = cam1_from_cam2.transpose();
+  result.inliers = inliers;
+
+  // Parallax is independent of the (possibly arbitrary) translation: under a pure rotation every
+  // ray 1 coincides with its rotated ray 2, whatever the estimated t.
+  std::vector<double> parallax;
+  parallax.reserve(inliers.size());
+  for (int k : inliers) {
+    const Eigen::Vector3d r2 = cam1_from_cam2 * rays2[k];
+    parallax.push_back(std::atan2(rays1[k].cross(r2).norm(), rays1[k].dot(r2)));
+  }
+  result.median_parallax_deg = DegreesFromRadians(FiniteMedian(std::move(parallax)));
+
+  if (static_cast<int>(inliers.size()) < options.min_inliers) {
+    result.status = PairStatus::kTooFewInliers;
+  } else if (rotation_explains_all || result.median_parallax_deg < options.min_parallax_deg) {
+    result.status = PairStatus::kPureRotation;
+  } else {
+    result.status = PairStatus::kValid;
+  }
+  return result;
+}
+
+}  // namespace raytime

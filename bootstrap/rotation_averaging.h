@@ -1,0 +1,64 @@
+// Global rotations from pairwise relative rotations (SPEC §4; paper §4.8 "Refinement without an
+// external prior": "a maximum-spanning-tree initial guess, then iteratively reweighted
+// least-squares averaging in the tangent space", after Chatterjee & Govindu, ICCV 2013).
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+namespace raytime {
+
+// One measured relative rotation between nodes i and j. With world_from_cam rotations R (camera
+// to world), the measurement is cam_j_from_cam_i = R_j^T R_i.
+struct RelativeRotation {
+  int i = 0;
+  int j = 0;
+  Eigen::Matrix3d cam_j_from_cam_i = Eigen::Matrix3d::Identity();
+  double weight = 1.0;  // spanning-tree weight (the pair's inlier count), > 0
+};
+
+struct RotationAveragingOptions {
+  // Chatterjee & Govindu's two stages: iterations of robust L1 averaging (IRLS with weights
+  // 1/|r|), which needs no outlier scale, then IRLS with the Geman-McClure loss at
+  // `robust_scale_deg` (their σ = 5°), which sharpens the solution on the inliers.
+  int l1_iterations = 30;
+  int irls_iterations = 30;
+  double robust_scale_deg = 5.0;  // degrees
+  // A stage stops when the largest tangent-space update is below this, degrees.
+  double rotation_tolerance_deg = 1e-5;
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("l1_iterations", l1_iterations);
+    v("irls_iterations", irls_iterations);
+    v("robust_scale_deg", robust_scale_deg);
+    v("rotation_tolerance_deg", rotation_tolerance_deg);
+  }
+};
+
+void ValidateRotationAveragingOptions(const RotationAveragingOptions& options);
+
+struct RotationAveragingResult {
+  // Per node: camera-to-world rotation R_i. Only nodes of the largest connected component are
+  // registered; the others keep the identity. Gauge: the best-connected node (largest weight sum)
+  // has the identity.
+  std::vector<Eigen::Matrix3d> world_from_cam;
+  std::vector<bool> registered;
+  int root = -1;
+  int num_registered = 0;
+  int num_edges_used = 0;  // edges inside the component
+  int l1_iterations = 0;   // performed
+  int irls_iterations = 0;
+  bool converged = false;
+  // Per input edge: angle of R_ji_measured^T R_j^T R_i in degrees (NaN outside the component).
+  std::vector<double> edge_residual_deg;
+  double mean_residual_deg = 0.0;  // over the component's edges
+  double median_residual_deg = 0.0;
+};
+
+// Throws std::invalid_argument on a node index out of range, a self-loop, a non-finite rotation
+// or a non-positive weight.
+RotationAveragingResult AverageRotations(int num_nodes, const std::vector<RelativeRotation>& edges,
+                                         const RotationAveragingOptions& options);
+
+}  // namespace raytime
