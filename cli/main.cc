@@ -113,6 +113,11 @@ int Main(int argc, char** argv) {
   run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
   run->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
   run->add_flag("--force", force, "Rerun every stage even when unchanged");
+  RunOptions run_options;
+  run->add_option("--jobs", run_options.jobs, "Concurrent sweep runs (default: number of cores)");
+  run->add_option("--cache-dir", run_options.cache_dir,
+                  "Stage outputs shared between runs, by content key (sweeps default to "
+                  "WORKDIR/cache)");
 
   std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
                    align = "sim3";
@@ -163,10 +168,9 @@ int Main(int argc, char** argv) {
   if (run->parsed()) {
     PipelineSpec spec = LoadPipeline(pipeline_path);
     for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
-    RunOptions options;
-    options.workdir = workdir;
-    options.force = force;
-    RunPipeline(spec, options);
+    run_options.workdir = workdir;
+    run_options.force = force;
+    RunPipeline(spec, run_options);
     return 0;
   }
   if (evaluate->parsed()) {

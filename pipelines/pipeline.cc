@@ -1,12 +1,17 @@
 #include "pipelines/pipeline.h"
 
+#include <fcntl.h>
 #include <spdlog/spdlog.h>
+#include <sys/file.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <thread>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -36,17 +41,17 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-PipelineStageSpec* FindStage(PipelineSpec* spec, const std::string& type) {
+PipelineStageSpec* FindStage(PipelineSpec* spec, const std::string& id) {
   for (auto& stage : spec->stages) {
-    if (stage.type == type) return &stage;
+    if (stage.id == id) return &stage;
   }
   return nullptr;
 }
 
-std::vector<std::string> StageNames(const PipelineSpec& spec) {
-  std::vector<std::string> names;
-  for (const auto& stage : spec.stages) names.push_back(stage.type);
-  return names;
+std::vector<std::string> StageIds(const PipelineSpec& spec) {
+  std::vector<std::string> ids;
+  for (const auto& stage : spec.stages) ids.push_back(stage.id);
+  return ids;
 }
 
 // Validates the options of one stage entry by configuring a throwaway stage.
@@ -62,17 +67,17 @@ void SetOption(PipelineSpec* spec, const std::string& dotted_key, const YAML::No
     throw InputError(source + " " + dotted_key + ": expected STAGE.KEY (e.g. dataset.root or "
                      "prior.level_deg)");
   }
-  const std::string type = dotted_key.substr(0, dot);
+  const std::string id = dotted_key.substr(0, dot);
   const std::string key = dotted_key.substr(dot + 1);
-  PipelineStageSpec* stage = FindStage(spec, type);
+  PipelineStageSpec* stage = FindStage(spec, id);
   if (!stage) {
     throw InputError(source + " " + dotted_key + ": " +
-                     UnknownKeyMessage("this pipeline", type, StageNames(*spec), "stage"));
+                     UnknownKeyMessage("this pipeline", id, StageIds(*spec), "stage"));
   }
-  const std::vector<std::string> keys = CreateStage(type)->OptionKeys();
+  const std::vector<std::string> keys = CreateStage(stage->type)->OptionKeys();
   if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
     throw InputError(source + " " + dotted_key + ": " +
-                     UnknownKeyMessage("stage '" + type + "'", key, keys));
+                     UnknownKeyMessage("stage '" + id + "'", key, keys));
   }
   stage->options = YAML::Clone(stage->options);
   if (!stage->options.IsMap()) stage->options = YAML::Node(YAML::NodeType::Map);
@@ -96,7 +101,48 @@ struct ArtifactSource {
   std::string stage_key;  // content key of the stage that wrote it
 };
 
-json RunOnce(const PipelineSpec& spec, const std::string& workdir, bool force) {
+// Exclusive lock on a cache key, held while one process computes or copies that stage, so
+// parallel sweep runs needing the same stage compute it once.
+class CacheLock {
+ public:
+  CacheLock(const std::string& cache_dir, const std::string& key) {
+    fs::create_directories(cache_dir);
+    fd_ = ::open((fs::path(cache_dir) / (key + ".lock")).c_str(), O_CREAT | O_RDWR, 0644);
+    if (fd_ >= 0) ::flock(fd_, LOCK_EX);
+  }
+  ~CacheLock() {
+    if (fd_ >= 0) ::close(fd_);  // releases the lock
+  }
+  CacheLock(const CacheLock&) = delete;
+  CacheLock& operator=(const CacheLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
+// Hard link where possible (the cache and the runs share a file system), copy otherwise; the
+// target appears atomically. Writers never modify an HDF5 file in place (they rename a new one
+// over it), so linked copies cannot change under a reader.
+void LinkOrCopy(const fs::path& from, const fs::path& to) {
+  WriteAtomically(to.string(), [&](const std::string& tmp) {
+    std::error_code error;
+    fs::create_hard_link(from, tmp, error);
+    if (error) fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+  });
+}
+
+struct StageRecord {
+  std::string key;
+  json summary;
+  double seconds = 0.0;
+};
+
+json RecordJson(const StageRecord& record) {
+  return {{"key", record.key}, {"summary", record.summary}, {"seconds", record.seconds},
+          {"finished_utc", UtcNow()}};
+}
+
+json RunOnce(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   const auto run_start = std::chrono::steady_clock::now();
   fs::create_directories(fs::path(workdir) / ".raytime");
   json summary = {{"raytime_version", Version()},
@@ -115,12 +161,14 @@ json RunOnce(const PipelineSpec& spec, const std::string& workdir, bool force) {
       std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
       stage->Configure(stage_spec.options, spec.path);
       const std::string tag = "[" + std::to_string(i + 1) + "/" +
-                              std::to_string(spec.stages.size()) + "] " + stage->type();
+                              std::to_string(spec.stages.size()) + "] " + stage_spec.id;
 
       StageContext context;
+      context.stage_id = stage_spec.id;
       context.workdir = workdir;
-      context.output_path = (fs::path(workdir) / (stage->type() + ".h5")).string();
-      json key_material = {{"type", stage->type()},
+      context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
+      // The key names the id too: "refine@gnc" writes pose set "refined@gnc", not "refined".
+      json key_material = {{"id", stage_spec.id},
                            {"version", Version()},
                            {"options", stage->OptionsJson()},
                            {"inputs", json::object()},
@@ -134,11 +182,12 @@ json RunOnce(const PipelineSpec& spec, const std::string& workdir, bool force) {
         key_material["external"][file] = HashFileContents(file);
       }
       const std::string key = HashBytes(key_material.dump());
-
       const std::string record_path =
-          (fs::path(workdir) / ".raytime" / (stage->type() + ".json")).string();
-      bool unchanged = !force && fs::exists(record_path) && fs::exists(context.output_path);
+          (fs::path(workdir) / ".raytime" / (stage_spec.id + ".json")).string();
+
+      // 1. This work directory already holds the result.
       json record;
+      bool unchanged = !options.force && fs::exists(record_path) && fs::exists(context.output_path);
       if (unchanged) {
         record = json::parse(ReadTextFile(record_path), nullptr, false);
         unchanged = !record.is_discarded() && record.value("key", "") == key;
@@ -155,7 +204,10 @@ json RunOnce(const PipelineSpec& spec, const std::string& workdir, bool force) {
           unchanged = false;
         }
       }
-      json entry = {{"type", stage->type()}, {"key", key}, {"options", stage->OptionsJson()}};
+      json entry = {{"id", stage_spec.id},
+                    {"type", stage_spec.type},
+                    {"key", key},
+                    {"options", stage->OptionsJson()}};
       if (unchanged) {
         spdlog::info("{}: inputs and options unchanged, skipped", tag);
         entry["status"] = "skipped";
@@ -163,25 +215,48 @@ json RunOnce(const PipelineSpec& spec, const std::string& workdir, bool force) {
         entry["summary"] = record["summary"];
         entry["previous_seconds"] = record["seconds"];
       } else {
-        spdlog::info("{}: {}", tag, stage->description());
-        const auto start = std::chrono::steady_clock::now();
-        json stage_summary = stage->Run(context);
-        const double seconds = SecondsSince(start);
-        spdlog::info("{}: done in {:.2f} s", tag, seconds);
-        record = {{"key", key}, {"summary", stage_summary}, {"seconds", seconds},
-                  {"finished_utc", UtcNow()}};
+        // 2. Another run computed it (sweeps share a cache); stages that write folders besides
+        // their HDF5 file always run.
+        const bool cacheable = !options.cache_dir.empty() && stage->ExtraOutputs().empty();
+        std::unique_ptr<CacheLock> lock;
+        const fs::path cached = fs::path(options.cache_dir) / key;
+        if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
+        if (cacheable && !options.force && fs::exists(cached / "record.json")) {
+          spdlog::info("{}: computed by another run, taken from the cache", tag);
+          record = json::parse(ReadTextFile((cached / "record.json").string()));
+          LinkOrCopy(cached / "output.h5", context.output_path);
+          entry["status"] = "cached";
+          entry["seconds"] = 0.0;
+          entry["previous_seconds"] = record["seconds"];
+        } else {
+          // 3. Run it.
+          spdlog::info("{}: {}", tag, stage->description());
+          const auto start = std::chrono::steady_clock::now();
+          StageRecord fresh{key, stage->Run(context), 0.0};
+          fresh.seconds = SecondsSince(start);
+          spdlog::info("{}: done in {:.2f} s", tag, fresh.seconds);
+          record = RecordJson(fresh);
+          entry["status"] = "ran";
+          entry["seconds"] = fresh.seconds;
+          if (cacheable) {
+            WriteDirectoryAtomically(cached.string(), [&](const std::string& dir) {
+              LinkOrCopy(context.output_path, fs::path(dir) / "output.h5");
+              WriteTextFileAtomically((fs::path(dir) / "record.json").string(), record.dump(2));
+            });
+          }
+        }
         WriteTextFileAtomically(record_path, record.dump(2));
-        entry["status"] = "ran";
-        entry["seconds"] = seconds;
-        entry["summary"] = stage_summary;
+        entry["summary"] = record["summary"];
         produced = ArtifactsIn(context.output_path);
       }
       for (const auto& artifact : produced) {
         artifacts[artifact] = {context.output_path, key};
       }
-      if (entry["summary"].contains("metrics")) summary["metrics"].update(entry["summary"]["metrics"]);
+      if (entry["summary"].contains("metrics")) {
+        summary["metrics"].update(entry["summary"]["metrics"]);
+      }
       if (entry["summary"].contains("guardrails")) {
-        summary["guardrails"][stage->type()] = entry["summary"]["guardrails"];
+        summary["guardrails"][stage_spec.id] = entry["summary"]["guardrails"];
       }
       summary["stages"].push_back(entry);
     }
@@ -256,7 +331,60 @@ void WriteSweepTables(const std::string& workdir, const json& rows) {
   WriteTextFileAtomically((fs::path(workdir) / "sweep.json").string(), rows.dump(2));
 }
 
-json RunSweep(const PipelineSpec& spec, const std::string& workdir, bool force) {
+// A sweep run in its own process: `raytime run RUN_DIR/pipeline.yaml --workdir RUN_DIR
+// --cache-dir CACHE`, output to RUN_DIR/run.log.
+pid_t SpawnRun(const std::string& run_dir, const std::string& cache_dir, bool force) {
+  const std::string self = fs::read_symlink("/proc/self/exe").string();
+  const std::string pipeline = (fs::path(run_dir) / "pipeline.yaml").string();
+  const std::string log = (fs::path(run_dir) / "run.log").string();
+  std::vector<std::string> args = {self,        "run",           pipeline, "--workdir",
+                                   run_dir,     "--cache-dir",   cache_dir};
+  if (force) args.push_back("--force");
+  const pid_t pid = ::fork();
+  if (pid < 0) throw std::runtime_error("cannot start a sweep run: fork failed");
+  if (pid == 0) {
+    const int fd = ::open(log.c_str(), O_CREAT | O_WRONLY | O_TRUNC, 0644);
+    if (fd >= 0) {
+      ::dup2(fd, STDOUT_FILENO);
+      ::dup2(fd, STDERR_FILENO);
+      ::close(fd);
+    }
+    std::vector<char*> argv;
+    for (auto& arg : args) argv.push_back(arg.data());
+    argv.push_back(nullptr);
+    ::execv(self.c_str(), argv.data());
+    ::_exit(127);
+  }
+  return pid;
+}
+
+json SweepRow(const std::string& label, const json& params, const std::string& run_dir) {
+  json row = {{"run", label}};
+  row.update(params);
+  const fs::path summary_path = fs::path(run_dir) / "summary.json";
+  const json summary = fs::exists(summary_path)
+                           ? json::parse(ReadTextFile(summary_path.string()), nullptr, false)
+                           : json();
+  if (summary.is_discarded() || summary.is_null()) {
+    row["status"] = "failed";
+    row["error"] = "no summary.json (see " + run_dir + "/run.log)";
+    return row;
+  }
+  row["status"] = summary.value("status", "failed");
+  if (summary.contains("error")) row["error"] = summary["error"];
+  row["seconds"] = summary.value("seconds", 0.0);
+  for (const auto& stage : summary["stages"]) {
+    // Time of the stage's own computation, also when this run reused it.
+    const double seconds = stage["status"] == "ran" ? stage["seconds"].get<double>()
+                                                    : stage.value("previous_seconds", 0.0);
+    row["seconds." + stage["id"].get<std::string>()] = seconds;
+  }
+  FlattenScalars(summary["metrics"], "metrics", &row);
+  FlattenScalars(summary["guardrails"], "guardrails", &row);
+  return row;
+}
+
+json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   std::vector<std::vector<size_t>> combinations = {{}};
   for (const auto& [key, values] : spec.sweep) {
     std::vector<std::vector<size_t>> expanded;
@@ -268,39 +396,74 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, bool force) 
     }
     combinations = std::move(expanded);
   }
-  spdlog::info("sweep: {} runs", combinations.size());
-  const auto start = std::chrono::steady_clock::now();
-  json rows = json::array();
-  int failures = 0;
-  for (size_t r = 0; r < combinations.size(); ++r) {
-    PipelineSpec run = spec;
-    run.sweep.clear();
+  const int jobs = options.jobs > 0
+                       ? options.jobs
+                       : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const std::string cache_dir = options.cache_dir.empty()
+                                    ? (fs::path(workdir) / "cache").string()
+                                    : options.cache_dir;
+  spdlog::info("sweep: {} runs, {} at a time, cache {}", combinations.size(), jobs, cache_dir);
+
+  struct Run {
     std::string label;
-    json params = json::object();
+    std::string dir;
+    json params;
+  };
+  std::vector<Run> runs;
+  for (const auto& combination : combinations) {
+    PipelineSpec run_spec = spec;
+    run_spec.sweep.clear();
+    Run run;
+    run.params = json::object();
     for (size_t axis = 0; axis < spec.sweep.size(); ++axis) {
       const auto& [key, values] = spec.sweep[axis];
-      const YAML::Node& value = values[combinations[r][axis]];
-      SetOption(&run, key, value, "sweep");
-      label += (label.empty() ? "" : ",") + RunLabelPart(key, value);
-      params[key] = value.IsScalar() ? value.Scalar() : YAML::Dump(value);
+      const YAML::Node& value = values[combination[axis]];
+      SetOption(&run_spec, key, value, "sweep");
+      run.label += (run.label.empty() ? "" : ",") + RunLabelPart(key, value);
+      run.params[key] = value.IsScalar() ? value.Scalar() : YAML::Dump(value);
     }
-    const std::string run_dir = (fs::path(workdir) / "runs" / label).string();
-    spdlog::info("sweep run {}/{}: {}", r + 1, combinations.size(), label);
-    json row = {{"run", label}};
-    row.update(params);
-    try {
-      const json run_summary = RunOnce(run, run_dir, force);
-      row["status"] = "ok";
-      row["seconds"] = run_summary["seconds"];
-      FlattenScalars(run_summary["metrics"], "metrics", &row);
-    } catch (const std::exception& e) {
-      ++failures;
-      spdlog::error("sweep run {} failed: {}", label, e.what());
-      row["status"] = "failed";
-      row["error"] = e.what();
+    run.dir = (fs::path(workdir) / "runs" / run.label).string();
+    fs::create_directories(run.dir);
+    WriteTextFileAtomically((fs::path(run.dir) / "pipeline.yaml").string(),
+                            PipelineToYaml(run_spec));
+    runs.push_back(std::move(run));
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<json> rows(runs.size());
+  std::map<pid_t, size_t> running;
+  size_t next = 0, done = 0;
+  int failures = 0;
+  auto write_tables = [&]() {
+    json table = json::array();
+    for (const auto& row : rows) {
+      if (!row.is_null()) table.push_back(row);
     }
-    rows.push_back(row);
-    WriteSweepTables(workdir, rows);  // after every run, so an interrupted sweep keeps its rows
+    WriteSweepTables(workdir, table);
+  };
+  while (done < runs.size()) {
+    while (next < runs.size() && static_cast<int>(running.size()) < jobs) {
+      running[SpawnRun(runs[next].dir, cache_dir, options.force)] = next;
+      ++next;
+    }
+    int status = 0;
+    const pid_t pid = ::waitpid(-1, &status, 0);
+    if (pid < 0) throw std::runtime_error("sweep: waitpid failed");
+    const auto it = running.find(pid);
+    if (it == running.end()) continue;
+    const size_t index = it->second;
+    running.erase(it);
+    ++done;
+    rows[index] = SweepRow(runs[index].label, runs[index].params, runs[index].dir);
+    if (rows[index]["status"] != "ok") ++failures;
+    spdlog::info("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), runs[index].label,
+                 rows[index]["status"].get<std::string>(),
+                 rows[index].value("seconds", 0.0));
+    if (rows[index]["status"] != "ok") {
+      spdlog::error("sweep run {} failed: {}", runs[index].label,
+                    rows[index].value("error", std::string("see run.log")));
+    }
+    write_tables();  // after every run, so an interrupted sweep keeps its rows
   }
   json summary = {{"raytime_version", Version()}, {"pipeline", spec.path},
                   {"name", spec.name},            {"workdir", workdir},
@@ -309,8 +472,8 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, bool force) 
                   {"seconds", SecondsSince(start)}};
   WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
   if (failures) {
-    throw InputError(std::to_string(failures) + " of " + std::to_string(combinations.size()) +
-                     " sweep runs failed (see " + workdir + "/sweep.csv)");
+    throw InputError(std::to_string(failures) + " of " + std::to_string(runs.size()) +
+                     " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
   }
   return summary;
 }
@@ -338,7 +501,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   spec.name = root["name"] ? root["name"].as<std::string>() : fs::path(path).stem().string();
   spec.workdir = root["workdir"] ? root["workdir"].as<std::string>() : "";
   if (!root["dataset"]) ThrowInput(path, 0, "the pipeline has no 'dataset' section");
-  spec.stages.push_back({"dataset", root["dataset"], YamlLine(root["dataset"])});
+  spec.stages.push_back({"dataset", "dataset", root["dataset"], YamlLine(root["dataset"])});
 
   const YAML::Node stages = root["stages"];
   if (stages && !stages.IsSequence()) {
@@ -348,14 +511,23 @@ PipelineSpec LoadPipeline(const std::string& path) {
     PipelineStageSpec stage;
     stage.line = YamlLine(entry);
     if (entry.IsScalar()) {
-      stage.type = entry.as<std::string>();
+      stage.id = entry.as<std::string>();
       stage.options = YAML::Node(YAML::NodeType::Map);
     } else if (entry.IsMap() && entry.size() == 1) {
-      stage.type = entry.begin()->first.as<std::string>();
+      stage.id = entry.begin()->first.as<std::string>();
       stage.options = entry.begin()->second;
     } else {
       ThrowInput(path, stage.line,
                  "a stage entry must be a stage name or '- NAME: {options}' with one name");
+    }
+    stage.type = StageTypeOfId(stage.id);
+    const std::string suffix = stage.id.substr(stage.type.size());
+    if (!suffix.empty() &&
+        (suffix.size() < 2 || suffix.find_first_not_of(
+                                  "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-",
+                                  1) != std::string::npos)) {
+      ThrowInput(path, stage.line,
+                 "stage id '" + stage.id + "': after '@' use letters, digits, '_' or '-'");
     }
     if (stage.type == "dataset") {
       ThrowInput(path, stage.line, "'dataset' is configured in its own top-level section");
@@ -365,8 +537,10 @@ PipelineSpec LoadPipeline(const std::string& path) {
     if (std::find(types.begin(), types.end(), stage.type) == types.end()) {
       ThrowInput(path, stage.line, UnknownKeyMessage("the pipeline", stage.type, types, "stage"));
     }
-    if (FindStage(&spec, stage.type)) {
-      ThrowInput(path, stage.line, "stage '" + stage.type + "' appears twice");
+    if (FindStage(&spec, stage.id)) {
+      ThrowInput(path, stage.line,
+                 "stage '" + stage.id + "' appears twice (name a second one '" + stage.type +
+                     "@NAME')");
     }
     spec.stages.push_back(stage);
   }
@@ -394,6 +568,22 @@ PipelineSpec LoadPipeline(const std::string& path) {
   return spec;
 }
 
+std::string PipelineToYaml(const PipelineSpec& spec) {
+  YAML::Node root(YAML::NodeType::Map);
+  root["name"] = spec.name;
+  root["dataset"] = YAML::Clone(spec.stages.front().options);
+  YAML::Node stages(YAML::NodeType::Sequence);
+  for (size_t i = 1; i < spec.stages.size(); ++i) {
+    YAML::Node entry(YAML::NodeType::Map);
+    entry[spec.stages[i].id] = YAML::Clone(spec.stages[i].options);
+    stages.push_back(entry);
+  }
+  root["stages"] = stages;
+  YAML::Emitter out;
+  out << root;
+  return std::string(out.c_str()) + "\n";
+}
+
 void ApplyOverride(PipelineSpec* spec, const std::string& assignment) {
   const size_t eq = assignment.find('=');
   if (eq == std::string::npos) {
@@ -413,8 +603,8 @@ json RunPipeline(const PipelineSpec& spec, const RunOptions& options) {
   if (workdir.empty()) {
     throw InputError(spec.path + ": no work directory (set 'workdir' or pass --workdir)");
   }
-  if (!spec.sweep.empty()) return RunSweep(spec, workdir, options.force);
-  return RunOnce(spec, workdir, options.force);
+  if (!spec.sweep.empty()) return RunSweep(spec, workdir, options);
+  return RunOnce(spec, workdir, options);
 }
 
 }  // namespace raytime

@@ -11,8 +11,15 @@
 //     prior.level_deg: [0, 2, 4]
 //     prior.seed: [0, 1, 2]
 //
-// The `dataset` stage always runs first from the `dataset` section. Every stage writes
-// WORKDIR/<stage>.h5; a stage whose options and inputs (by content) are unchanged is skipped.
+// The `dataset` stage always runs first from the `dataset` section. A stage type may appear more
+// than once under distinct ids, `refine@plain` and `refine@gnc`; their pose sets are named
+// `refined@plain` and `refined@gnc`. Every stage writes WORKDIR/<id>.h5; a stage whose options
+// and inputs (by content) are unchanged is skipped.
+//
+// Sweep runs execute as separate processes (HDF5 is not thread-safe), up to `jobs` at once, each
+// in WORKDIR/runs/<label>/ with its resolved pipeline.yaml and run.log. They share a
+// content-addressed cache of stage outputs (WORKDIR/cache), so stages that are identical across
+// runs (a scene's features and matches) are computed once.
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -24,7 +31,8 @@
 namespace raytime {
 
 struct PipelineStageSpec {
-  std::string type;
+  std::string id;    // "refine", or "refine@gnc" when a type appears more than once
+  std::string type;  // "refine"
   YAML::Node options;  // mapping (possibly empty)
   int line = 0;        // where the entry is in the pipeline file
 };
@@ -47,9 +55,15 @@ PipelineSpec LoadPipeline(const std::string& path);
 void ApplyOverride(PipelineSpec* spec, const std::string& assignment);
 
 struct RunOptions {
-  std::string workdir;  // overrides the pipeline's workdir when not empty
-  bool force = false;   // rerun every stage even when unchanged
+  std::string workdir;    // overrides the pipeline's workdir when not empty
+  bool force = false;     // rerun every stage even when unchanged
+  std::string cache_dir;  // content-addressed stage outputs shared between runs ("" = none)
+  int jobs = 0;           // concurrent sweep runs; 0 = number of cores
 };
+
+// The pipeline as YAML (dataset, stages with their options; no workdir, no sweep): what a sweep
+// run executes, written into its run folder.
+std::string PipelineToYaml(const PipelineSpec& spec);
 
 // Runs the pipeline (or its sweep) and writes WORKDIR/summary.json, also when a stage fails
 // (then with "status": "failed" and the error, and the exception is rethrown).

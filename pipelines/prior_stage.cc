@@ -86,7 +86,8 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       }
     }
     Hdf5Writer writer(context.output_path);
-    writer.WritePoseSet("prior", prior, PoseRole::kPrior, MakeProvenance(*this));
+    writer.WritePoseSet(context.OutputPoseSetName("prior"), prior, PoseRole::kPrior,
+                        MakeProvenance(*this));
     writer.Commit();
     summary["num_poses"] = prior.size();
     return summary;

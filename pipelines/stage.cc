@@ -16,6 +16,15 @@ const std::string& StageContext::Require(const std::string& artifact) const {
   return it->second;
 }
 
+std::string StageContext::OutputPoseSetName(const std::string& base) const {
+  const size_t at = stage_id.find('@');
+  return at == std::string::npos ? base : base + stage_id.substr(at);
+}
+
+std::string StageTypeOfId(const std::string& stage_id) {
+  return stage_id.substr(0, stage_id.find('@'));
+}
+
 }  // namespace raytime
 
 #include "core/hdf5_store.h"

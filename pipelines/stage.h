@@ -20,6 +20,9 @@ inline constexpr const char* kArtifactImages = "images";
 inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
 
 struct StageContext {
+  // The stage's id in the pipeline: its type, or "type@name" when a pipeline runs one stage type
+  // more than once (two refine arms, say). Pose sets the stage writes carry the same suffix.
+  std::string stage_id;
   std::string workdir;
   // Artifact -> HDF5 file holding it (the latest writer's file).
   std::map<std::string, std::string> artifacts;
@@ -28,7 +31,12 @@ struct StageContext {
 
   // File holding `artifact`; InputError naming the artifact and the stage that should make it.
   const std::string& Require(const std::string& artifact) const;
+  // "refined" for stage "refine", "refined@gnc" for stage "refine@gnc".
+  std::string OutputPoseSetName(const std::string& base) const;
 };
+
+// The type of a stage id: "refine@gnc" -> "refine".
+std::string StageTypeOfId(const std::string& stage_id);
 
 class Stage {
  public:

@@ -140,6 +140,62 @@ sweep:
   int lines = 0;
   for (std::string line; std::getline(csv, line);) ++lines;
   EXPECT_EQ(lines, 5);
+
+  // Runs are separate processes sharing a content-addressed cache: the dataset stage, identical
+  // in all four runs, is computed once and taken from the cache by the others.
+  int dataset_ran = 0, dataset_cached = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(run_dir) / "runs")) {
+    EXPECT_TRUE(fs::exists(entry.path() / "pipeline.yaml")) << entry.path();
+    EXPECT_TRUE(fs::exists(entry.path() / "run.log")) << entry.path();
+    const json summary = ReadJson(entry.path() / "summary.json");
+    const std::string status = summary["stages"][0]["status"];
+    dataset_ran += status == "ran";
+    dataset_cached += status == "cached";
+  }
+  EXPECT_EQ(dataset_ran, 1);
+  EXPECT_EQ(dataset_cached, 3);
+
+  // Rerunning the sweep skips every stage of every run and reproduces the rows.
+  CommandResult again = Raytime("run " + pipeline + " --workdir " + run_dir);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  const json rows_again = ReadJson(fs::path(run_dir) / "sweep.json");
+  ASSERT_EQ(rows_again.size(), 4u);
+  for (size_t r = 0; r < rows.size(); ++r) {
+    EXPECT_EQ(rows_again[r]["metrics.prior.none.mean_rotation_deg"],
+              rows[r]["metrics.prior.none.mean_rotation_deg"]);
+  }
+  for (const auto& entry : fs::directory_iterator(fs::path(run_dir) / "runs")) {
+    for (const auto& stage : ReadJson(entry.path() / "summary.json")["stages"]) {
+      EXPECT_EQ(stage["status"], "skipped") << entry.path();
+    }
+  }
+}
+
+TEST_F(PipelineTest, OneStageTypeTwiceUnderDistinctIds) {
+  const std::string pipeline = WriteFile("arms.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior@small: {level_deg: 1, seed: 3}
+  - prior@large: {level_deg: 8, seed: 3}
+  - evaluate: {poses: ["prior@small", "prior@large"], alignments: [none]}
+)");
+  const std::string run_dir = (workdir_ / "arms").string();
+  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir +
+                                 " --set prior@large.level_deg=16");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json metrics = ReadJson(fs::path(run_dir) / "summary.json")["metrics"];
+  EXPECT_NEAR(metrics["prior@small"]["none"]["mean_rotation_deg"].get<double>(), 1.0, 1e-9);
+  EXPECT_NEAR(metrics["prior@large"]["none"]["mean_rotation_deg"].get<double>(), 16.0, 1e-9);
+
+  const std::string duplicate = WriteFile("duplicate.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {}
+  - prior: {}
+)");
+  CommandResult dup = Raytime("run " + duplicate + " --workdir " + run_dir);
+  EXPECT_EQ(dup.exit_code, 2);
+  EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
 
 TEST_F(PipelineTest, UnknownStageNamesLineAndNearestStage) {
