@@ -1,0 +1,56 @@
+#include "refine/guardrails.h"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace raytime {
+
+TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
+                                    const std::vector<Rigid3>& solution,
+                                    double rotation_threshold_deg, double translation_threshold) {
+  TrustRegionVerdict verdict;
+  verdict.enabled = true;
+  verdict.rotation_threshold_deg = rotation_threshold_deg;
+  verdict.translation_threshold = translation_threshold;
+  for (size_t i = 0; i < prior.size(); ++i) {
+    verdict.max_rotation_deg =
+        std::max(verdict.max_rotation_deg,
+                 DegreesFromRadians(RotationDistance(prior[i].rotation, solution[i].rotation)));
+    verdict.max_translation =
+        std::max(verdict.max_translation, (prior[i].translation - solution[i].translation).norm());
+  }
+  verdict.fired = verdict.max_rotation_deg > rotation_threshold_deg ||
+                  verdict.max_translation > translation_threshold;
+  return verdict;
+}
+
+WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
+                          double expected, double factor) {
+  WanderVerdict verdict;
+  verdict.enabled = true;
+  verdict.expected = expected;
+  verdict.threshold = factor * expected;
+  if (prior.empty()) return verdict;
+  std::vector<Eigen::Vector3d> prior_centres, solution_centres;
+  for (size_t i = 0; i < prior.size(); ++i) {
+    prior_centres.push_back(prior[i].translation);
+    solution_centres.push_back(solution[i].translation);
+  }
+  Sim3 prior_from_solution;
+  try {
+    prior_from_solution = FitAlignment(solution_centres, prior_centres, AlignmentKind::kSim3);
+  } catch (const std::invalid_argument&) {
+    prior_from_solution = Sim3();
+  }
+  std::vector<double> displacements;
+  for (size_t i = 0; i < prior.size(); ++i) {
+    displacements.push_back((prior_from_solution * solution_centres[i] - prior_centres[i]).norm());
+  }
+  const size_t mid = displacements.size() / 2;
+  std::nth_element(displacements.begin(), displacements.begin() + mid, displacements.end());
+  verdict.median_displacement = displacements[mid];
+  verdict.fired = verdict.median_displacement > verdict.threshold;
+  return verdict;
+}
+
+}  // namespace raytime

@@ -1,0 +1,28 @@
+// Posterior guardrails (paper §3.6 "Prior trust region", §4.3 room-scale wander test): checks of
+// a finished solve against the prior it started from. Plain Eigen; RefinePoses decides what to
+// return.
+#pragma once
+
+#include <vector>
+
+#include "refine/refine.h"
+
+namespace raytime {
+
+// Per-frame rotation angle and centre displacement of `solution` from `prior`, maxima over
+// frames, measured in the prior's own frame without alignment: the position prior anchors the
+// solve's gauge (a global similarity) to the prior's metric frame (§3.3), so a correct solve
+// has no gauge offset to remove, and a twist that aligned away would hide exactly the motion the
+// envelope bounds (castle, §4.11). Fires when either maximum exceeds its threshold.
+TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
+                                    const std::vector<Rigid3>& solution,
+                                    double rotation_threshold_deg, double translation_threshold);
+
+// Median per-frame centre displacement of `solution` from `prior` after a Sim(3) fit of the
+// solution's centres onto the prior's (Umeyama), so that a gauge drift of a room solve does not
+// count as wander; fires above factor × expected. With fewer than three non-collinear centres no
+// Sim(3) is determined and the displacement is measured without alignment.
+WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
+                          double expected, double factor);
+
+}  // namespace raytime

@@ -1,0 +1,93 @@
+#include "refine/ray_time_init.h"
+
+#include <algorithm>
+
+#include "core/camera.h"
+
+namespace raytime {
+namespace {
+
+double Median(std::vector<double> values) {
+  const size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + mid, values.end());
+  return values[mid];
+}
+
+// Rays that are parallel to within this (1 - cos²) carry no depth information.
+constexpr double kMinSinSquared = 1e-10;
+
+}  // namespace
+
+std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
+                                    const std::vector<Rigid3>& world_from_cam,
+                                    const CameraIntrinsics& intrinsics, const std::string& mode,
+                                    double constant, RayTimeInitSummary* summary) {
+  summary->mode = mode;
+  const size_t num_ray_times = layout.ray_time_observation.size();
+  if (mode == "constant" || num_ray_times == 0) {
+    summary->min_depth = summary->median_depth = summary->max_depth = constant;
+    return std::vector<double>(num_ray_times, constant);
+  }
+
+  // World-frame unit direction of every observation's ray under the prior.
+  std::vector<Eigen::Vector3d> directions(layout.observations.size());
+  for (size_t o = 0; o < layout.observations.size(); ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                             input.keypoints[obs.image](obs.keypoint, 1)};
+    double undistorted[2], ray[3];
+    UndistortPixel(intrinsics.params.data(), pixel, undistorted);
+    PixelToUnitRay(intrinsics.params.data(), undistorted, ray);
+    directions[o] = world_from_cam[obs.image].rotation * Eigen::Vector3d(ray[0], ray[1], ray[2]);
+  }
+
+  const size_t num_images = world_from_cam.size();
+  std::vector<std::vector<double>> depths(num_images);
+  std::vector<double> all_depths;
+  for (const CrossProjection& residual : layout.residuals) {
+    const int i = layout.observations[residual.source].image;
+    const int j = layout.observations[residual.target].image;
+    const Eigen::Vector3d& d1 = directions[residual.source];
+    const Eigen::Vector3d& d2 = directions[residual.target];
+    const Eigen::Vector3d w = world_from_cam[i].translation - world_from_cam[j].translation;
+    // Closest approach of O_i + s·d1 and O_j + u·d2 (unit directions).
+    const double b = d1.dot(d2);
+    const double denom = 1.0 - b * b;
+    if (denom < kMinSinSquared) continue;
+    const double d = d1.dot(w);
+    const double e = d2.dot(w);
+    const double s = (b * e - d) / denom;
+    const double u = (e - b * d) / denom;
+    if (s > 0.0 && u > 0.0) {
+      depths[i].push_back(s);
+      all_depths.push_back(s);
+    }
+  }
+  summary->num_depth_samples = static_cast<int>(all_depths.size());
+  const double global = all_depths.empty() ? constant : Median(all_depths);
+
+  std::vector<double> image_depth(num_images, global);
+  std::vector<bool> image_has_ray_time(num_images, false);
+  for (int o : layout.ray_time_observation) image_has_ray_time[layout.observations[o].image] = true;
+  std::vector<double> used_depths;
+  for (size_t i = 0; i < num_images; ++i) {
+    if (!image_has_ray_time[i]) continue;
+    if (depths[i].empty()) {
+      ++summary->images_with_fallback;
+    } else {
+      image_depth[i] = Median(std::move(depths[i]));
+    }
+    used_depths.push_back(image_depth[i]);
+  }
+  summary->min_depth = *std::min_element(used_depths.begin(), used_depths.end());
+  summary->max_depth = *std::max_element(used_depths.begin(), used_depths.end());
+  summary->median_depth = Median(used_depths);
+
+  std::vector<double> ray_times(num_ray_times);
+  for (size_t t = 0; t < num_ray_times; ++t) {
+    ray_times[t] = image_depth[layout.observations[layout.ray_time_observation[t]].image];
+  }
+  return ray_times;
+}
+
+}  // namespace raytime

@@ -1,0 +1,28 @@
+// Initial ray times (paper §3.2; SPEC §3 "Ray point").
+//
+// The paper starts every ray time at 1 m, sane for metric object and room captures. On deeper
+// scenes (the Strecha scenes are 8–25 m deep) that start is far from every point, and the first
+// iterations drag the poses along while the ray times travel out. "auto" starts each image's ray
+// times at a robust depth scale of that image instead: the median, over the residuals whose
+// source ray lies in the image, of the depth along that ray of its closest approach to the target
+// observation's ray under the prior poses, counting only pairs of rays that meet in front of
+// both cameras. This is a scale per image, not structure: no point is triangulated or kept, no
+// match is gated or culled, and every ray time of the image starts at the same value. An image
+// without a sample takes the median over all samples; no sample at all falls back to the
+// constant.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "refine/problem_layout.h"
+
+namespace raytime {
+
+// Initial value of every ray time of `layout`; `mode` is "auto" or "constant".
+std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
+                                    const std::vector<Rigid3>& world_from_cam,
+                                    const CameraIntrinsics& intrinsics, const std::string& mode,
+                                    double constant, RayTimeInitSummary* summary);
+
+}  // namespace raytime

@@ -1,0 +1,158 @@
+#include "refine/ray_time_problem.h"
+
+#include <ceres/product_manifold.h>
+
+#include "refine/cross_projection_cost.h"
+#include "refine/pose_prior_cost.h"
+
+namespace raytime {
+namespace {
+
+// Paper §3.3: ray times are bounded below at 1e-9, focal lengths positive.
+constexpr double kRayTimeLowerBound = 1e-9;
+constexpr double kFocalLowerBound = 1e-9;  // pixels
+
+using PoseManifold =
+    ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
+
+ceres::LossFunction* ScaledArctan(double scale_px2, double weight) {
+  return new ceres::ScaledLoss(new ceres::ArctanLoss(scale_px2), weight, ceres::TAKE_OWNERSHIP);
+}
+
+}  // namespace
+
+RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& layout,
+                               const std::vector<Rigid3>& prior_world_from_cam,
+                               const std::vector<Rigid3>& initial_world_from_cam,
+                               const CameraIntrinsics& initial_intrinsics,
+                               const std::vector<double>& initial_ray_times,
+                               const RayTimeProblemSettings& settings)
+    : intrinsics_info_(initial_intrinsics),
+      intrinsics_(initial_intrinsics.params),
+      ray_times_(initial_ray_times) {
+  const int num_cameras = static_cast<int>(initial_world_from_cam.size());
+  poses_.resize(kPoseBlockSize * num_cameras);
+  for (int i = 0; i < num_cameras; ++i) {
+    const Eigen::Quaterniond q = initial_world_from_cam[i].rotation.normalized();
+    double* pose = pose_block(i);
+    pose[0] = q.x();
+    pose[1] = q.y();
+    pose[2] = q.z();
+    pose[3] = q.w();
+    for (int r = 0; r < 3; ++r)
+      pose[kPoseCentreOffset + r] = initial_world_from_cam[i].translation[r];
+  }
+
+  if (settings.use_evaluation_cache) {
+    std::vector<ObservationCache::Source> sources(layout.observations.size());
+    for (size_t o = 0; o < layout.observations.size(); ++o) {
+      const LayoutObservation& obs = layout.observations[o];
+      sources[o].pixel[0] = input.keypoints[obs.image](obs.keypoint, 0);
+      sources[o].pixel[1] = input.keypoints[obs.image](obs.keypoint, 1);
+      sources[o].image = obs.image;
+      sources[o].ray_time = obs.ray_time;
+    }
+    cache_ =
+        std::make_unique<ObservationCache>(intrinsics_.data(), poses_.data(), ray_times_.data(),
+                                           std::move(sources), settings.num_threads);
+  }
+
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.evaluation_callback = cache_.get();
+  problem_ = std::make_unique<ceres::Problem>(problem_options);
+
+  pose_manifold_ = std::make_unique<PoseManifold>();
+  problem_->AddParameterBlock(intrinsics_.data(), kNumIntrinsics);
+  for (int i = 0; i < num_cameras; ++i) {
+    problem_->AddParameterBlock(pose_block(i), kPoseBlockSize, pose_manifold_.get());
+  }
+  for (size_t t = 0; t < ray_times_.size(); ++t) {
+    problem_->AddParameterBlock(ray_time_block(static_cast<int>(t)), 1);
+    problem_->SetParameterLowerBound(ray_time_block(static_cast<int>(t)), 0, kRayTimeLowerBound);
+  }
+
+  // Match term: 1/S Σ ρ(|r|²) with S scalar components (see the header).
+  const int num_scalar_residuals = 2 * static_cast<int>(layout.residuals.size());
+  match_loss_weight_ = num_scalar_residuals > 0 ? 2.0 / num_scalar_residuals : 0.0;
+  match_loss_ = std::make_unique<ceres::LossFunctionWrapper>(
+      ScaledArctan(settings.loss_scale_px2, match_loss_weight_), ceres::TAKE_OWNERSHIP);
+  std::vector<bool> camera_observed(num_cameras, false);
+  match_blocks_.reserve(layout.residuals.size());
+  for (const CrossProjection& residual : layout.residuals) {
+    const LayoutObservation& source = layout.observations[residual.source];
+    const LayoutObservation& target = layout.observations[residual.target];
+    camera_observed[source.image] = camera_observed[target.image] = true;
+    ceres::CostFunction* cost = nullptr;
+    if (cache_) {
+      cost = CachedCrossProjectionCost::Create(cache_.get(), residual.source, residual.target);
+    } else {
+      cost = CrossProjectionAutoDiffCost::Create(
+          input.keypoints[source.image].row(source.keypoint).transpose(),
+          input.keypoints[target.image].row(target.keypoint).transpose());
+    }
+    match_blocks_.push_back(problem_->AddResidualBlock(
+        cost, match_loss_.get(), intrinsics_.data(), pose_block(source.image),
+        ray_time_block(source.ray_time), pose_block(target.image)));
+  }
+
+  // Prior terms λp/N, λR/N (§3.3). A camera no match reaches is held at its start: its only
+  // term is the prior, whose minimum is the anchor.
+  const double position_weight = settings.position_weight / num_cameras;
+  const double orientation_weight = settings.orientation_weight / num_cameras;
+  for (int i = 0; i < num_cameras; ++i) {
+    prior_blocks_.push_back(problem_->AddResidualBlock(
+        PosePriorCost::Create(prior_world_from_cam[i], position_weight, orientation_weight),
+        nullptr, pose_block(i)));
+    if (!camera_observed[i]) problem_->SetParameterBlockConstant(pose_block(i));
+  }
+
+  // Self-calibration (§3.1): the shared intrinsics are constant unless some are refined; the
+  // others are held by a subset manifold.
+  const bool refined[kNumIntrinsics] = {
+      settings.refine_focal,           settings.refine_focal,      settings.refine_principal_point,
+      settings.refine_principal_point, settings.refine_distortion, settings.refine_distortion,
+      settings.refine_distortion,      settings.refine_distortion};
+  std::vector<int> held;
+  for (int c = 0; c < kNumIntrinsics; ++c) {
+    if (!refined[c]) held.push_back(c);
+  }
+  if (held.size() == kNumIntrinsics) {
+    problem_->SetParameterBlockConstant(intrinsics_.data());
+  } else {
+    if (!held.empty()) {
+      intrinsics_manifold_ = std::make_unique<ceres::SubsetManifold>(kNumIntrinsics, held);
+      problem_->SetManifold(intrinsics_.data(), intrinsics_manifold_.get());
+    }
+    if (settings.refine_focal) {
+      problem_->SetParameterLowerBound(intrinsics_.data(), kFx, kFocalLowerBound);
+      problem_->SetParameterLowerBound(intrinsics_.data(), kFy, kFocalLowerBound);
+    }
+  }
+}
+
+RayTimeProblem::~RayTimeProblem() = default;
+
+void RayTimeProblem::SetLossScale(double scale_px2) {
+  match_loss_->Reset(ScaledArctan(scale_px2, match_loss_weight_), ceres::TAKE_OWNERSHIP);
+}
+
+std::vector<Rigid3> RayTimeProblem::WorldFromCam() const {
+  const int num_cameras = static_cast<int>(poses_.size()) / kPoseBlockSize;
+  std::vector<Rigid3> poses(num_cameras);
+  for (int i = 0; i < num_cameras; ++i) {
+    const double* pose = poses_.data() + kPoseBlockSize * i;
+    poses[i].rotation = Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]).normalized();
+    poses[i].translation = Eigen::Vector3d(pose[4], pose[5], pose[6]);
+  }
+  return poses;
+}
+
+CameraIntrinsics RayTimeProblem::Intrinsics() const {
+  CameraIntrinsics intrinsics = intrinsics_info_;
+  intrinsics.params = intrinsics_;
+  return intrinsics;
+}
+
+}  // namespace raytime

@@ -1,0 +1,292 @@
+// RefinePoses: one pass (or the two passes of the staged room recipe, §4.3) of layout → ray-time
+// initialization → problem → GNC, then the posterior guardrails (§3.6, §4.3).
+#include "refine/refine.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <string>
+#include <unordered_map>
+
+#include "core/error.h"
+#include "refine/gnc_solver.h"
+#include "refine/guardrails.h"
+#include "refine/problem_layout.h"
+#include "refine/ray_time_init.h"
+#include "refine/ray_time_problem.h"
+
+namespace raytime {
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void ValidateInput(const RefineInput& input) {
+  const size_t n = input.prior_world_from_cam.size();
+  if (input.keypoints.size() != n) {
+    throw InputError("refine: " + std::to_string(n) + " prior poses but keypoints for " +
+                     std::to_string(input.keypoints.size()) + " images");
+  }
+  const auto& p = input.intrinsics.params;
+  if (!(p[kFx] > 0) || !(p[kFy] > 0)) {
+    throw InputError("refine: the shared intrinsics need positive focal lengths, got fx = " +
+                     std::to_string(p[kFx]) + ", fy = " + std::to_string(p[kFy]));
+  }
+}
+
+uint64_t KeyOf(const LayoutObservation& obs) {
+  return (static_cast<uint64_t>(obs.image) << 32) | static_cast<uint32_t>(obs.keypoint);
+}
+
+// What differs between the passes of one run.
+struct PassSettings {
+  std::string name;
+  int max_matches_per_pair = 0;
+  double orientation_weight = 0.0;
+  std::vector<double> scales;
+  bool refine_focal = false;
+  bool refine_principal_point = false;
+  bool refine_distortion = false;
+};
+
+// State carried from one pass to the next (the staged recipe's warm start).
+struct PassState {
+  std::vector<Rigid3> world_from_cam;
+  CameraIntrinsics intrinsics;
+  std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
+};
+
+RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
+                          const PassSettings& settings, const std::vector<Rigid3>& anchor,
+                          PassState* state) {
+  RefinePassSummary pass;
+  pass.name = settings.name;
+  pass.orientation_weight = settings.orientation_weight;
+  pass.self_calibration =
+      settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
+  const auto build_start = std::chrono::steady_clock::now();
+  const ProblemLayout layout =
+      options.parameterization == "anchored"
+          ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
+          : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
+  std::vector<double> ray_times =
+      InitialRayTimes(layout, input, state->world_from_cam, state->intrinsics,
+                      options.ray_time_init, options.ray_time_constant_m, &pass.ray_time_init);
+  // A later pass starts every ray time an earlier pass solved from its solved value.
+  for (size_t t = 0; t < ray_times.size(); ++t) {
+    const auto it = state->ray_time_by_observation.find(
+        KeyOf(layout.observations[layout.ray_time_observation[t]]));
+    if (it != state->ray_time_by_observation.end()) ray_times[t] = it->second;
+  }
+
+  RayTimeProblemSettings problem_settings;
+  problem_settings.position_weight = options.position_weight;
+  problem_settings.orientation_weight = settings.orientation_weight;
+  problem_settings.loss_scale_px2 = settings.scales.front();
+  problem_settings.refine_focal = settings.refine_focal;
+  problem_settings.refine_principal_point = settings.refine_principal_point;
+  problem_settings.refine_distortion = settings.refine_distortion;
+  problem_settings.use_evaluation_cache = options.use_evaluation_cache;
+  problem_settings.num_threads = options.Threads();
+  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->intrinsics, ray_times,
+                         problem_settings);
+  pass.build_seconds = SecondsSince(build_start);
+
+  pass.num_cameras = static_cast<int>(input.prior_world_from_cam.size());
+  pass.num_observations = static_cast<int>(layout.observations.size());
+  pass.num_ray_times = static_cast<int>(layout.ray_time_observation.size());
+  pass.num_tracks = layout.num_tracks;
+  pass.num_matches_input = layout.num_matches_input;
+  pass.num_matches_used = layout.num_matches_used;
+  pass.num_residuals = static_cast<int>(layout.residuals.size());
+  spdlog::info(
+      "refine: {}: {} cameras, {} of {} matches, {} residuals, {} ray times ({} init, "
+      "median depth {:.3g}), built in {:.2f} s",
+      pass.name, pass.num_cameras, pass.num_matches_used, pass.num_matches_input,
+      pass.num_residuals, pass.num_ray_times, pass.ray_time_init.mode,
+      pass.ray_time_init.median_depth, pass.build_seconds);
+
+  GncSolverSettings solver_settings;
+  solver_settings.scales = settings.scales;
+  solver_settings.max_iterations = options.max_iterations;
+  solver_settings.function_tolerance = options.function_tolerance;
+  solver_settings.num_threads = options.Threads();
+  const auto solve_start = std::chrono::steady_clock::now();
+  pass.stages = SolveGnc(&problem, solver_settings, &pass.elimination_group_size);
+  pass.solve_seconds = SecondsSince(solve_start);
+
+  state->world_from_cam = problem.WorldFromCam();
+  state->intrinsics = problem.Intrinsics();
+  for (size_t t = 0; t < problem.ray_times().size(); ++t) {
+    state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
+        problem.ray_times()[t];
+  }
+  return pass;
+}
+
+}  // namespace
+
+RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
+                          RefineOutput* output) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Validate();
+  ValidateInput(input);
+  RefineSummary summary;
+
+  std::vector<Rigid3> prior = input.prior_world_from_cam;
+  for (Rigid3& pose : prior) pose.rotation.normalize();
+  PassState state;
+  state.world_from_cam = prior;
+  state.intrinsics = input.intrinsics;
+
+  PassSettings nominal;
+  nominal.name = "solve";
+  nominal.max_matches_per_pair = options.max_matches_per_pair;
+  nominal.orientation_weight = options.orientation_weight;
+  nominal.scales = options.StageScales();
+  nominal.refine_focal = options.refine_focal;
+  nominal.refine_principal_point = options.refine_principal_point;
+  nominal.refine_distortion = options.refine_distortion;
+  if (options.staged) {
+    // §4.3: pass 1 poses only, light orientation anchor, capped matches, full GNC schedule ...
+    PassSettings pass1;
+    pass1.name = "pass1_poses";
+    pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
+    pass1.orientation_weight = options.stage1_orientation_weight;
+    pass1.scales = options.StageScales();
+    summary.passes.push_back(RunPass(input, options, pass1, prior, &state));
+    // ... pass 2 one warm solve at the nominal scale, priors re-anchored at the pass-1 poses.
+    PassSettings pass2 = nominal;
+    pass2.name = "pass2_self_calibration";
+    pass2.scales = {options.loss_scale_px2};
+    const std::vector<Rigid3> pass1_poses = state.world_from_cam;
+    summary.passes.push_back(RunPass(input, options, pass2, pass1_poses, &state));
+  } else {
+    summary.passes.push_back(RunPass(input, options, nominal, prior, &state));
+  }
+
+  for (const RefinePassSummary& pass : summary.passes) {
+    summary.build_seconds += pass.build_seconds;
+    summary.solve_seconds += pass.solve_seconds;
+    for (const GncStageSummary& stage : pass.stages) {
+      summary.total_iterations += stage.iterations;
+      summary.jacobian_seconds += stage.jacobian_seconds;
+      summary.solver_failed = summary.solver_failed || stage.termination == "FAILURE";
+    }
+  }
+  summary.initial_cost = summary.passes.front().stages.front().initial_cost;
+  summary.final_cost = summary.passes.back().stages.back().final_cost;
+
+  // Posterior guardrails against the original prior.
+  if (summary.solver_failed) summary.guardrails_fired.push_back("solver_failure");
+  if (options.trust_region) {
+    summary.trust_region =
+        CheckTrustRegion(prior, state.world_from_cam, options.trust_region_rotation_deg,
+                         options.trust_region_translation_m * options.length_unit_m);
+    if (summary.trust_region.fired) summary.guardrails_fired.push_back("trust_region");
+  }
+  if (options.wander_test) {
+    summary.wander =
+        CheckWander(prior, state.world_from_cam, options.wander_expected_m * options.length_unit_m,
+                    options.wander_factor);
+    if (summary.wander.fired) summary.guardrails_fired.push_back("wander");
+  }
+  summary.returned_prior = !summary.guardrails_fired.empty();
+
+  output->solved_world_from_cam = state.world_from_cam;
+  output->solved_intrinsics = state.intrinsics;
+  output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
+  output->intrinsics = summary.returned_prior ? input.intrinsics : state.intrinsics;
+  summary.total_seconds = SecondsSince(start);
+  if (summary.trust_region.enabled) {
+    spdlog::info(
+        "refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
+        "{:.4g}){}",
+        summary.trust_region.max_rotation_deg, summary.trust_region.max_translation,
+        summary.trust_region.rotation_threshold_deg, summary.trust_region.translation_threshold,
+        summary.trust_region.fired ? ": FIRED" : "");
+  }
+  if (summary.wander.enabled) {
+    spdlog::info(
+        "refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
+        "{:.4g}){}",
+        summary.wander.median_displacement, summary.wander.threshold,
+        summary.wander.fired ? ": FIRED" : "");
+  }
+  if (summary.returned_prior) {
+    spdlog::warn("refine: guardrail fired ({}): returning the prior",
+                 summary.guardrails_fired.front());
+  }
+  return summary;
+}
+
+nlohmann::json RefineSummary::ToJson() const {
+  using nlohmann::json;
+  json out;
+  out["passes"] = json::array();
+  for (const RefinePassSummary& pass : passes) {
+    json p = {{"name", pass.name},
+              {"num_cameras", pass.num_cameras},
+              {"num_observations", pass.num_observations},
+              {"num_ray_times", pass.num_ray_times},
+              {"num_tracks", pass.num_tracks},
+              {"num_matches_input", pass.num_matches_input},
+              {"num_matches_used", pass.num_matches_used},
+              {"num_residuals", pass.num_residuals},
+              {"elimination_group_size", pass.elimination_group_size},
+              {"orientation_weight", pass.orientation_weight},
+              {"self_calibration", pass.self_calibration},
+              {"ray_time_init",
+               {{"mode", pass.ray_time_init.mode},
+                {"num_depth_samples", pass.ray_time_init.num_depth_samples},
+                {"images_with_fallback", pass.ray_time_init.images_with_fallback},
+                {"min_depth", pass.ray_time_init.min_depth},
+                {"median_depth", pass.ray_time_init.median_depth},
+                {"max_depth", pass.ray_time_init.max_depth}}},
+              {"build_seconds", pass.build_seconds},
+              {"solve_seconds", pass.solve_seconds},
+              {"stages", json::array()}};
+    for (const GncStageSummary& s : pass.stages) {
+      p["stages"].push_back({{"loss_scale_px2", s.loss_scale_px2},
+                             {"iterations", s.iterations},
+                             {"successful_steps", s.successful_steps},
+                             {"initial_cost", s.initial_cost},
+                             {"final_cost", s.final_cost},
+                             {"seconds", s.seconds},
+                             {"jacobian_seconds", s.jacobian_seconds},
+                             {"residual_seconds", s.residual_seconds},
+                             {"linear_solver_seconds", s.linear_solver_seconds},
+                             {"jacobian_evaluations", s.jacobian_evaluations},
+                             {"termination", s.termination},
+                             {"message", s.message}});
+    }
+    out["passes"].push_back(p);
+  }
+  out["total_iterations"] = total_iterations;
+  out["initial_cost"] = initial_cost;
+  out["final_cost"] = final_cost;
+  out["timings"] = {{"build_seconds", build_seconds},
+                    {"solve_seconds", solve_seconds},
+                    {"jacobian_seconds", jacobian_seconds},
+                    {"total_seconds", total_seconds}};
+  out["guardrails"] = {{"fired", guardrails_fired},
+                       {"returned_prior", returned_prior},
+                       {"solver_failed", solver_failed},
+                       {"trust_region",
+                        {{"enabled", trust_region.enabled},
+                         {"fired", trust_region.fired},
+                         {"max_rotation_deg", trust_region.max_rotation_deg},
+                         {"max_translation", trust_region.max_translation},
+                         {"rotation_threshold_deg", trust_region.rotation_threshold_deg},
+                         {"translation_threshold", trust_region.translation_threshold}}},
+                       {"wander",
+                        {{"enabled", wander.enabled},
+                         {"fired", wander.fired},
+                         {"median_displacement", wander.median_displacement},
+                         {"expected", wander.expected},
+                         {"threshold", wander.threshold}}}};
+  return out;
+}
+
+}  // namespace raytime

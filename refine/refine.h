@@ -1,0 +1,136 @@
+// The ray-time refiner (SPEC §3; paper §3): refines camera poses (and optionally the shared
+// intrinsics) from a coarse pose prior and feature matches in one sparse solve without
+// triangulation. Entry point: RefinePoses. The solver never sees ground truth.
+//
+//   RefineInput input;             // intrinsics, prior world_from_cam, keypoints, matches
+//   RefineOutput output;
+//   const RefineSummary summary = RefinePoses(input, RefineOptions(), &output);
+//   if (summary.returned_prior) ...  // a guardrail fired: output holds the prior
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/geometry.h"
+#include "refine/refine_options.h"
+
+namespace raytime {
+
+// Matches of one image pair: rows of (keypoint index in image1, keypoint index in image2).
+struct PairMatchIndices {
+  int image1 = 0;
+  int image2 = 0;
+  Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
+};
+
+using Keypoints = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
+
+struct RefineInput {
+  CameraIntrinsics intrinsics;               // shared by every image (SPEC §2)
+  std::vector<Rigid3> prior_world_from_cam;  // one per image
+  std::vector<Keypoints> keypoints;          // per image: distorted pixels, OpenCV convention
+  std::vector<PairMatchIndices> pairs;       // indices into the images above
+};
+
+struct RefineOutput {
+  std::vector<Rigid3> world_from_cam;  // the solution, or the prior when a guardrail fired
+  CameraIntrinsics intrinsics;         // refined when self-calibrating, else the input's
+  // The solve's own result even when the prior was returned (for diagnostics).
+  std::vector<Rigid3> solved_world_from_cam;
+  CameraIntrinsics solved_intrinsics;
+};
+
+// One Ceres solve of the GNC schedule (§3.5).
+struct GncStageSummary {
+  double loss_scale_px2 = 0.0;
+  int iterations = 0;  // successful + unsuccessful steps
+  int successful_steps = 0;
+  double initial_cost = 0.0;  // Ceres cost = E of paper eq. (energy) at this stage's scale
+  double final_cost = 0.0;
+  double seconds = 0.0;
+  double jacobian_seconds = 0.0;  // Ceres: Jacobian evaluation (includes the cache)
+  double residual_seconds = 0.0;  // Ceres: residual-only evaluation
+  double linear_solver_seconds = 0.0;
+  int jacobian_evaluations = 0;
+  std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
+  std::string message;
+};
+
+struct RayTimeInitSummary {
+  std::string mode;              // "auto" or "constant"
+  int num_depth_samples = 0;     // positive closest-approach depths found (auto)
+  int images_with_fallback = 0;  // matched images without a sample (global median used)
+  // Per-image initial depth over the matched images (length units of the prior).
+  double min_depth = 0.0;
+  double median_depth = 0.0;
+  double max_depth = 0.0;
+};
+
+// One pass of the refiner: a problem object and its GNC stages (two passes in the staged room
+// recipe of §4.3, one otherwise).
+struct RefinePassSummary {
+  std::string name;  // "solve", or "pass1_poses" / "pass2_self_calibration"
+  int num_cameras = 0;
+  int num_observations = 0;        // distinct (image, keypoint) in the used matches
+  int num_ray_times = 0;           // = observations (per_observation) or tracks (anchored)
+  int num_tracks = 0;              // anchored only
+  int num_matches_input = 0;       // matches between distinct images in the input
+  int num_matches_used = 0;        // after the per-pair cap
+  int num_residuals = 0;           // 2-vector cross-projection residuals
+  int elimination_group_size = 0;  // Schur elimination group Ceres chose (should = ray times)
+  double orientation_weight = 0.0;
+  bool self_calibration = false;
+  RayTimeInitSummary ray_time_init;
+  std::vector<GncStageSummary> stages;
+  double build_seconds = 0.0;
+  double solve_seconds = 0.0;
+};
+
+// Prior trust region (§3.6): per-frame motion of the solution from the prior, prior's frame.
+struct TrustRegionVerdict {
+  bool enabled = false;
+  bool fired = false;
+  double max_rotation_deg = 0.0;
+  double max_translation = 0.0;  // prior length units
+  double rotation_threshold_deg = 0.0;
+  double translation_threshold = 0.0;  // trust_region_translation_m * length_unit_m
+};
+
+// Room-scale wander test (§4.3).
+struct WanderVerdict {
+  bool enabled = false;
+  bool fired = false;
+  double median_displacement = 0.0;  // after Sim(3) fit onto the prior, prior length units
+  double expected = 0.0;             // wander_expected_m * length_unit_m
+  double threshold = 0.0;            // wander_factor * expected
+};
+
+struct RefineSummary {
+  std::vector<RefinePassSummary> passes;
+  // Totals over passes and stages.
+  int total_iterations = 0;
+  double initial_cost = 0.0;  // first stage of the first pass
+  double final_cost = 0.0;    // last stage of the last pass (the nominal objective)
+  double build_seconds = 0.0;
+  double solve_seconds = 0.0;
+  double jacobian_seconds = 0.0;
+  double total_seconds = 0.0;
+  bool solver_failed = false;  // a Ceres solve reported FAILURE
+  TrustRegionVerdict trust_region;
+  WanderVerdict wander;
+  std::vector<std::string> guardrails_fired;  // "solver_failure", "trust_region", "wander"
+  bool returned_prior = false;
+
+  nlohmann::json ToJson() const;
+};
+
+// Refines input.prior_world_from_cam. Throws InputError on inconsistent input (sizes, keypoint
+// indices out of range, image indices out of range) or invalid options.
+RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
+                          RefineOutput* output);
+
+}  // namespace raytime

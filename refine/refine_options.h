@@ -1,0 +1,129 @@
+// Options of the ray-time refiner (SPEC §3, paper §3.2–3.7, §4.3). Defaults are the paper's
+// headline configuration; every field is listed once in VisitFields (YAML key = field name).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace raytime {
+
+struct RefineOptions {
+  // Structure variables (§3.2, §3.6): "per_observation" = one ray time per matched observation
+  // (the method); "anchored" = union-find tracks over the match graph, one ray time per track on
+  // its anchor observation's ray (the ablation baseline).
+  std::string parameterization = "per_observation";
+
+  // Arctan loss scale a of the nominal objective, px² (§3.3: rho(s) = a atan(s / a), a = 100).
+  double loss_scale_px2 = 100.0;
+  // GNC schedule (§3.5): arctan scales, px², solved in order on one problem object, each stage
+  // warm-started from the previous one. loss_scale_px2 is appended when the list does not end
+  // with it, so the last stage is exactly the nominal objective; [] or [loss_scale_px2] is a
+  // plain solve.
+  std::vector<double> gnc_scales = {1e4, 1e3, 1e2};
+
+  // λp, weight of the position prior λp/N Σ |O_i - O_i^prior|², 1/length² (§3.3).
+  double position_weight = 1e-2;
+  // λR, weight of the orientation prior λR/N Σ |Log(R_i^prior^-1 R_i)|², 1/rad² (§3.3, §3.6).
+  double orientation_weight = 1e3;
+
+  // Ray-time initialization (§3.2, SPEC §3): "auto" = per image, the median of the positive
+  // closest-approach depths of its matched rays under the prior poses (global median for an
+  // image without one); a depth scale only, no structure is committed (no gates, no culling).
+  // "constant" = every ray time at ray_time_constant_m (the paper's 1 m for metric object and
+  // room captures).
+  std::string ray_time_init = "auto";
+  double ray_time_constant_m = 1.0;  // prior length units (metres for a metric prior)
+
+  // At most this many matches per image pair, drawn uniformly at random with a seed derived from
+  // the pair's image indices and match_cap_seed (§4.7 "match capping": 100); 0 keeps all.
+  int max_matches_per_pair = 0;
+  int match_cap_seed = 0;
+
+  // Self-calibration of the shared intrinsics (§3.1, §4.3); all off in headline object runs,
+  // where the intrinsics block is constant.
+  bool refine_focal = false;            // fx, fy (bounded positive)
+  bool refine_principal_point = false;  // cx, cy
+  bool refine_distortion = false;       // k1, k2, p1, p2
+
+  // Shared evaluation cache (§3.7): undistortion and ray points once per observation per
+  // evaluation point, copied into each residual's Jacobian. Off: every residual recomputes its
+  // chain with automatic differentiation (same values and Jacobians, slower).
+  bool use_evaluation_cache = true;
+  // Threads for Ceres and the cache; 0 = hardware concurrency. Results are bit-identical between
+  // runs with 1 thread; with more, Ceres' parallel reductions change the summation order.
+  int num_threads = 0;
+  // Per GNC stage: Ceres iteration limit and relative cost-change tolerance (Ceres defaults are
+  // 50 and 1e-6; warm-started stages converge well before the limit).
+  int max_iterations = 100;
+  double function_tolerance = 1e-6;
+
+  // Prior trust region (§3.6 "Prior trust region"): when the solution moves any frame more than
+  // these from the prior, measured per frame in the prior's own frame (no alignment: the
+  // position prior anchors the gauge there), the prior is returned instead. Object-scale
+  // thresholds (twice the MobileBrick training envelope, 1.75° / 10.8 mm).
+  bool trust_region = true;
+  double trust_region_rotation_deg = 3.5;     // degrees
+  double trust_region_translation_m = 0.022;  // metres at object scale, times length_unit_m
+  // Scale of the scene's length unit relative to the metric captures the translation thresholds
+  // were derived on: trust_region_translation_m and wander_expected_m are multiplied by it
+  // (1 for metric object and room captures; e.g. 30 for a building 30x deeper than an object
+  // orbit, 1000 for a metric prior stored in millimetres).
+  double length_unit_m = 1.0;
+
+  // Room-scale wander test (§4.3): flags the solve when the median per-frame centre displacement
+  // from the prior, after a Sim(3) fit of the solution's centres onto the prior's, exceeds
+  // wander_factor times the expected displacement; the prior is then returned.
+  bool wander_test = false;
+  double wander_expected_m = 0.02;  // metres times length_unit_m (ARKit-grade room prior, §4.3)
+  double wander_factor = 2.0;
+
+  // Staged room recipe (§4.3): pass 1 = poses-only GNC from the prior with a light orientation
+  // anchor and capped matches; pass 2 = one warm solve at the nominal scale with the options
+  // above (self-calibration, weights, cap), its priors re-anchored at the pass-1 poses.
+  bool staged = false;
+  double stage1_orientation_weight = 10.0;  // λR of pass 1, 1/rad²
+  int stage1_max_matches_per_pair = 100;    // cap of pass 1; 0 keeps all
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("parameterization", parameterization);
+    v("loss_scale_px2", loss_scale_px2);
+    v("gnc_scales", gnc_scales);
+    v("position_weight", position_weight);
+    v("orientation_weight", orientation_weight);
+    v("ray_time_init", ray_time_init);
+    v("ray_time_constant_m", ray_time_constant_m);
+    v("max_matches_per_pair", max_matches_per_pair);
+    v("match_cap_seed", match_cap_seed);
+    v("refine_focal", refine_focal);
+    v("refine_principal_point", refine_principal_point);
+    v("refine_distortion", refine_distortion);
+    v("use_evaluation_cache", use_evaluation_cache);
+    v("num_threads", num_threads);
+    v("max_iterations", max_iterations);
+    v("function_tolerance", function_tolerance);
+    v("trust_region", trust_region);
+    v("trust_region_rotation_deg", trust_region_rotation_deg);
+    v("trust_region_translation_m", trust_region_translation_m);
+    v("length_unit_m", length_unit_m);
+    v("wander_test", wander_test);
+    v("wander_expected_m", wander_expected_m);
+    v("wander_factor", wander_factor);
+    v("staged", staged);
+    v("stage1_orientation_weight", stage1_orientation_weight);
+    v("stage1_max_matches_per_pair", stage1_max_matches_per_pair);
+  }
+
+  // Throws InputError naming the first invalid field.
+  void Validate() const;
+  // True when any intrinsic is refined.
+  bool SelfCalibrates() const {
+    return refine_focal || refine_principal_point || refine_distortion;
+  }
+  // The loss scales of the stages actually solved (gnc_scales, then loss_scale_px2 if absent).
+  std::vector<double> StageScales() const;
+  // Threads to use (num_threads, or the hardware concurrency for 0).
+  int Threads() const;
+};
+
+}  // namespace raytime

@@ -1,0 +1,52 @@
+// Synthetic scenes for the refiner's tests and benchmark: cameras on an arc looking at points 8–25
+// m away (the depth range of the shared Strecha scenes, SPEC §8), keypoints projected with the
+// shared intrinsics (optionally distorted and noisy), matches between nearby cameras. Everything
+// is deterministic for a seed.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "core/types.h"
+#include "refine/refine.h"
+
+namespace raytime {
+
+struct SyntheticSceneOptions {
+  int num_cameras = 8;
+  int num_points = 300;
+  double arc_radius_m = 16.0;   // camera distance from the scene centre
+  double arc_span_deg = 70.0;   // angle the arc covers
+  double point_radius_m = 7.0;  // points uniform in a ball around the centre (depths ~9–23 m)
+  bool distortion = false;      // OpenCV k1, k2, p1, p2 of a mild barrel lens
+  double pixel_noise = 0.0;     // standard deviation, pixels, on the distorted keypoints
+  // Pairs (i, j) with 0 < j - i <= max_pair_gap are matched; 0 matches every pair.
+  int max_pair_gap = 2;
+  // Fraction of each pair's matches whose second keypoint is replaced by a random one.
+  double outlier_fraction = 0.0;
+  uint64_t seed = 1;
+};
+
+struct SyntheticScene {
+  RefineInput input;  // prior_world_from_cam = ground truth; tests overwrite it
+  std::vector<Rigid3> ground_truth;
+  std::vector<Eigen::Vector3d> points;
+  // Per camera and point: keypoint index, or -1 when the point is not visible.
+  std::vector<std::vector<int>> keypoint_of_point;
+};
+
+// Shared intrinsics of the scenes: 1536 x 1024 px (the shared Strecha images), f ~ 1400 px.
+CameraIntrinsics SyntheticIntrinsics(bool distortion);
+
+SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options);
+
+// Regenerates camera `camera`'s keypoints as if it stood at `world_from_cam` (the matches keep
+// their indices): matches that pull the solve to a wrong pose, for the guardrail tests.
+void ReprojectCamera(SyntheticScene* scene, int camera, const Rigid3& world_from_cam);
+
+// Image names "0000.jpg", ... and pose sets for evaluate/ (pose errors, perturbation).
+PoseSet ToPoseSet(const std::vector<Rigid3>& world_from_cam);
+std::vector<Rigid3> FromPoseSet(const PoseSet& poses, int num_cameras);
+
+}  // namespace raytime

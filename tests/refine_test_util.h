@@ -1,0 +1,55 @@
+// Helpers shared by the refiner's tests: true ray times of a synthetic scene and perturbed
+// problem states, so residuals and Jacobians are checked away from the optimum.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "refine/problem_layout.h"
+#include "tests/refine_synthetic.h"
+
+namespace raytime {
+
+// Depth along the observation's unit ray of the scene point it sees: the ray time at which the
+// ray point is the point.
+inline std::vector<double> TrueRayTimes(const SyntheticScene& scene, const ProblemLayout& layout) {
+  std::vector<double> ray_times;
+  for (int o : layout.ray_time_observation) {
+    const LayoutObservation& obs = layout.observations[o];
+    const std::vector<int>& map = scene.keypoint_of_point[obs.image];
+    const auto it = std::find(map.begin(), map.end(), obs.keypoint);
+    const Eigen::Vector3d& point = scene.points[it - map.begin()];
+    ray_times.push_back((point - scene.ground_truth[obs.image].translation).norm());
+  }
+  return ray_times;
+}
+
+// Every pose moved by `degrees` about a random axis and `metres` in a random direction.
+inline std::vector<Rigid3> JitterPoses(const std::vector<Rigid3>& poses, double degrees,
+                                       double metres, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<Rigid3> out = poses;
+  for (Rigid3& pose : out) {
+    const Eigen::Vector3d axis = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    const Eigen::Vector3d direction = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    pose.rotation =
+        Eigen::Quaterniond(Eigen::AngleAxisd(degrees * M_PI / 180.0, axis)) * pose.rotation;
+    pose.translation += metres * direction;
+  }
+  return out;
+}
+
+inline std::vector<double> JitterValues(const std::vector<double>& values, double relative,
+                                        uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<double> out = values;
+  for (double& v : out) v *= 1.0 + relative * u(rng);
+  return out;
+}
+
+}  // namespace raytime
