@@ -46,7 +46,7 @@ struct PoseErrorSummary {
   bool success = false;
   Sim3 gt_from_estimate;  // the fitted alignment (identity for "none")
   std::vector<FrameError> frames;
-  std::vector<std::string> only_in_estimate;      // reported, never silently dropped
+  std::vector<std::string> only_in_estimate;  // reported, never silently dropped
   std::vector<std::string> only_in_ground_truth;
 
   nlohmann::json ToJson(bool with_frames = true) const;

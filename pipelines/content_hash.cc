@@ -14,7 +14,8 @@ namespace {
 
 std::string Hex(XXH128_hash_t hash) {
   char buffer[33];
-  std::snprintf(buffer, sizeof(buffer), "%016llx%016llx", static_cast<unsigned long long>(hash.high64),
+  std::snprintf(buffer, sizeof(buffer), "%016llx%016llx",
+                static_cast<unsigned long long>(hash.high64),
                 static_cast<unsigned long long>(hash.low64));
   return buffer;
 }
@@ -29,7 +30,7 @@ std::string HashFileContents(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) ThrowInput(path, 0, "cannot read file");
   std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(),
-                                                                  &XXH3_freeState);
+                                                                 &XXH3_freeState);
   XXH3_128bits_reset(state.get());
   std::vector<char> buffer(1 << 20);
   while (in) {

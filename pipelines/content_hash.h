@@ -5,7 +5,7 @@
 
 namespace raytime {
 
-std::string HashBytes(const std::string& bytes);     // 32 hex digits
+std::string HashBytes(const std::string& bytes);        // 32 hex digits
 std::string HashFileContents(const std::string& path);  // InputError naming an unreadable file
 
 }  // namespace raytime

@@ -16,9 +16,7 @@ class DatasetStage : public StageWithOptions<DatasetOptions> {
     return "Read a dataset (images, intrinsics, ground truth) into the work directory";
   }
   std::vector<std::string> Inputs() const override { return {}; }
-  std::vector<std::string> ExternalFiles() const override {
-    return LoadDataset(options_).files;
-  }
+  std::vector<std::string> ExternalFiles() const override { return LoadDataset(options_).files; }
 
   nlohmann::json Run(const StageContext& context) override {
     const Dataset dataset = LoadDataset(options_);

@@ -10,9 +10,9 @@ namespace raytime {
 namespace {
 
 struct EvaluateStageOptions {
-  std::vector<std::string> poses = {"prior"};             // pose sets to score
-  std::vector<std::string> alignments = {"sim3", "none"}; // sim3, se3, none
-  double success_rotation_deg = 1.0;                      // degrees (paper §4.8)
+  std::vector<std::string> poses = {"prior"};              // pose sets to score
+  std::vector<std::string> alignments = {"sim3", "none"};  // sim3, se3, none
+  double success_rotation_deg = 1.0;                       // degrees (paper §4.8)
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
@@ -48,13 +48,14 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
         error_options.alignment = alignment;
         error_options.success_rotation_deg = options_.success_rotation_deg;
         const PoseErrorSummary errors = ComputePoseErrors(estimate, ground_truth, error_options);
-        spdlog::info("evaluate: {} ({}): rotation mean {:.4f}° median {:.4f}°, centre mean "
-                     "{:.4f} m median {:.4f} m{}",
-                     name, alignment, errors.mean_rotation_deg, errors.median_rotation_deg,
-                     errors.mean_centre_m, errors.median_centre_m,
-                     errors.only_in_estimate.empty() && errors.only_in_ground_truth.empty()
-                         ? ""
-                         : " (some names did not join: see summary)");
+        spdlog::info(
+            "evaluate: {} ({}): rotation mean {:.4f}° median {:.4f}°, centre mean "
+            "{:.4f} m median {:.4f} m{}",
+            name, alignment, errors.mean_rotation_deg, errors.median_rotation_deg,
+            errors.mean_centre_m, errors.median_centre_m,
+            errors.only_in_estimate.empty() && errors.only_in_ground_truth.empty()
+                ? ""
+                : " (some names did not join: see summary)");
         metrics[name][alignment] = errors.ToJson();
       }
     }

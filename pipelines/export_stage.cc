@@ -15,8 +15,8 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
-const std::vector<std::string> kExportFormats = {"colmap_text", "colmap_binary",
-                                                 "transforms_json", "tum"};
+const std::vector<std::string> kExportFormats = {"colmap_text", "colmap_binary", "transforms_json",
+                                                 "tum"};
 
 struct ExportStageOptions {
   std::vector<std::string> poses = {"prior"};

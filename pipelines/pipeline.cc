@@ -27,8 +27,8 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-const std::vector<std::string> kTopLevelKeys = {"name", "description", "dataset",
-                                                "workdir", "stages", "sweep"};
+const std::vector<std::string> kTopLevelKeys = {"name",    "description", "dataset",
+                                                "workdir", "stages",      "sweep"};
 
 std::string UtcNow() {
   const std::time_t now = std::time(nullptr);
@@ -64,7 +64,8 @@ void SetOption(PipelineSpec* spec, const std::string& dotted_key, const YAML::No
                const std::string& source) {
   const size_t dot = dotted_key.find('.');
   if (dot == std::string::npos || dot == 0 || dot + 1 == dotted_key.size()) {
-    throw InputError(source + " " + dotted_key + ": expected STAGE.KEY (e.g. dataset.root or "
+    throw InputError(source + " " + dotted_key +
+                     ": expected STAGE.KEY (e.g. dataset.root or "
                      "prior.level_deg)");
   }
   const std::string id = dotted_key.substr(0, dot);
@@ -138,21 +139,19 @@ struct StageRecord {
 };
 
 json RecordJson(const StageRecord& record) {
-  return {{"key", record.key}, {"summary", record.summary}, {"seconds", record.seconds},
+  return {{"key", record.key},
+          {"summary", record.summary},
+          {"seconds", record.seconds},
           {"finished_utc", UtcNow()}};
 }
 
 json RunOnce(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   const auto run_start = std::chrono::steady_clock::now();
   fs::create_directories(fs::path(workdir) / ".raytime");
-  json summary = {{"raytime_version", Version()},
-                  {"pipeline", spec.path},
-                  {"name", spec.name},
-                  {"workdir", workdir},
-                  {"started_utc", UtcNow()},
-                  {"stages", json::array()},
-                  {"metrics", json::object()},
-                  {"guardrails", json::object()}};
+  json summary = {
+      {"raytime_version", Version()}, {"pipeline", spec.path},       {"name", spec.name},
+      {"workdir", workdir},           {"started_utc", UtcNow()},     {"stages", json::array()},
+      {"metrics", json::object()},    {"guardrails", json::object()}};
   const std::string summary_path = (fs::path(workdir) / "summary.json").string();
   std::map<std::string, ArtifactSource> artifacts;
   try {
@@ -337,8 +336,8 @@ pid_t SpawnRun(const std::string& run_dir, const std::string& cache_dir, bool fo
   const std::string self = fs::read_symlink("/proc/self/exe").string();
   const std::string pipeline = (fs::path(run_dir) / "pipeline.yaml").string();
   const std::string log = (fs::path(run_dir) / "run.log").string();
-  std::vector<std::string> args = {self,        "run",           pipeline, "--workdir",
-                                   run_dir,     "--cache-dir",   cache_dir};
+  std::vector<std::string> args = {self,    "run",         pipeline, "--workdir",
+                                   run_dir, "--cache-dir", cache_dir};
   if (force) args.push_back("--force");
   const pid_t pid = ::fork();
   if (pid < 0) throw std::runtime_error("cannot start a sweep run: fork failed");
@@ -399,9 +398,8 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
   const int jobs = options.jobs > 0
                        ? options.jobs
                        : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  const std::string cache_dir = options.cache_dir.empty()
-                                    ? (fs::path(workdir) / "cache").string()
-                                    : options.cache_dir;
+  const std::string cache_dir =
+      options.cache_dir.empty() ? (fs::path(workdir) / "cache").string() : options.cache_dir;
   spdlog::info("sweep: {} runs, {} at a time, cache {}", combinations.size(), jobs, cache_dir);
 
   struct Run {
@@ -457,17 +455,19 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     rows[index] = SweepRow(runs[index].label, runs[index].params, runs[index].dir);
     if (rows[index]["status"] != "ok") ++failures;
     spdlog::info("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), runs[index].label,
-                 rows[index]["status"].get<std::string>(),
-                 rows[index].value("seconds", 0.0));
+                 rows[index]["status"].get<std::string>(), rows[index].value("seconds", 0.0));
     if (rows[index]["status"] != "ok") {
       spdlog::error("sweep run {} failed: {}", runs[index].label,
                     rows[index].value("error", std::string("see run.log")));
     }
     write_tables();  // after every run, so an interrupted sweep keeps its rows
   }
-  json summary = {{"raytime_version", Version()}, {"pipeline", spec.path},
-                  {"name", spec.name},            {"workdir", workdir},
-                  {"runs", rows},                 {"failures", failures},
+  json summary = {{"raytime_version", Version()},
+                  {"pipeline", spec.path},
+                  {"name", spec.name},
+                  {"workdir", workdir},
+                  {"runs", rows},
+                  {"failures", failures},
                   {"status", failures ? "failed" : "ok"},
                   {"seconds", SecondsSince(start)}};
   WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
@@ -522,10 +522,10 @@ PipelineSpec LoadPipeline(const std::string& path) {
     }
     stage.type = StageTypeOfId(stage.id);
     const std::string suffix = stage.id.substr(stage.type.size());
-    if (!suffix.empty() &&
-        (suffix.size() < 2 || suffix.find_first_not_of(
-                                  "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-",
-                                  1) != std::string::npos)) {
+    if (!suffix.empty() && (suffix.size() < 2 ||
+                            suffix.find_first_not_of(
+                                "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-",
+                                1) != std::string::npos)) {
       ThrowInput(path, stage.line,
                  "stage id '" + stage.id + "': after '@' use letters, digits, '_' or '-'");
     }
@@ -538,9 +538,9 @@ PipelineSpec LoadPipeline(const std::string& path) {
       ThrowInput(path, stage.line, UnknownKeyMessage("the pipeline", stage.type, types, "stage"));
     }
     if (FindStage(&spec, stage.id)) {
-      ThrowInput(path, stage.line,
-                 "stage '" + stage.id + "' appears twice (name a second one '" + stage.type +
-                     "@NAME')");
+      ThrowInput(
+          path, stage.line,
+          "stage '" + stage.id + "' appears twice (name a second one '" + stage.type + "@NAME')");
     }
     spec.stages.push_back(stage);
   }

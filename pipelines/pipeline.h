@@ -22,17 +22,17 @@
 // runs (a scene's features and matches) are computed once.
 #pragma once
 
+#include <yaml-cpp/yaml.h>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
 #include <vector>
-#include <yaml-cpp/yaml.h>
 
 namespace raytime {
 
 struct PipelineStageSpec {
-  std::string id;    // "refine", or "refine@gnc" when a type appears more than once
-  std::string type;  // "refine"
+  std::string id;      // "refine", or "refine@gnc" when a type appears more than once
+  std::string type;    // "refine"
   YAML::Node options;  // mapping (possibly empty)
   int line = 0;        // where the entry is in the pipeline file
 };

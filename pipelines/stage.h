@@ -2,13 +2,13 @@
 // and one Run(). Stages meet only here, through HDF5 files in the work directory.
 #pragma once
 
+#include <yaml-cpp/yaml.h>
 #include <CLI/CLI.hpp>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
-#include <yaml-cpp/yaml.h>
 
 #include "core/options.h"
 

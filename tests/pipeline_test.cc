@@ -68,8 +68,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["status"], "ok");
-  EXPECT_EQ(StageStatuses(summary),
-            (std::vector<std::string>{"ran", "ran", "ran", "ran"}));
+  EXPECT_EQ(StageStatuses(summary), (std::vector<std::string>{"ran", "ran", "ran", "ran"}));
   // The demo perturbs every frame by exactly 4°: with no alignment each frame is 4° off.
   const json& absolute = summary["metrics"]["prior"]["none"];
   EXPECT_NEAR(absolute["mean_rotation_deg"].get<double>(), 4.0, 1e-9);
@@ -180,8 +179,8 @@ stages:
   - evaluate: {poses: ["prior@small", "prior@large"], alignments: [none]}
 )");
   const std::string run_dir = (workdir_ / "arms").string();
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir +
-                                 " --set prior@large.level_deg=16");
+  CommandResult result =
+      Raytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json metrics = ReadJson(fs::path(run_dir) / "summary.json")["metrics"];
   EXPECT_NEAR(metrics["prior@small"]["none"]["mean_rotation_deg"].get<double>(), 1.0, 1e-9);
