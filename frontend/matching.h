@@ -1,0 +1,115 @@
+// Pairwise matching and geometric verification of a set of images (SPEC §5, paper §4.1).
+//
+// Per image pair: nearest-neighbour matching with the ratio test and mutual check
+// (descriptor_matching.h), robust two-view geometry on the putative matches
+// (two_view_geometry.h), then guided matching: a second matching pass in which each keypoint only
+// competes with keypoints near its epipolar line under the estimated F, verified again. Pairs
+// with fewer than min_num_inliers verified inliers are dropped. No pose prior enters: the pairs
+// come from the image list alone (all pairs, or a window along the name order plus a keyframe
+// grid for loop closures).
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/hdf5_store.h"
+#include "core/types.h"
+
+namespace raytime {
+
+struct MatchingOptions {
+  // "exhaustive": every pair (the paper's setting, O(N^2)). "sequential": images in name order
+  // (video frames), each with the next `window` images, plus loop candidates (below).
+  std::string pairs = "exhaustive";
+  int window = 10;  // sequential: neighbours matched after each image
+  // Sequential loop candidates: every pair of keyframes (images whose index in name order is a
+  // multiple of loop_stride) further apart than the window, so returning to a place is matched
+  // without any pose prior. 0 disables.
+  int loop_stride = 0;
+  // Lowe's ratio test on descriptor distances (COLMAP's SiftMatching.max_ratio).
+  double max_ratio = 0.8;
+  // Largest descriptor distance of a match (L2 between unit descriptors; 0.7 is about COLMAP's
+  // SiftMatching.max_distance of 0.7 rad). Matters for guided matching, where a keypoint with a
+  // single candidate passes any ratio test.
+  double max_distance = 0.7;
+  // Keep a match only when each keypoint is the other's nearest neighbour and both pass the
+  // ratio test (COLMAP's SiftMatching.cross_check).
+  bool mutual_check = true;
+  // Descriptor product kernel: "auto" (AVX2 when the CPU has it), "avx2", "gemm" (portable).
+  // The choice and its measurement: descriptor_matching.h.
+  std::string kernel = "auto";
+  // "auto": essential matrix when the pair's cameras have a focal length, fundamental otherwise;
+  // "essential" (an image without intrinsics is an error) or "fundamental".
+  std::string geometry = "auto";
+  // Robust estimator: "magsac" (OpenCV USAC_MAGSAC, MAGSAC++) or "ransac" (OpenCV RANSAC).
+  std::string estimator = "magsac";
+  // Threshold of the robust estimator, pixels (Sampson distance). Measured on fountain-P11
+  // (1536x1024, 55 pairs, MAGSAC++): 90th percentile of the relative rotation error over pairs
+  // 0.22° at 0.5 px, 0.29° at 1 px, 0.39° at 2 px, 0.50° at 4 px, where one facade pair also
+  // came out 34° wrong (a near-planar scene leaves a second essential matrix inside a 4 px
+  // band); the verified inliers (counted at max_error_px) barely change.
+  double ransac_error_px = 1.0;
+  // Inlier threshold of the polished model and half-width of the guided matching band, pixels
+  // (Sampson distance; COLMAP's SiftMatching.max_error).
+  double max_error_px = 4.0;
+  double confidence = 0.999;   // RANSAC stopping confidence (COLMAP: 0.999)
+  int max_iterations = 10000;  // RANSAC iteration cap (COLMAP's max_num_trials)
+  int min_num_inliers = 15;    // pairs verified by fewer are dropped (COLMAP's default)
+  // Second matching pass restricted to candidates within max_error_px (Sampson distance) of the
+  // epipolar line under the estimated F, then verified again (COLMAP's guided_matching).
+  bool guided_matching = true;
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("pairs", pairs);
+    v("window", window);
+    v("loop_stride", loop_stride);
+    v("max_ratio", max_ratio);
+    v("max_distance", max_distance);
+    v("mutual_check", mutual_check);
+    v("kernel", kernel);
+    v("geometry", geometry);
+    v("estimator", estimator);
+    v("ransac_error_px", ransac_error_px);
+    v("max_error_px", max_error_px);
+    v("confidence", confidence);
+    v("max_iterations", max_iterations);
+    v("min_num_inliers", min_num_inliers);
+    v("guided_matching", guided_matching);
+  }
+  // Throws InputError naming `what` (e.g. "stage 'matches'") for values out of range.
+  void Check(const std::string& what) const;
+};
+
+struct MatchingSummary {
+  int num_images = 0;
+  int num_pairs = 0;           // candidate pairs matched
+  int num_verified_pairs = 0;  // kept: at least min_num_inliers inliers
+  int num_dropped_pairs = 0;   // num_pairs - num_verified_pairs
+  int64_t num_putative = 0;    // first-pass putative matches over all candidate pairs
+  int64_t num_inliers = 0;     // verified inliers over the kept pairs (after guided matching)
+  int64_t num_inliers_first_pass = 0;  // the same before guided matching
+  std::string kernel;                  // descriptor kernel that ran
+  double seconds = 0;                  // wall clock
+  // Thread time summed over pairs, per step (exceeds `seconds` when pairs run in parallel).
+  double matching_thread_seconds = 0;
+  double verification_thread_seconds = 0;
+  double guided_thread_seconds = 0;
+
+  nlohmann::json ToJson() const;
+};
+
+// Candidate pairs (i < j, indices into the image list), sorted.
+std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options);
+
+// Matches and verifies the candidate pairs of `images`, in parallel over pairs. features[i]
+// belongs to images.images[i]. Output: the kept pairs sorted by (image1, image2); `matches` holds
+// the first-pass putative matches plus the guided ones (so inlier_matches is a subset of it).
+// Keypoints are undistorted (core/camera.h) before estimation when the camera has distortion;
+// the stored indices refer to the original keypoints.
+MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                            const MatchingOptions& options, std::vector<PairMatches>* pairs);
+
+}  // namespace raytime

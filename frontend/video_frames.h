@@ -1,0 +1,50 @@
+// Frames of a video file as an image list (issue 3: images from a video sampled at a stride or a
+// target frame count). The frames are written as JPEG files so that later stages and COLMAP read
+// them like any other image folder.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/types.h"
+
+namespace raytime {
+
+struct VideoFramesOptions {
+  std::string video;  // video file (anything cv::VideoCapture opens); "" = not a video input
+  int stride = 1;     // keep every stride-th frame (frame 0 first)
+  // Target number of frames spread evenly over the video; overrides `stride` when > 0 (needs a
+  // container that reports its frame count, else `stride` is used).
+  int num_frames = 0;
+  // Focal length in pixels (fx = fy, principal point at the image centre, no distortion). 0 = not
+  // known: the camera is written with focal 0 and matching estimates fundamental matrices.
+  double focal_px = 0;
+  int jpeg_quality = 95;  // of the written frames
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    v("video", video);
+    v("stride", stride);
+    v("num_frames", num_frames);
+    v("focal_px", focal_px);
+    v("jpeg_quality", jpeg_quality);
+  }
+  void Check(const std::string& what) const;  // InputError naming `what`
+};
+
+struct VideoFramesSummary {
+  int num_frames_read = 0;     // decoded from the video
+  int num_frames_written = 0;  // kept
+  double seconds = 0;
+
+  nlohmann::json ToJson() const;
+};
+
+// Decodes `options.video` and writes the kept frames to `folder`/frame_NNNNNN.jpg (NNNNNN = frame
+// number in the video, so name order is time order), replacing the folder atomically. Returns
+// the image list (image_root = folder, one shared camera). A video that cannot be opened or
+// yields no frames is an InputError naming the file.
+ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string& folder,
+                            VideoFramesSummary* summary);
+
+}  // namespace raytime

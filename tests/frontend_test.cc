@@ -1,0 +1,541 @@
+// The front end (frontend/, SPEC §5, issue 3): matching kernels against a brute-force reference,
+// SIFT keypoint positions on a synthetic blob, the verification pipeline on a synthetic two-view
+// scene with known geometry (distorted and undistorted), and on the sample scene
+// (fountain-P11, 768x512): relative rotations from each verified pair's stored geometry against
+// the ground truth, the minimum-inlier rule, guided matching and determinism.
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <random>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "core/camera.h"
+#include "core/error.h"
+#include "core/formats/strecha.h"
+#include "core/geometry.h"
+#include "frontend/descriptor_matching.h"
+#include "frontend/feature_extraction.h"
+#include "frontend/matching.h"
+#include "frontend/two_view_geometry.h"
+#include "frontend/video_frames.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+const std::string kSampleScene = std::string(RAYTIME_SOURCE_DIR) + "/data/sample/fountain-P11";
+
+class TempDir {
+ public:
+  TempDir() {
+    std::string pattern = (fs::temp_directory_path() / "raytime_frontend_XXXXXX").string();
+    path_ = mkdtemp(pattern.data());
+  }
+  ~TempDir() {
+    std::error_code ignored;
+    fs::remove_all(path_, ignored);
+  }
+  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  fs::path path_;
+};
+
+FloatDescriptors RandomUnitDescriptors(int rows, int dim, std::mt19937* rng) {
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  FloatDescriptors out(rows, dim);
+  for (int i = 0; i < rows; ++i) {
+    for (int k = 0; k < dim; ++k) out(i, k) = uniform(*rng);
+    out.row(i).normalize();
+  }
+  return out;
+}
+
+// Top-2 of each row of a against b in double precision (ties: smallest index).
+void ReferenceNeighbors(const FloatDescriptors& a, const FloatDescriptors& b,
+                        std::vector<int>* index, std::vector<double>* best,
+                        std::vector<double>* second) {
+  const Eigen::MatrixXd dots = a.cast<double>() * b.cast<double>().transpose();
+  const double none = -std::numeric_limits<double>::infinity();
+  index->assign(a.rows(), -1);
+  best->assign(a.rows(), none);
+  second->assign(a.rows(), none);
+  for (int i = 0; i < a.rows(); ++i) {
+    for (int j = 0; j < b.rows(); ++j) {
+      if (dots(i, j) > (*best)[i]) {
+        (*second)[i] = (*best)[i];
+        (*best)[i] = dots(i, j);
+        (*index)[i] = j;
+      } else if (dots(i, j) > (*second)[i]) {
+        (*second)[i] = dots(i, j);
+      }
+    }
+  }
+}
+
+void ExpectMatchesReference(const NeighborList& got, const FloatDescriptors& a,
+                            const FloatDescriptors& b) {
+  std::vector<int> index;
+  std::vector<double> best, second;
+  ReferenceNeighbors(a, b, &index, &best, &second);
+  ASSERT_EQ(got.index.size(), index.size());
+  for (size_t i = 0; i < index.size(); ++i) {
+    EXPECT_NEAR(got.best[i], best[i], 1e-5) << "row " << i;
+    if (std::isfinite(second[i])) {
+      EXPECT_NEAR(got.second[i], second[i], 1e-5) << "row " << i;
+    } else {
+      EXPECT_FALSE(std::isfinite(got.second[i])) << "row " << i;
+    }
+    // Float rounding may only reorder near-ties.
+    if (best[i] - second[i] > 1e-5) {
+      EXPECT_EQ(got.index[i], index[i]) << "row " << i;
+    }
+  }
+}
+
+TEST(MatchingKernel, AgreesWithBruteForceOnRandomDescriptors) {
+  std::mt19937 rng(7);
+  // Sizes straddle the kernels' blocking: 6-row tiles, 16-column panels, 1024-column blocks,
+  // 256-row GEMM blocks; single rows and columns have no second neighbour.
+  const std::vector<std::pair<int, int>> sizes = {{1, 1},     {1, 5},      {7, 1},    {13, 17},
+                                                  {300, 257}, {257, 1100}, {1030, 40}};
+  std::vector<MatchKernel> kernels = {MatchKernel::kGemm};
+  if (CpuHasAvx2Fma()) kernels.push_back(MatchKernel::kAvx2);
+  for (const auto& [n, m] : sizes) {
+    const FloatDescriptors a = RandomUnitDescriptors(n, 128, &rng);
+    const FloatDescriptors b = RandomUnitDescriptors(m, 128, &rng);
+    for (const MatchKernel kernel : kernels) {
+      SCOPED_TRACE(std::string(MatchKernelName(kernel)) + " " + std::to_string(n) + "x" +
+                   std::to_string(m));
+      NeighborList ab, ba;
+      FindNeighbors(a, b, kernel, &ab, &ba);
+      ExpectMatchesReference(ab, a, b);
+      ExpectMatchesReference(ba, b, a);
+    }
+  }
+}
+
+TEST(MatchingKernel, RatioTestAndMutualCheck) {
+  // Row 0 -> 0 is clear and mutual; row 1 -> 0 loses the mutual check; row 2 fails the ratio.
+  NeighborList ab{{0, 0, 1}, {0.99f, 0.95f, 0.90f}, {0.2f, 0.1f, 0.89f}};
+  NeighborList ba{{0, 2}, {0.99f, 0.90f}, {0.95f, 0.3f}};
+  const MatchList mutual = RatioTestMatches(ab, ba, 0.8, 0.7, true);
+  ASSERT_EQ(mutual.rows(), 1);
+  EXPECT_EQ(mutual(0, 0), 0u);
+  EXPECT_EQ(mutual(0, 1), 0u);
+  // Without the mutual check row 1 is kept; row 0 no longer needs column 0 to pass.
+  EXPECT_EQ(RatioTestMatches(ab, ba, 0.8, 0.7, false).rows(), 2);
+  // A single candidate passes the ratio test (the missing second counts as orthogonal) but not
+  // the absolute bound: dot 0.6 is distance 0.89 > 0.7.
+  const float none = -std::numeric_limits<float>::infinity();
+  NeighborList single{{0, 0}, {0.9f, 0.6f}, {none, none}};
+  NeighborList back{{0}, {0.9f}, {none}};
+  const MatchList bounded = RatioTestMatches(single, back, 0.8, 0.7, false);
+  ASSERT_EQ(bounded.rows(), 1);
+  EXPECT_EQ(bounded(0, 0), 0u);
+}
+
+TEST(Features, RootSiftQuantization) {
+  cv::Mat d(1, 4, CV_32F);
+  d.at<float>(0) = 9;
+  d.at<float>(1) = 16;
+  d.at<float>(2) = 0;
+  d.at<float>(3) = 75;
+  // L1 norm 100: sqrt -> 0.3, 0.4, 0, sqrt(0.75) = 0.866; x 512, saturated at 255.
+  const ByteDescriptors q = QuantizeSiftDescriptors(d, true);
+  EXPECT_EQ(q(0, 0), 154);
+  EXPECT_EQ(q(0, 1), 205);
+  EXPECT_EQ(q(0, 2), 0);
+  EXPECT_EQ(q(0, 3), 255);
+}
+
+// A dark blob on a bright background at a sub-pixel position: the detected keypoint must sit on
+// it in the OpenCV pixel convention (corrects OpenCV 4.6's 0.25 px upsampling shift).
+TEST(Features, KeypointPositionsUseOpenCvPixelConvention) {
+  const double cx = 100.0, cy = 80.0, sigma = 4.0;
+  cv::Mat image(160, 200, CV_8U);
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      const double r2 = (x - cx) * (x - cx) + (y - cy) * (y - cy);
+      image.at<uint8_t>(y, x) =
+          cv::saturate_cast<uint8_t>(40 + 180 * std::exp(-r2 / (2 * sigma * sigma)));
+    }
+  }
+  for (const int first_octave : {-1, 0}) {
+    FeatureExtractionOptions options;
+    options.first_octave = first_octave;
+    const ImageFeatures features = ExtractSift(image, options);
+    ASSERT_GT(features.keypoints.rows(), 0) << "first_octave " << first_octave;
+    // The strongest keypoint is the blob.
+    EXPECT_NEAR(features.keypoints(0, 0), cx, 0.1) << "first_octave " << first_octave;
+    EXPECT_NEAR(features.keypoints(0, 1), cy, 0.1) << "first_octave " << first_octave;
+    // Scale: the sigma of the blob (the scale-normalized Laplacian peaks there).
+    EXPECT_NEAR(features.keypoints(0, 2), sigma, 1.0);
+    EXPECT_EQ(features.descriptors.cols(), 128);
+  }
+}
+
+TEST(Features, UnreadableImageIsAnInputErrorNamingTheFile) {
+  TempDir dir;
+  std::ofstream(dir / "broken.jpg") << "not a jpeg";
+  ImageSet images;
+  images.image_root = dir / "";
+  images.cameras.resize(1);
+  images.images.push_back({"broken.jpg", 10, 10, 0});
+  std::vector<ImageFeatures> features;
+  try {
+    ExtractFeatures(images, FeatureExtractionOptions(), &features);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("broken.jpg"), std::string::npos) << e.what();
+  }
+}
+
+// ---- Synthetic two-view scene with exact correspondences. ----
+
+struct SyntheticPair {
+  ImageSet images;
+  std::vector<ImageFeatures> features;
+  Rigid3 cam2_from_cam1;
+  int num_points = 0;
+};
+
+// Points in front of two cameras; each point gets one random descriptor shared by its two
+// observations, and each image also gets unmatched clutter keypoints.
+SyntheticPair MakeSyntheticPair(const CameraIntrinsics& camera, int num_points, int clutter) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  SyntheticPair pair;
+  pair.images.cameras = {camera};
+  pair.images.images = {{"a.png", camera.width, camera.height, 0},
+                        {"b.png", camera.width, camera.height, 0}};
+  pair.cam2_from_cam1 = Rigid3(Eigen::Quaterniond(ExpSO3(Eigen::Vector3d(0.02, -0.15, 0.03))),
+                               Eigen::Vector3d(-1.0, 0.1, 0.2));
+  std::vector<Eigen::Vector2d> kp[2];
+  std::vector<int> descriptor_id[2];
+  int id = 0;
+  while (static_cast<int>(kp[0].size()) < num_points) {
+    const Eigen::Vector3d p1(4 * u(rng), 3 * u(rng), 8 + 4 * u(rng));
+    const Eigen::Vector3d p2 = pair.cam2_from_cam1 * p1;
+    double pix[2][2];
+    ProjectPinhole(camera.params.data(), p1.data(), pix[0]);
+    ProjectPinhole(camera.params.data(), p2.data(), pix[1]);
+    bool inside = p2.z() > 0;
+    for (int v = 0; v < 2; ++v) {
+      double distorted[2];
+      DistortPixel(camera.params.data(), pix[v], distorted);
+      pix[v][0] = distorted[0];
+      pix[v][1] = distorted[1];
+      inside = inside && pix[v][0] > 0 && pix[v][1] > 0 && pix[v][0] < camera.width - 1 &&
+               pix[v][1] < camera.height - 1;
+    }
+    if (!inside) continue;
+    for (int v = 0; v < 2; ++v) {
+      kp[v].emplace_back(pix[v][0], pix[v][1]);
+      descriptor_id[v].push_back(id);
+    }
+    ++id;
+  }
+  pair.num_points = num_points;
+  for (int v = 0; v < 2; ++v) {
+    for (int c = 0; c < clutter; ++c) {
+      kp[v].emplace_back(camera.width * 0.5 * (1 + u(rng)), camera.height * 0.5 * (1 + u(rng)));
+      descriptor_id[v].push_back(id++);
+    }
+  }
+  // Sparse like SIFT: unrelated descriptors are far apart (cosine ~0.2).
+  std::uniform_int_distribution<int> byte(1, 255);
+  std::bernoulli_distribution nonzero(0.3);
+  std::vector<std::array<uint8_t, 128>> descriptors(id);
+  for (auto& d : descriptors) {
+    for (auto& value : d) value = nonzero(rng) ? static_cast<uint8_t>(byte(rng)) : 0;
+  }
+  pair.features.resize(2);
+  for (int v = 0; v < 2; ++v) {
+    ImageFeatures& f = pair.features[v];
+    f.keypoints.resize(kp[v].size(), 4);
+    f.descriptors.resize(kp[v].size(), 128);
+    for (size_t k = 0; k < kp[v].size(); ++k) {
+      f.keypoints.row(k) << kp[v][k].x(), kp[v][k].y(), 2.0f, 0.0f;
+      for (int c = 0; c < 128; ++c) f.descriptors(k, c) = descriptors[descriptor_id[v][k]][c];
+    }
+  }
+  return pair;
+}
+
+CameraIntrinsics SyntheticCamera(double k1) {
+  CameraIntrinsics camera;
+  camera.width = 1000;
+  camera.height = 750;
+  camera.params = {800, 810, 499.5, 374.5, k1, 0.5 * k1 * k1, 0.0005, -0.0003};
+  return camera;
+}
+
+TEST(Verification, RecoversTheRelativePoseWithDistortion) {
+  const SyntheticPair pair = MakeSyntheticPair(SyntheticCamera(-0.25), 400, 200);
+  MatchingOptions options;
+  std::vector<PairMatches> pairs;
+  const MatchingSummary summary = MatchImages(pair.images, pair.features, options, &pairs);
+  ASSERT_EQ(pairs.size(), 1u);
+  const TwoViewGeometry& g = pairs[0].geometry;
+  EXPECT_EQ(g.config, TwoViewConfig::kCalibrated);
+  // Every true correspondence verifies (the points are exact once undistorted) ...
+  EXPECT_GE(g.inlier_matches.rows(), pair.num_points * 0.98);
+  // ... and only those: the clutter has its own descriptors and indices past num_points.
+  for (Eigen::Index k = 0; k < g.inlier_matches.rows(); ++k) {
+    EXPECT_EQ(g.inlier_matches(k, 0), g.inlier_matches(k, 1));
+  }
+  EXPECT_LT(
+      DegreesFromRadians(RotationDistance(g.cam2_from_cam1.rotation, pair.cam2_from_cam1.rotation)),
+      0.01);
+  EXPECT_LT(DegreesFromRadians(std::acos(std::clamp(
+                g.cam2_from_cam1.translation.dot(pair.cam2_from_cam1.translation.normalized()),
+                -1.0, 1.0))),
+            0.1);
+  EXPECT_EQ(summary.num_verified_pairs, 1);
+}
+
+TEST(Verification, DistortionIgnoredLosesInliers) {
+  // The same scene read as if undistorted: the essential matrix no longer explains the points,
+  // which shows that the previous test depends on the undistortion.
+  SyntheticPair pair = MakeSyntheticPair(SyntheticCamera(-0.25), 400, 0);
+  pair.images.cameras[0].params[kK1] = pair.images.cameras[0].params[kK2] = 0;
+  pair.images.cameras[0].params[kP1] = pair.images.cameras[0].params[kP2] = 0;
+  MatchingOptions options;
+  options.ransac_error_px = 1.0;
+  options.max_error_px = 1.0;
+  options.guided_matching = false;
+  std::vector<PairMatches> pairs;
+  MatchImages(pair.images, pair.features, options, &pairs);
+  const Eigen::Index inliers = pairs.empty() ? 0 : pairs[0].geometry.inlier_matches.rows();
+  EXPECT_LT(inliers, pair.num_points * 0.9);
+}
+
+TEST(Verification, FundamentalMatrixWithoutIntrinsics) {
+  const SyntheticPair pair = MakeSyntheticPair(SyntheticCamera(0.0), 300, 100);
+  MatchingOptions options;
+  options.geometry = "fundamental";
+  std::vector<PairMatches> pairs;
+  MatchImages(pair.images, pair.features, options, &pairs);
+  ASSERT_EQ(pairs.size(), 1u);
+  const TwoViewGeometry& g = pairs[0].geometry;
+  EXPECT_EQ(g.config, TwoViewConfig::kUncalibrated);
+  EXPECT_GE(g.inlier_matches.rows(), pair.num_points * 0.98);
+  PointList x1(g.inlier_matches.rows(), 2), x2(g.inlier_matches.rows(), 2);
+  for (Eigen::Index k = 0; k < x1.rows(); ++k) {
+    x1.row(k) = pair.features[0].keypoints.row(g.inlier_matches(k, 0)).head<2>().cast<double>();
+    x2.row(k) = pair.features[1].keypoints.row(g.inlier_matches(k, 1)).head<2>().cast<double>();
+  }
+  EXPECT_LT(SampsonDistances(g.F, x1, x2).maxCoeff(), 0.1);
+}
+
+TEST(Matching, SequentialPairsAreAWindowPlusAKeyframeGrid) {
+  MatchingOptions options;
+  options.pairs = "sequential";
+  options.window = 2;
+  options.loop_stride = 4;
+  const auto pairs = SelectPairs(10, options);
+  const std::set<std::pair<int, int>> got(pairs.begin(), pairs.end());
+  std::set<std::pair<int, int>> expected;
+  for (int i = 0; i < 10; ++i) {
+    for (int j = i + 1; j <= std::min(9, i + 2); ++j) expected.emplace(i, j);
+  }
+  expected.insert({{0, 4}, {0, 8}, {4, 8}});
+  EXPECT_EQ(got, expected);
+  EXPECT_TRUE(std::is_sorted(pairs.begin(), pairs.end()));
+  options.pairs = "exhaustive";
+  EXPECT_EQ(SelectPairs(10, options).size(), 45u);
+}
+
+TEST(Matching, BadOptionsAreInputErrors) {
+  MatchingOptions options;
+  options.pairs = "sequentail";
+  EXPECT_THROW(options.Check("test"), InputError);
+  options = MatchingOptions();
+  options.min_num_inliers = 3;
+  EXPECT_THROW(options.Check("test"), InputError);
+  options = MatchingOptions();
+  options.estimator = "lmeds";
+  EXPECT_THROW(options.Check("test"), InputError);
+}
+
+// ---- Video input. ----
+
+TEST(Video, FramesAreSampledByStrideOrCount) {
+  TempDir dir;
+  const std::string video = dir / "clip.avi";
+  {
+    cv::VideoWriter writer(video, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10,
+                           cv::Size(160, 120));
+    ASSERT_TRUE(writer.isOpened());
+    for (int f = 0; f < 10; ++f) {
+      cv::Mat frame(120, 160, CV_8UC3, cv::Scalar(20 * f, 100, 200 - 15 * f));
+      writer.write(frame);
+    }
+  }
+  VideoFramesOptions options;
+  options.video = video;
+  options.stride = 3;
+  options.focal_px = 150;
+  VideoFramesSummary summary;
+  ImageSet images = ExtractVideoFrames(options, dir / "frames", &summary);
+  ASSERT_EQ(images.images.size(), 4u);  // frames 0, 3, 6, 9
+  EXPECT_EQ(images.images[1].name, "frame_000003.jpg");
+  EXPECT_EQ(summary.num_frames_read, 10);
+  EXPECT_EQ(images.cameras.at(0).fx(), 150);
+  EXPECT_EQ(images.cameras.at(0).cx(), 79.5);
+  EXPECT_TRUE(fs::exists(fs::path(images.image_root) / images.images[3].name));
+  options.num_frames = 2;
+  images = ExtractVideoFrames(options, dir / "frames", &summary);
+  ASSERT_EQ(images.images.size(), 2u);
+  EXPECT_EQ(images.images[0].name, "frame_000000.jpg");
+  EXPECT_EQ(images.images[1].name, "frame_000009.jpg");
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "frames"), fs::directory_iterator()), 2);
+
+  options.video = dir / "missing.mp4";
+  try {
+    ExtractVideoFrames(options, dir / "frames2", &summary);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.mp4"), std::string::npos) << e.what();
+  }
+}
+
+// ---- The sample scene: fountain-P11 at 768x512 with ground truth. ----
+
+class SampleScene : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    ReadStrechaScene(kSampleScene, &images_, &ground_truth_);
+    FeatureExtractionOptions extraction;
+    extraction.max_features = 2048;
+    ExtractFeatures(images_, extraction, &features_);
+    summary_ = MatchImages(images_, features_, MatchingOptions(), &pairs_);
+  }
+
+  // Angle (degrees) between the stored cam2_from_cam1 rotation and the ground truth's.
+  static double RotationErrorDeg(const PairMatches& pair) {
+    const Rigid3& w1 = ground_truth_.world_from_cam.at(images_.images[pair.image1].name);
+    const Rigid3& w2 = ground_truth_.world_from_cam.at(images_.images[pair.image2].name);
+    const Eigen::Quaterniond truth = w2.rotation.conjugate() * w1.rotation;
+    return DegreesFromRadians(RotationDistance(pair.geometry.cam2_from_cam1.rotation, truth));
+  }
+
+  static ImageSet images_;
+  static PoseSet ground_truth_;
+  static std::vector<ImageFeatures> features_;
+  static std::vector<PairMatches> pairs_;
+  static MatchingSummary summary_;
+};
+ImageSet SampleScene::images_;
+PoseSet SampleScene::ground_truth_;
+std::vector<ImageFeatures> SampleScene::features_;
+std::vector<PairMatches> SampleScene::pairs_;
+MatchingSummary SampleScene::summary_;
+
+TEST_F(SampleScene, RelativeRotationsAgreeWithGroundTruth) {
+  ASSERT_GE(pairs_.size(), 30u) << "too few verified pairs of 55";
+  std::vector<double> errors;
+  for (const PairMatches& pair : pairs_) {
+    EXPECT_EQ(pair.geometry.config, TwoViewConfig::kCalibrated);
+    errors.push_back(RotationErrorDeg(pair));
+  }
+  std::sort(errors.begin(), errors.end());
+  const double median = errors[errors.size() / 2];
+  const double p90 = errors[static_cast<size_t>(0.9 * (errors.size() - 1))];
+  EXPECT_LT(median, 1.0);
+  EXPECT_LT(p90, 2.0);
+  RecordProperty("median_rotation_error_deg", std::to_string(median));
+}
+
+TEST_F(SampleScene, NoKeptPairBelowTheMinimumInliers) {
+  const MatchingOptions defaults;
+  for (const PairMatches& pair : pairs_) {
+    EXPECT_GE(pair.geometry.inlier_matches.rows(), defaults.min_num_inliers);
+    EXPECT_LT(pair.image1, pair.image2);
+    // Inliers are a subset of the stored matches, and indices are valid keypoint rows.
+    std::set<std::pair<uint32_t, uint32_t>> matches;
+    for (Eigen::Index k = 0; k < pair.matches.rows(); ++k) {
+      matches.emplace(pair.matches(k, 0), pair.matches(k, 1));
+      EXPECT_LT(pair.matches(k, 0), features_[pair.image1].keypoints.rows());
+      EXPECT_LT(pair.matches(k, 1), features_[pair.image2].keypoints.rows());
+    }
+    for (Eigen::Index k = 0; k < pair.geometry.inlier_matches.rows(); ++k) {
+      EXPECT_TRUE(
+          matches.count({pair.geometry.inlier_matches(k, 0), pair.geometry.inlier_matches(k, 1)}));
+    }
+  }
+  EXPECT_EQ(summary_.num_verified_pairs + summary_.num_dropped_pairs, 55);
+  EXPECT_EQ(summary_.num_verified_pairs, static_cast<int>(pairs_.size()));
+}
+
+// The guided pass, run on its own from a first-pass geometry, keeps (nearly) every first-pass
+// inlier and finds more.
+TEST_F(SampleScene, GuidedMatchingDoesNotLoseInliers) {
+  MatchingOptions first_only;
+  first_only.guided_matching = false;
+  int64_t first_total = 0, kept_total = 0, guided_total = 0;
+  for (const auto& [i, j] : std::vector<std::pair<int, int>>{{0, 1}, {2, 4}, {5, 6}, {7, 10}}) {
+    ImageSet two = images_;
+    two.images = {images_.images[i], images_.images[j]};
+    std::vector<PairMatches> first;
+    MatchImages(two, {features_[i], features_[j]}, first_only, &first);
+    ASSERT_EQ(first.size(), 1u) << i << "-" << j;
+    const TwoViewGeometry& g = first[0].geometry;
+    PointList x1(features_[i].keypoints.rows(), 2), x2(features_[j].keypoints.rows(), 2);
+    x1 = features_[i].keypoints.leftCols<2>().cast<double>();
+    x2 = features_[j].keypoints.leftCols<2>().cast<double>();
+    const MatchList guided =
+        GuidedMatches(NormalizeDescriptors(features_[i].descriptors),
+                      NormalizeDescriptors(features_[j].descriptors), x1, x2, g.F,
+                      first_only.max_error_px, first_only.max_ratio, first_only.max_distance, true);
+    std::set<std::pair<uint32_t, uint32_t>> guided_set;
+    for (Eigen::Index k = 0; k < guided.rows(); ++k) guided_set.emplace(guided(k, 0), guided(k, 1));
+    for (Eigen::Index k = 0; k < g.inlier_matches.rows(); ++k) {
+      kept_total += guided_set.count({g.inlier_matches(k, 0), g.inlier_matches(k, 1)});
+    }
+    first_total += g.inlier_matches.rows();
+    guided_total += guided.rows();
+  }
+  EXPECT_GE(kept_total, 0.97 * first_total);
+  EXPECT_GT(guided_total, 1.1 * first_total);
+  // Over the whole scene, the final inliers (guided) exceed the first pass's.
+  EXPECT_GT(summary_.num_inliers, summary_.num_inliers_first_pass);
+}
+
+TEST_F(SampleScene, Deterministic) {
+  // Features of three images and their matches again: bit-identical.
+  ImageSet three = images_;
+  three.images = {images_.images[0], images_.images[1], images_.images[2]};
+  FeatureExtractionOptions extraction;
+  extraction.max_features = 2048;
+  std::vector<ImageFeatures> again;
+  ExtractFeatures(three, extraction, &again);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(again[i].keypoints == features_[i].keypoints) << "image " << i;
+    EXPECT_TRUE(again[i].descriptors == features_[i].descriptors) << "image " << i;
+  }
+  std::vector<PairMatches> pairs;
+  MatchImages(three, again, MatchingOptions(), &pairs);
+  for (const PairMatches& pair : pairs) {
+    const auto it = std::find_if(pairs_.begin(), pairs_.end(), [&](const PairMatches& p) {
+      return p.image1 == pair.image1 && p.image2 == pair.image2;
+    });
+    ASSERT_NE(it, pairs_.end());
+    EXPECT_TRUE(it->matches == pair.matches);
+    EXPECT_TRUE(it->geometry.inlier_matches == pair.geometry.inlier_matches);
+    EXPECT_TRUE(it->geometry.E == pair.geometry.E);
+  }
+}
+
+}  // namespace
+}  // namespace raytime
