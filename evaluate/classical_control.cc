@@ -1,0 +1,348 @@
+#include "evaluate/classical_control.h"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <regex>
+#include <sstream>
+
+#include "core/camera.h"
+#include "core/error.h"
+#include "core/formats/colmap_database.h"
+#include "core/formats/colmap_model.h"
+#include "core/options.h"
+
+extern char** environ;
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::string Quoted(const std::string& s) {
+  if (!s.empty() && s.find_first_of(" \t'\"\\$`") == std::string::npos) return s;
+  std::string quoted = "'";
+  for (const char c : s) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+std::string CommandLine(const std::vector<std::string>& argv) {
+  std::string line;
+  for (const auto& arg : argv) line += (line.empty() ? "" : " ") + Quoted(arg);
+  return line;
+}
+
+// An option value as text with 17 significant digits, so COLMAP receives the threshold unchanged.
+std::string Number(double value) {
+  std::ostringstream out;
+  out.precision(17);
+  out << value;
+  return out.str();
+}
+
+// Runs COLMAP with stdout and stderr appended to `log_path`; returns the text it appended.
+// COLMAP links Qt; without a display its platform plugin must be the offscreen one (PLATFORM.md),
+// unless the caller's environment chose one.
+std::string RunColmap(const std::vector<std::string>& argv, const std::string& log_path) {
+  const std::string command = CommandLine(argv);
+  const auto offset = fs::exists(log_path) ? fs::file_size(log_path) : 0;
+  {
+    std::ofstream log(log_path, std::ios::app);
+    log << "\n$ " << command << "\n";
+  }
+  std::vector<std::string> env_storage;
+  bool has_qt_platform = false;
+  for (char** e = environ; *e; ++e) {
+    env_storage.emplace_back(*e);
+    has_qt_platform = has_qt_platform || std::strncmp(*e, "QT_QPA_PLATFORM=", 16) == 0;
+  }
+  if (!has_qt_platform) env_storage.emplace_back("QT_QPA_PLATFORM=offscreen");
+  std::vector<char*> envp;
+  for (auto& e : env_storage) envp.push_back(e.data());
+  envp.push_back(nullptr);
+  std::vector<std::string> args = argv;
+  std::vector<char*> cargv;
+  for (auto& a : args) cargv.push_back(a.data());
+  cargv.push_back(nullptr);
+
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 1, log_path.c_str(), O_WRONLY | O_APPEND | O_CREAT,
+                                   0644);
+  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  pid_t pid = 0;
+  const int spawn_error =
+      posix_spawnp(&pid, cargv[0], &actions, nullptr, cargv.data(), envp.data());
+  posix_spawn_file_actions_destroy(&actions);
+  if (spawn_error != 0) {
+    throw std::runtime_error("cannot run '" + command + "': " + std::strerror(spawn_error) +
+                             " (is COLMAP 3.8 installed? option 'colmap' names the executable)");
+  }
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0) {
+    if (errno != EINTR) throw std::runtime_error("waitpid failed for '" + command + "'");
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    const std::string how = WIFEXITED(status)
+                                ? "exited with status " + std::to_string(WEXITSTATUS(status))
+                                : "was killed by signal " + std::to_string(WTERMSIG(status));
+    throw std::runtime_error("COLMAP command failed (" + how + "): " + command +
+                             "; its output is in " + log_path);
+  }
+  std::ifstream log(log_path, std::ios::binary);
+  log.seekg(static_cast<std::streamoff>(offset));
+  std::ostringstream text;
+  text << log.rdbuf();
+  return text.str();
+}
+
+// The last "Final cost : X [px]" of COLMAP's bundle adjustment report in `output`, or NaN.
+double LastFinalCost(const std::string& output) {
+  static const std::regex pattern(R"(Final cost\s*:\s*([0-9.eE+-]+)\s*\[px\])");
+  double cost = std::numeric_limits<double>::quiet_NaN();
+  for (auto it = std::sregex_iterator(output.begin(), output.end(), pattern);
+       it != std::sregex_iterator(); ++it) {
+    cost = std::stod((*it)[1].str());
+  }
+  return cost;
+}
+
+// The gate options shared by point_triangulator and mapper (COLMAP's IncrementalMapper options).
+std::vector<std::string> GateArguments(const ClassicalControlOptions& o) {
+  return {"--Mapper.tri_create_max_angle_error",
+          Number(o.max_angle_error_deg),
+          "--Mapper.tri_continue_max_angle_error",
+          Number(o.max_angle_error_deg),
+          "--Mapper.tri_merge_max_reproj_error",
+          Number(o.max_reproj_error_px),
+          "--Mapper.tri_complete_max_reproj_error",
+          Number(o.max_reproj_error_px),
+          "--Mapper.filter_max_reproj_error",
+          Number(o.max_reproj_error_px),
+          "--Mapper.tri_min_angle",
+          Number(o.min_tri_angle_deg),
+          "--Mapper.filter_min_tri_angle",
+          Number(o.min_tri_angle_deg)};
+}
+
+std::vector<std::string> Concat(std::vector<std::string> a, const std::vector<std::string>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+std::string Flag(bool value) { return value ? "1" : "0"; }
+
+// Mean reprojection error over every track element, with the model's own cameras.
+double MeanReprojectionError(const ColmapModel& model, int* num_observations) {
+  std::map<uint32_t, CameraIntrinsics> intrinsics;
+  for (const auto& [id, camera] : model.cameras) intrinsics[id] = IntrinsicsFromColmap(camera);
+  double sum = 0.0;
+  int count = 0;
+  for (const auto& [id, point] : model.points3D) {
+    for (const ColmapTrackElement& element : point.track) {
+      const ColmapImage& image = model.images.at(element.image_id);
+      const double* k = intrinsics.at(image.camera_id).params.data();
+      const Eigen::Vector3d p = image.cam_from_world * point.xyz;
+      double undistorted[2], distorted[2];
+      ProjectPinhole(k, p.data(), undistorted);
+      DistortPixel(k, undistorted, distorted);
+      // points2D are in COLMAP's pixel convention; the intrinsics in OpenCV's.
+      const Eigen::Vector2d observed =
+          image.points2D.at(element.point2D_idx) - Eigen::Vector2d(0.5, 0.5);
+      sum += (Eigen::Vector2d(distorted[0], distorted[1]) - observed).norm();
+      ++count;
+    }
+  }
+  *num_observations = count;
+  return count ? sum / count : std::numeric_limits<double>::quiet_NaN();
+}
+
+// The model folder of a mapper run with the most registered images.
+std::string LargestMapperModel(const std::string& mapper_dir, const std::string& log_path) {
+  std::string best;
+  size_t best_images = 0;
+  for (const auto& entry : fs::directory_iterator(mapper_dir)) {
+    if (!entry.is_directory()) continue;
+    const size_t n = ReadColmapModel(entry.path().string()).images.size();
+    if (n > best_images || (n == best_images && entry.path().string() < best)) {
+      best = entry.path().string();
+      best_images = n;
+    }
+  }
+  if (best.empty()) {
+    throw std::runtime_error("COLMAP's mapper reconstructed nothing in " + mapper_dir +
+                             "; its output is in " + log_path);
+  }
+  return best;
+}
+
+}  // namespace
+
+ClassicalControlOptions ClassicalControlOptions::Tuned() {
+  ClassicalControlOptions options;
+  options.rounds = 8;
+  options.max_angle_error_deg = 8.0;
+  options.max_reproj_error_px = 16.0;
+  return options;
+}
+
+void ValidateClassicalControlOptions(const ClassicalControlOptions& o) {
+  if (o.mode != "triangulate" && o.mode != "mapper") {
+    throw InputError(
+        UnknownKeyMessage("classical.mode", o.mode, {"triangulate", "mapper"}, "mode"));
+  }
+  if (o.rounds < 1) throw InputError("classical.rounds must be at least 1");
+  if (!(o.max_angle_error_deg > 0) || !(o.max_reproj_error_px > 0) || !(o.min_tri_angle_deg >= 0)) {
+    throw InputError(
+        "classical gates must be positive (max_angle_error_deg, max_reproj_error_px) and "
+        "min_tri_angle_deg non-negative");
+  }
+  if (o.colmap.empty()) throw InputError("classical.colmap must name the COLMAP executable");
+}
+
+nlohmann::json ClassicalControlSummary::ToJson() const {
+  const auto number = [](double v) -> nlohmann::json {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
+  nlohmann::json rounds_json = nlohmann::json::array();
+  for (const auto& r : per_round) {
+    rounds_json.push_back({{"triangulate_s", r.triangulate_s},
+                           {"adjust_s", r.adjust_s},
+                           {"num_points", r.num_points},
+                           {"colmap_final_cost_px", number(r.colmap_final_cost_px)}});
+  }
+  return {{"mode", mode},
+          {"rounds", rounds},
+          {"per_round", rounds_json},
+          {"num_images", num_images},
+          {"num_registered", num_registered},
+          {"num_points", num_points},
+          {"num_observations", num_observations},
+          {"mean_reprojection_error_px", number(mean_reprojection_error_px)},
+          {"colmap_final_cost_px", number(colmap_final_cost_px)},
+          {"wall_time_s", wall_time_s},
+          {"model_dir", model_dir},
+          {"log_path", log_path}};
+}
+
+PoseSet RunClassicalControl(const std::string& database_path, const ImageSet& images,
+                            const PoseSet& prior, const ClassicalControlOptions& options,
+                            const std::string& workdir, ClassicalControlSummary* summary) {
+  ValidateClassicalControlOptions(options);
+  const auto start = std::chrono::steady_clock::now();
+  if (!fs::is_regular_file(database_path)) {
+    ThrowInput(database_path, 0, "no such file (COLMAP database for the classical control)");
+  }
+  if (images.image_root.empty() || !fs::is_directory(images.image_root)) {
+    const std::string root = "'" + images.image_root + "'";
+    throw InputError("the classical control needs the image folder for COLMAP; image root " + root +
+                     " is not a folder");
+  }
+  ClassicalControlSummary result;
+  result.mode = options.mode;
+  result.num_images = static_cast<int>(images.images.size());
+
+  // A fresh work area: COLMAP output from an earlier run must not leak into this one.
+  fs::create_directories(workdir);
+  for (const auto& entry : fs::directory_iterator(workdir)) {
+    const std::string name = entry.path().filename().string();
+    if (name == "prior" || name == "mapper" || name.rfind("round_", 0) == 0) {
+      fs::remove_all(entry.path());
+    }
+  }
+  result.log_path = (fs::path(workdir) / "colmap.log").string();
+  std::ofstream(result.log_path, std::ios::trunc);
+  const std::string refine = Flag(options.refine_intrinsics);
+  const std::vector<std::string> io = {"--database_path", database_path, "--image_path",
+                                       images.image_root};
+
+  if (options.mode == "mapper") {
+    const std::string mapper_dir = (fs::path(workdir) / "mapper").string();
+    fs::create_directories(mapper_dir);
+    const auto t = std::chrono::steady_clock::now();
+    const std::string output = RunColmap(
+        Concat(Concat(Concat({options.colmap, "mapper"}, io), {"--output_path", mapper_dir}),
+               Concat(GateArguments(options), {"--Mapper.ba_refine_focal_length", refine,
+                                               "--Mapper.ba_refine_principal_point", refine,
+                                               "--Mapper.ba_refine_extra_params", refine})),
+        result.log_path);
+    ClassicalRoundSummary round_summary;
+    round_summary.triangulate_s = SecondsSince(t);
+    round_summary.colmap_final_cost_px = LastFinalCost(output);
+    result.model_dir = LargestMapperModel(mapper_dir, result.log_path);
+    result.per_round.push_back(round_summary);
+  } else {
+    // The prior as a model with no points; ids agree with the database (ToColmapModel).
+    ColmapModel prior_model = ToColmapModel(images, prior);
+    if (prior_model.images.size() < 2) {
+      throw InputError("the classical control needs a prior pose for at least two images (" +
+                       std::to_string(prior_model.images.size()) + " of " +
+                       std::to_string(images.images.size()) + " have one)");
+    }
+    if (options.refine_intrinsics) {
+      // ToColmapModel's camera ids are camera_index + 1.
+      for (auto& [id, camera] : prior_model.cameras) {
+        camera = ColmapCameraWithModel(images.cameras[id - 1], id, "OPENCV");
+      }
+    }
+    std::string input = (fs::path(workdir) / "prior").string();
+    WriteColmapModelText(prior_model, input);
+    for (int r = 1; r <= options.rounds; ++r) {
+      const fs::path round_dir = fs::path(workdir) / ("round_" + std::to_string(r));
+      const std::string triangulated = (round_dir / "triangulated").string();
+      const std::string adjusted = (round_dir / "adjusted").string();
+      fs::create_directories(triangulated);
+      fs::create_directories(adjusted);
+      ClassicalRoundSummary round_summary;
+      auto t = std::chrono::steady_clock::now();
+      RunColmap(Concat(Concat(Concat({options.colmap, "point_triangulator"}, io),
+                              {"--input_path", input, "--output_path", triangulated}),
+                       GateArguments(options)),
+                result.log_path);
+      round_summary.triangulate_s = SecondsSince(t);
+      t = std::chrono::steady_clock::now();
+      const std::string output =
+          RunColmap({options.colmap, "bundle_adjuster", "--input_path", triangulated,
+                     "--output_path", adjusted, "--BundleAdjustment.refine_focal_length", refine,
+                     "--BundleAdjustment.refine_principal_point", refine,
+                     "--BundleAdjustment.refine_extra_params", refine},
+                    result.log_path);
+      round_summary.adjust_s = SecondsSince(t);
+      round_summary.colmap_final_cost_px = LastFinalCost(output);
+      round_summary.num_points = static_cast<int>(ReadColmapModel(adjusted).points3D.size());
+      result.per_round.push_back(round_summary);
+      input = adjusted;
+    }
+    result.model_dir = input;
+  }
+
+  const ColmapModel model = ReadColmapModel(result.model_dir);
+  PoseSet poses;
+  FromColmapModel(model, nullptr, &poses);
+  result.rounds = static_cast<int>(result.per_round.size());
+  result.num_registered = static_cast<int>(poses.size());
+  result.num_points = static_cast<int>(model.points3D.size());
+  result.mean_reprojection_error_px = MeanReprojectionError(model, &result.num_observations);
+  result.colmap_final_cost_px = result.per_round.back().colmap_final_cost_px;
+  if (options.mode == "mapper") result.per_round.back().num_points = result.num_points;
+  result.wall_time_s = SecondsSince(start);
+  if (summary) *summary = result;
+  return poses;
+}
+
+}  // namespace raytime
