@@ -15,59 +15,95 @@
 namespace raytime {
 namespace {
 
-// Weight floor of the L1 stage: 1/|r| is capped at 1/kL1Floor so that edges the current
-// estimate fits exactly (the spanning tree's) keep a finite weight.
-constexpr double kL1FloorRad = 1e-6;
+// Inner IRLS iterations of one L1 step and the floor of its weights 1/|r|: the linearized L1
+// problem is convex, so its IRLS starts from the least-squares solution and needs only the floor
+// to keep the weights of exactly fitted edges finite.
+constexpr int kL1InnerIterations = 25;
+constexpr double kL1FloorRad = 1e-7;
 
 Eigen::Vector3d EdgeError(const RelativeRotation& e, const std::vector<Eigen::Matrix3d>& r) {
   // E = R_ji_measured (R_j^T R_i)^T: the identity when the estimate reproduces the measurement.
   return LogSO3(e.cam_j_from_cam_i * r[e.i].transpose() * r[e.j]);
 }
 
-// One IRLS step in the tangent space. With left updates R_i <- Exp(w_i) R_i, the edge error
-// linearizes to R_j^T (w_i - w_j) = Log(E), so every edge contributes the same 3x3 identity
+// The tangent-space problem at the current rotations. With left updates R_i <- Exp(w_i) R_i the
+// edge error linearizes to w_i - w_j = R_j Log(E) =: b_k, so every edge contributes identity
 // blocks: the normal matrix is the weighted graph Laplacian (root removed) times I_3 and the
-// three coordinates decouple into three solves with one sparse factorization.
-double IrlsStep(const std::vector<RelativeRotation>& edges, const std::vector<int>& used,
-                const std::vector<double>& weights, const std::vector<int>& variable,
-                int num_variables, std::vector<Eigen::Matrix3d>* rotations) {
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(used.size() * 4);
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(num_variables, 3);
-  for (size_t k = 0; k < used.size(); ++k) {
-    const RelativeRotation& e = edges[used[k]];
-    const double w = weights[k];
-    const Eigen::Vector3d b = (*rotations)[e.j] * EdgeError(e, *rotations);
-    const int vi = variable[e.i], vj = variable[e.j];
-    if (vi >= 0) {
-      triplets.emplace_back(vi, vi, w);
-      rhs.row(vi) += w * b.transpose();
-    }
-    if (vj >= 0) {
-      triplets.emplace_back(vj, vj, w);
-      rhs.row(vj) -= w * b.transpose();
-    }
-    if (vi >= 0 && vj >= 0) {
-      triplets.emplace_back(vi, vj, -w);
-      triplets.emplace_back(vj, vi, -w);
-    }
+// three coordinates decouple into three solves sharing one sparse factorization.
+class Linearization {
+ public:
+  Linearization(const std::vector<RelativeRotation>& edges, const std::vector<int>& used,
+                const std::vector<int>& variable, int num_variables,
+                const std::vector<Eigen::Matrix3d>& rotations)
+      : edges_(edges), used_(used), variable_(variable), n_(num_variables) {
+    for (int k : used) b_.push_back(rotations[edges[k].j] * EdgeError(edges[k], rotations));
   }
-  Eigen::SparseMatrix<double> laplacian(num_variables, num_variables);
-  laplacian.setFromTriplets(triplets.begin(), triplets.end());
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(laplacian);
-  if (solver.info() != Eigen::Success) {
-    throw std::runtime_error("rotation averaging: the weighted Laplacian is not factorizable");
+
+  // argmin over w of sum_k weight_k |w_i - w_j - b_k|^2, one row per variable.
+  Eigen::MatrixXd Solve(const std::vector<double>& weights) const {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(used_.size() * 4);
+    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(n_, 3);
+    for (size_t k = 0; k < used_.size(); ++k) {
+      const RelativeRotation& e = edges_[used_[k]];
+      const double w = weights[k];
+      const int vi = variable_[e.i], vj = variable_[e.j];
+      if (vi >= 0) {
+        triplets.emplace_back(vi, vi, w);
+        rhs.row(vi) += w * b_[k].transpose();
+      }
+      if (vj >= 0) {
+        triplets.emplace_back(vj, vj, w);
+        rhs.row(vj) -= w * b_[k].transpose();
+      }
+      if (vi >= 0 && vj >= 0) {
+        triplets.emplace_back(vi, vj, -w);
+        triplets.emplace_back(vj, vi, -w);
+      }
+    }
+    Eigen::SparseMatrix<double> laplacian(n_, n_);
+    laplacian.setFromTriplets(triplets.begin(), triplets.end());
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(laplacian);
+    if (solver.info() != Eigen::Success) {
+      throw std::runtime_error("rotation averaging: the weighted Laplacian is not factorizable");
+    }
+    return solver.solve(rhs);
   }
-  const Eigen::MatrixXd omega = solver.solve(rhs);
-  double max_step = 0.0;
-  for (size_t node = 0; node < variable.size(); ++node) {
-    if (variable[node] < 0) continue;
-    const Eigen::Vector3d w = omega.row(variable[node]).transpose();
-    (*rotations)[node] = Orthonormalize(ExpSO3(w) * (*rotations)[node]);
-    max_step = std::max(max_step, w.norm());
+
+  // |w_i - w_j - b_k| of every edge.
+  std::vector<double> Residuals(const Eigen::MatrixXd& omega) const {
+    std::vector<double> r(used_.size());
+    for (size_t k = 0; k < used_.size(); ++k) {
+      const RelativeRotation& e = edges_[used_[k]];
+      r[k] = (Row(omega, e.i) - Row(omega, e.j) - b_[k]).norm();
+    }
+    return r;
   }
-  return max_step;
-}
+
+  // Applies R_i <- Exp(w_i) R_i; returns the largest |w_i|.
+  double Apply(const Eigen::MatrixXd& omega, std::vector<Eigen::Matrix3d>* rotations) const {
+    double max_step = 0.0;
+    for (size_t node = 0; node < variable_.size(); ++node) {
+      if (variable_[node] < 0) continue;
+      const Eigen::Vector3d w = Row(omega, static_cast<int>(node));
+      (*rotations)[node] = Orthonormalize(ExpSO3(w) * (*rotations)[node]);
+      max_step = std::max(max_step, w.norm());
+    }
+    return max_step;
+  }
+
+ private:
+  Eigen::Vector3d Row(const Eigen::MatrixXd& omega, int node) const {
+    return variable_[node] < 0 ? Eigen::Vector3d::Zero()
+                               : Eigen::Vector3d(omega.row(variable_[node]).transpose());
+  }
+
+  const std::vector<RelativeRotation>& edges_;
+  const std::vector<int>& used_;
+  const std::vector<int>& variable_;
+  const int n_;
+  std::vector<Eigen::Vector3d> b_;
+};
 
 }  // namespace
 
@@ -179,13 +215,21 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
   bool irls_converged = options.irls_iterations == 0;
   if (num_variables > 0) {
     for (int it = 0; it < options.l1_iterations; ++it) {
-      for (size_t k = 0; k < used.size(); ++k) {
-        const double r = EdgeError(edges[used[k]], result.world_from_cam).norm();
-        weights[k] = 1.0 / std::max(r, kL1FloorRad);
+      // One L1 step: the convex problem min sum_k |w_i - w_j - b_k| on this linearization,
+      // solved by IRLS from its least-squares solution.
+      const Linearization linear(edges, used, variable, num_variables, result.world_from_cam);
+      std::fill(weights.begin(), weights.end(), 1.0);
+      Eigen::MatrixXd omega = linear.Solve(weights);
+      for (int inner = 0; inner < kL1InnerIterations; ++inner) {
+        const std::vector<double> r = linear.Residuals(omega);
+        for (size_t k = 0; k < used.size(); ++k) weights[k] = 1.0 / std::max(r[k], kL1FloorRad);
+        const Eigen::MatrixXd next = linear.Solve(weights);
+        const double change = (next - omega).cwiseAbs().maxCoeff();
+        omega = next;
+        if (change < tolerance) break;
       }
       ++result.l1_iterations;
-      if (IrlsStep(edges, used, weights, variable, num_variables, &result.world_from_cam) <
-          tolerance) {
+      if (linear.Apply(omega, &result.world_from_cam) < tolerance) {
         l1_converged = true;
         break;
       }
@@ -199,8 +243,8 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
         weights[k] = std::max(s2 * s2 / ((r2 + s2) * (r2 + s2)), 1e-12);
       }
       ++result.irls_iterations;
-      if (IrlsStep(edges, used, weights, variable, num_variables, &result.world_from_cam) <
-          tolerance) {
+      const Linearization linear(edges, used, variable, num_variables, result.world_from_cam);
+      if (linear.Apply(linear.Solve(weights), &result.world_from_cam) < tolerance) {
         irls_converged = true;
         break;
       }

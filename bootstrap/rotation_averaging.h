@@ -18,13 +18,15 @@ struct RelativeRotation {
 };
 
 struct RotationAveragingOptions {
-  // Chatterjee & Govindu's two stages: iterations of robust L1 averaging (IRLS with weights
-  // 1/|r|), which needs no outlier scale, then IRLS with the Geman-McClure loss at
+  // Chatterjee & Govindu's two stages: L1 averaging, which needs no outlier scale and escapes a
+  // spanning tree that contains wrong pairs (each of its `l1_iterations` solves the convex L1
+  // problem of one linearization by inner IRLS), then IRLS with the Geman-McClure loss at
   // `robust_scale_deg` (their σ = 5°), which sharpens the solution on the inliers.
-  int l1_iterations = 30;
+  int l1_iterations = 20;
   int irls_iterations = 30;
   double robust_scale_deg = 5.0;  // degrees
-  // A stage stops when the largest tangent-space update is below this, degrees.
+  // A stage (and an L1 step's inner IRLS) stops when the largest tangent-space update is below
+  // this, degrees.
   double rotation_tolerance_deg = 1e-5;
 
   template <class Visitor>

@@ -1,10 +1,12 @@
 // The `prior` stage: the pose prior the refiner starts from. Either the dataset's ground truth
 // perturbed by the paper's protocol (§4.8 "Basin of convergence"), a pose file (a phone capture's
-// ARKit/ARCore poses, a COLMAP model, ...), or the ground truth itself.
+// ARKit/ARCore poses, a COLMAP model, ...), or the ground truth itself; or the prior-free
+// bootstrap's poses, which can also repair a given coarse prior (§4.8 "Basin of convergence").
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
 
+#include "bootstrap/prior_repair.h"
 #include "core/formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "evaluate/perturbation.h"
@@ -15,17 +17,23 @@ namespace {
 
 struct PriorOptions {
   // "perturb": ground truth perturbed with the options below; "file": read `path` in `format`;
-  // "ground_truth": the ground truth unchanged (a 0° control that skips the perturbation).
+  // "ground_truth": the ground truth unchanged (a 0° control that skips the perturbation);
+  // "bootstrap": the pose set "bootstrap" of the bootstrap stage (prior-free, SPEC §4).
   std::string source = "perturb";
   std::string format = "colmap";  // for source "file": colmap, nerfstudio, tum, strecha
   std::string path;               // for source "file"
   PerturbationOptions perturbation;
+  // Repair of the prior above with the bootstrap's poses (paper §4.8): "none"; "rotations"
+  // (averaged rotations in the prior's frame, prior centres kept: recovers 32° priors);
+  // "replace" (bootstrap poses Sim(3)-fitted onto the prior centres: recovers 64° priors).
+  std::string repair = "none";
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("source", source);
     v("format", format);
     v("path", path);
+    v("repair", repair);
     perturbation.VisitFields(v);  // flat keys: prior.level_deg, prior.seed, ...
   }
 };
@@ -38,17 +46,33 @@ class PriorStage : public StageWithOptions<PriorOptions> {
   }
   void Validate() override {
     const auto& o = options_;
-    if (o.source != "perturb" && o.source != "file" && o.source != "ground_truth") {
-      throw InputError(UnknownKeyMessage("prior.source", o.source,
-                                         {"perturb", "file", "ground_truth"}, "source"));
+    if (o.source != "perturb" && o.source != "file" && o.source != "ground_truth" &&
+        o.source != "bootstrap") {
+      throw InputError(UnknownKeyMessage(
+          "prior.source", o.source, {"perturb", "file", "ground_truth", "bootstrap"}, "source"));
+    }
+    if (o.repair != "none" && o.repair != "rotations" && o.repair != "replace") {
+      throw InputError(
+          UnknownKeyMessage("prior.repair", o.repair, {"none", "rotations", "replace"}, "repair"));
+    }
+    if (o.source == "bootstrap" && o.repair != "none") {
+      throw InputError("prior.repair '" + o.repair +
+                       "' repairs a given prior with the "
+                       "bootstrap; with prior.source 'bootstrap' there is nothing to repair");
     }
     if (o.source == "file" && o.path.empty()) {
       throw InputError("prior.source is 'file' but prior.path is not set");
     }
   }
   std::vector<std::string> Inputs() const override {
-    if (options_.source == "file") return {kArtifactImages};
-    return {kArtifactImages, PoseArtifact("ground_truth")};
+    std::vector<std::string> inputs = {kArtifactImages};
+    if (options_.source == "perturb" || options_.source == "ground_truth") {
+      inputs.push_back(PoseArtifact("ground_truth"));
+    }
+    if (options_.source == "bootstrap" || options_.repair != "none") {
+      inputs.push_back(PoseArtifact("bootstrap"));
+    }
+    return inputs;
   }
   std::vector<std::string> ExternalFiles() const override {
     if (options_.source != "file") return {};
@@ -70,6 +94,12 @@ class PriorStage : public StageWithOptions<PriorOptions> {
     nlohmann::json summary = {{"source", options_.source}};
     if (options_.source == "file") {
       prior = ReadPoseFile(options_.format, options_.path, &images);
+    } else if (options_.source == "bootstrap") {
+      prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
+      if (prior.size() < images.images.size()) {
+        spdlog::warn("prior: the bootstrap registered {} of {} images; the others have no prior",
+                     prior.size(), images.images.size());
+      }
     } else {
       const PoseSet ground_truth =
           Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
@@ -84,6 +114,27 @@ class PriorStage : public StageWithOptions<PriorOptions> {
                      options_.perturbation.mode, options_.perturbation.level_deg,
                      perturbation.translation_m, options_.perturbation.seed);
       }
+    }
+    if (options_.repair != "none") {
+      const PoseSet bootstrap =
+          Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
+      PriorRepairSummary repair;
+      try {
+        prior = options_.repair == "rotations" ? RepairRotations(prior, bootstrap, &repair)
+                                               : ReplaceWithBootstrap(prior, bootstrap, &repair);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());
+      }
+      summary["repair"] = {{"mode", repair.mode},
+                           {"num_repaired", repair.num_repaired},
+                           {"num_kept_prior", repair.num_kept_prior},
+                           {"scale", repair.scale},
+                           {"median_rotation_change_deg", repair.median_rotation_change_deg}};
+      spdlog::info(
+          "prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
+          "rotation change {:.2f}°",
+          repair.mode, repair.num_repaired, repair.num_kept_prior,
+          repair.median_rotation_change_deg);
     }
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(context.OutputPoseSetName("prior"), prior, PoseRole::kPrior,

@@ -188,6 +188,8 @@ TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
     if (unit(rng) < 0.2) {
       outlier[k] = true;
       ++num_outliers;
+      // The most supported pairs: the spanning-tree initialization is built from outliers.
+      e.num_inliers = 1000;
       e.rotation = RandomRotation(rng, M_PI) * e.rotation;
       e.translation = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
     }

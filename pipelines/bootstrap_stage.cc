@@ -1,0 +1,203 @@
+// The `bootstrap` stage: prior-free poses from the match graph (SPEC §4; paper §4.8 "Refinement
+// without an external prior"). Reads images, features and verified matches; writes the pose set
+// "bootstrap" (role prior; "bootstrap@NAME" for stage id "bootstrap@NAME"), the per-pair verdicts
+// of the wrong-pair detector as JSON and, with `filter_matches`, the matches without the rejected
+// pairs for the stages after it.
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <set>
+
+#include "bootstrap/bootstrap.h"
+#include "core/hdf5_store.h"
+#include "pipelines/stages.h"
+
+namespace raytime {
+namespace {
+
+struct BootstrapStageOptions {
+  BootstrapOptions bootstrap;
+  // Also write the verified matches minus the pairs judged wrong as this stage's /matches, so
+  // later stages (refine, classical) read the filtered match graph through the "matches"
+  // artifact (issue 5: "hand the filtered match graph to refine as an option").
+  bool filter_matches = false;
+
+  template <class Visitor>
+  void VisitFields(Visitor&& v) {
+    bootstrap.VisitFields(v);
+    v("filter_matches", filter_matches);
+  }
+};
+
+nlohmann::json Number(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
+nlohmann::json PairsJson(const ImageSet& images, const BootstrapResult& result) {
+  nlohmann::json pairs = nlohmann::json::array();
+  for (size_t k = 0; k < result.edges.size(); ++k) {
+    const ViewGraphEdge& e = result.edges[k];
+    const PairScore& s = result.pairs.scores[k];
+    pairs.push_back({{"image1", images.images[e.image1].name},
+                     {"image2", images.images[e.image2].name},
+                     {"status", PairStatusName(e.status)},
+                     {"num_correspondences", e.num_correspondences},
+                     {"num_inliers", e.num_inliers},
+                     {"median_parallax_deg", Number(e.median_parallax_deg)},
+                     {"fragility_residual_deg", Number(result.fragility_residual_deg[k])},
+                     {"rotation_residual_deg", Number(s.rotation_residual_deg)},
+                     {"direction_residual_deg", Number(s.direction_residual_deg)},
+                     {"cycle_triplets", s.cycle_triplets},
+                     {"cycle_consistent", s.cycle_consistent},
+                     {"score", Number(s.score)},
+                     {"verdict", PairVerdictName(s.verdict)}});
+  }
+  return pairs;
+}
+
+class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
+ public:
+  std::string type() const override { return "bootstrap"; }
+  std::string description() const override {
+    return "Prior-free poses from the match graph: relative poses, rotation and translation "
+           "averaging, fragility flag, wrong-pair detection";
+  }
+  void Validate() override {
+    try {
+      ValidateBootstrapOptions(options_.bootstrap);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(std::string("stage 'bootstrap': ") + e.what());
+    }
+  }
+  std::vector<std::string> Inputs() const override {
+    return {kArtifactImages, "features", "matches"};
+  }
+
+  nlohmann::json Run(const StageContext& context) override {
+    const ImageSet images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
+    const std::string& features_path = context.Require("features");
+    const std::string& matches_path = context.Require("matches");
+    const std::vector<ImageFeatures> features = Hdf5Reader(features_path).ReadFeatures();
+    const std::vector<PairMatches> matches = Hdf5Reader(matches_path).ReadMatches();
+    spdlog::info("bootstrap: {} images, {} pairs", images.images.size(), matches.size());
+
+    BootstrapResult result;
+    try {
+      result = RunBootstrap(images, features, matches, options_.bootstrap);
+    } catch (const std::invalid_argument& e) {
+      throw InputError("bootstrap input (features " + features_path + ", matches " + matches_path +
+                       "): " + e.what());
+    }
+    int usable = 0, pure_rotation = 0;
+    for (const auto& e : result.edges) {
+      usable += e.UsableForRotation();
+      pure_rotation += e.status == PairStatus::kPureRotation;
+    }
+    spdlog::info(
+        "bootstrap: relative poses of {} pairs in {:.2f} s: {} usable ({} near-pure "
+        "rotation)",
+        result.edges.size(), result.relative_pose_seconds, usable, pure_rotation);
+    spdlog::info("bootstrap: fragility {:.2f}° mean pairwise rotation residual ({} pairs) -> {}",
+                 result.fragility.mean_residual_deg, result.fragility.num_pairs,
+                 result.fragility.fragile ? "FRAGILE" : "not fragile");
+    spdlog::info("bootstrap: wrong-pair detector rejects {} of {} usable pairs ({} rounds)",
+                 result.pairs.num_wrong, usable, result.pairs.rounds);
+    spdlog::info("bootstrap: {} of {} images registered, positions by {}{}", result.num_registered,
+                 images.images.size(), options_.bootstrap.positions,
+                 result.num_centres_filled
+                     ? " (" + std::to_string(result.num_centres_filled) + " by the look-at rule)"
+                     : std::string());
+    if (result.num_registered < static_cast<int>(images.images.size())) {
+      spdlog::warn(
+          "bootstrap: {} images are outside the largest connected pair graph and get "
+          "no pose",
+          images.images.size() - result.num_registered);
+    }
+
+    const PoseSet poses = BootstrapPoses(images, result);
+    Hdf5Writer writer(context.output_path);
+    writer.WritePoseSet(context.OutputPoseSetName("bootstrap"), poses, PoseRole::kPrior,
+                        MakeProvenance(*this));
+    writer.WriteJson("bootstrap_pairs", PairsJson(images, result));
+    int written_pairs = 0;
+    if (options_.filter_matches) {
+      std::set<std::pair<int, int>> wrong;
+      for (size_t k = 0; k < result.edges.size(); ++k) {
+        if (result.pairs.scores[k].verdict == PairVerdict::kWrong) {
+          wrong.insert({result.edges[k].image1, result.edges[k].image2});
+        }
+      }
+      std::vector<PairMatches> kept;
+      for (const auto& pair : matches) {
+        if (!wrong.count({pair.image1, pair.image2})) kept.push_back(pair);
+      }
+      written_pairs = static_cast<int>(kept.size());
+      writer.WriteMatches(kept, MakeProvenance(*this));
+    }
+    writer.Commit();
+
+    nlohmann::json focal = nlohmann::json::array();
+    for (size_t c = 0; c < result.focal_searches.size(); ++c) {
+      focal.push_back({{"camera", c},
+                       {"focal_px", result.focal_searches[c].focal_px},
+                       {"num_pairs", result.focal_searches[c].num_pairs},
+                       {"candidates_px", result.focal_searches[c].candidates_px},
+                       {"inliers", result.focal_searches[c].inliers}});
+    }
+    const auto& ra = result.rotations;
+    const auto& ta = result.translations;
+    nlohmann::json summary = {
+        {"num_images", images.images.size()},
+        {"num_pairs", result.edges.size()},
+        {"num_usable_pairs", usable},
+        {"num_pure_rotation_pairs", pure_rotation},
+        {"num_registered", result.num_registered},
+        {"num_centres_filled", result.num_centres_filled},
+        {"positions", options_.bootstrap.positions},
+        {"fragility",
+         {{"mean_residual_deg", result.fragility.mean_residual_deg},
+          {"median_residual_deg", result.fragility.median_residual_deg},
+          {"num_pairs", result.fragility.num_pairs},
+          {"threshold_deg", result.fragility.threshold_deg},
+          {"fragile", result.fragility.fragile}}},
+        {"pairs",
+         {{"kept", usable - result.pairs.num_wrong},
+          {"wrong", result.pairs.num_wrong},
+          {"unusable", result.pairs.num_unusable},
+          {"rounds", result.pairs.rounds}}},
+        {"rotation_averaging",
+         {{"num_edges", ra.num_edges_used},
+          {"l1_iterations", ra.l1_iterations},
+          {"irls_iterations", ra.irls_iterations},
+          {"converged", ra.converged},
+          {"mean_residual_deg", ra.mean_residual_deg},
+          {"median_residual_deg", ra.median_residual_deg}}},
+        {"translation_averaging",
+         {{"num_edges", ta.num_edges_used},
+          {"num_registered", ta.num_registered},
+          {"iterations", ta.iterations},
+          {"converged", ta.converged},
+          {"mean_residual_deg", ta.mean_residual_deg},
+          {"median_residual_deg", ta.median_residual_deg}}},
+        {"focal_search", focal},
+        {"seconds",
+         {{"relative_poses", result.relative_pose_seconds}, {"global", result.global_seconds}}},
+        // The pre-solve flag that decides the configuration (paper §5, SPEC §3 "Deployment").
+        {"guardrails",
+         {{"fragile", result.fragility.fragile},
+          {"fragility_deg", result.fragility.mean_residual_deg}}},
+        {"metrics",
+         {{"bootstrap",
+           {{"fragility_deg", result.fragility.mean_residual_deg},
+            {"num_wrong_pairs", result.pairs.num_wrong},
+            {"num_registered", result.num_registered}}}}}};
+    if (options_.filter_matches) summary["num_matches_pairs_written"] = written_pairs;
+    return summary;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<Stage> CreateBootstrapStage() { return std::make_unique<BootstrapStage>(); }
+
+}  // namespace raytime
