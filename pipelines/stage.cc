@@ -9,9 +9,9 @@ const std::string& StageContext::Require(const std::string& artifact) const {
   if (it == artifacts.end()) {
     std::string have;
     for (const auto& [name, file] : artifacts) have += (have.empty() ? "" : ", ") + name;
-    throw InputError("this stage needs '" + artifact +
-                     "', which no earlier stage produced (available: " +
-                     (have.empty() ? "none" : have) + ")");
+    throw InputError(
+        "this stage needs '" + artifact +
+        "', which no earlier stage produced (available: " + (have.empty() ? "none" : have) + ")");
   }
   return it->second;
 }
@@ -32,11 +32,20 @@ std::string StageTypeOfId(const std::string& stage_id) {
 
 namespace raytime {
 
-std::vector<std::string> StageTypes() { return {"dataset", "prior", "evaluate", "export"}; }
+std::vector<std::string> StageTypes() {
+  return {"dataset", "features", "matches",   "colmap_import", "bootstrap",
+          "prior",   "refine",   "classical", "evaluate",      "export"};
+}
 
 std::unique_ptr<Stage> CreateStage(const std::string& type) {
   if (type == "dataset") return CreateDatasetStage();
+  if (type == "features") return CreateFeaturesStage();
+  if (type == "matches") return CreateMatchesStage();
+  if (type == "colmap_import") return CreateColmapImportStage();
+  if (type == "bootstrap") return CreateBootstrapStage();
   if (type == "prior") return CreatePriorStage();
+  if (type == "refine") return CreateRefineStage();
+  if (type == "classical") return CreateClassicalStage();
   if (type == "evaluate") return CreateEvaluateStage();
   if (type == "export") return CreateExportStage();
   throw InputError(UnknownKeyMessage("the pipeline", type, StageTypes(), "stage"));

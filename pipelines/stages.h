@@ -8,7 +8,13 @@
 namespace raytime {
 
 std::unique_ptr<Stage> CreateDatasetStage();
+std::unique_ptr<Stage> CreateFeaturesStage();
+std::unique_ptr<Stage> CreateMatchesStage();
+std::unique_ptr<Stage> CreateColmapImportStage();
+std::unique_ptr<Stage> CreateBootstrapStage();
 std::unique_ptr<Stage> CreatePriorStage();
+std::unique_ptr<Stage> CreateRefineStage();
+std::unique_ptr<Stage> CreateClassicalStage();
 std::unique_ptr<Stage> CreateEvaluateStage();
 std::unique_ptr<Stage> CreateExportStage();
 

@@ -78,12 +78,12 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   match_loss_weight_ = num_scalar_residuals > 0 ? 2.0 / num_scalar_residuals : 0.0;
   match_loss_ = std::make_unique<ceres::LossFunctionWrapper>(
       ScaledArctan(settings.loss_scale_px2, match_loss_weight_), ceres::TAKE_OWNERSHIP);
-  std::vector<bool> camera_observed(num_cameras, false);
+  camera_observed_.assign(num_cameras, false);
   match_blocks_.reserve(layout.residuals.size());
   for (const CrossProjection& residual : layout.residuals) {
     const LayoutObservation& source = layout.observations[residual.source];
     const LayoutObservation& target = layout.observations[residual.target];
-    camera_observed[source.image] = camera_observed[target.image] = true;
+    camera_observed_[source.image] = camera_observed_[target.image] = true;
     ceres::CostFunction* cost = nullptr;
     if (cache_) {
       cost = CachedCrossProjectionCost::Create(cache_.get(), residual.source, residual.target);
@@ -105,7 +105,7 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
     prior_blocks_.push_back(problem_->AddResidualBlock(
         PosePriorCost::Create(prior_world_from_cam[i], position_weight, orientation_weight),
         nullptr, pose_block(i)));
-    if (!camera_observed[i]) problem_->SetParameterBlockConstant(pose_block(i));
+    if (!camera_observed_[i]) problem_->SetParameterBlockConstant(pose_block(i));
   }
 
   // Self-calibration (§3.1): the shared intrinsics are constant unless some are refined; the

@@ -70,12 +70,15 @@ class RayTimeProblem {
   const std::vector<ceres::ResidualBlockId>& prior_blocks() const { return prior_blocks_; }
   // 2/S, the ScaledLoss factor of the match term (see the file comment).
   double match_loss_weight() const { return match_loss_weight_; }
+  // Per camera: whether some residual reaches it (the others are held constant).
+  const std::vector<bool>& camera_observed() const { return camera_observed_; }
 
  private:
   CameraIntrinsics intrinsics_info_;
   std::array<double, kNumIntrinsics> intrinsics_;
   std::vector<double> poses_;
   std::vector<double> ray_times_;
+  std::vector<bool> camera_observed_;
   std::unique_ptr<ObservationCache> cache_;
   std::unique_ptr<ceres::Manifold> pose_manifold_;
   std::unique_ptr<ceres::Manifold> intrinsics_manifold_;

@@ -1,5 +1,5 @@
 // RefinePoses: one pass (or the two passes of the staged room recipe, §4.3) of layout → ray-time
-// initialization → problem → GNC, then the posterior guardrails (§3.6, §4.3).
+// initialization → problem → GNC → gauge polish, then the posterior guardrails (§3.6, §4.3).
 #include "refine/refine.h"
 
 #include <spdlog/spdlog.h>
@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
 #include "refine/problem_layout.h"
@@ -118,9 +119,13 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
 
   state->world_from_cam = problem.WorldFromCam();
   state->intrinsics = problem.Intrinsics();
-  for (size_t t = 0; t < problem.ray_times().size(); ++t) {
+  std::vector<double> solved_ray_times = problem.ray_times();
+  pass.gauge_polish =
+      PolishGauge(anchor, problem.camera_observed(), options.position_weight,
+                  settings.orientation_weight, &state->world_from_cam, &solved_ray_times);
+  for (size_t t = 0; t < solved_ray_times.size(); ++t) {
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
-        problem.ray_times()[t];
+        solved_ray_times[t];
   }
   return pass;
 }
@@ -176,7 +181,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     }
   }
   summary.initial_cost = summary.passes.front().stages.front().initial_cost;
-  summary.final_cost = summary.passes.back().stages.back().final_cost;
+  const RefinePassSummary& last = summary.passes.back();
+  summary.final_cost = last.stages.back().final_cost -
+                       (last.gauge_polish.prior_cost_before - last.gauge_polish.prior_cost_after);
 
   // Posterior guardrails against the original prior.
   if (summary.solver_failed) summary.guardrails_fired.push_back("solver_failure");
@@ -244,6 +251,12 @@ nlohmann::json RefineSummary::ToJson() const {
                 {"min_depth", pass.ray_time_init.min_depth},
                 {"median_depth", pass.ray_time_init.median_depth},
                 {"max_depth", pass.ray_time_init.max_depth}}},
+              {"gauge_polish",
+               {{"prior_cost_before", pass.gauge_polish.prior_cost_before},
+                {"prior_cost_after", pass.gauge_polish.prior_cost_after},
+                {"rotation_deg", pass.gauge_polish.rotation_deg},
+                {"translation", pass.gauge_polish.translation},
+                {"scale", pass.gauge_polish.scale}}},
               {"build_seconds", pass.build_seconds},
               {"solve_seconds", pass.solve_seconds},
               {"stages", json::array()}};

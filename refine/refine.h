@@ -16,6 +16,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "refine/gauge_polish.h"
 #include "refine/refine_options.h"
 
 namespace raytime {
@@ -86,6 +87,7 @@ struct RefinePassSummary {
   bool self_calibration = false;
   RayTimeInitSummary ray_time_init;
   std::vector<GncStageSummary> stages;
+  GaugePolishSummary gauge_polish;  // after the last stage (gauge_polish.h)
   double build_seconds = 0.0;
   double solve_seconds = 0.0;
 };
@@ -114,7 +116,9 @@ struct RefineSummary {
   // Totals over passes and stages.
   int total_iterations = 0;
   double initial_cost = 0.0;  // first stage of the first pass
-  double final_cost = 0.0;    // last stage of the last pass (the nominal objective)
+  // E at the returned solve: the last stage's final cost (the nominal objective) less what the
+  // last pass's gauge polish removed from the prior terms.
+  double final_cost = 0.0;
   double build_seconds = 0.0;
   double solve_seconds = 0.0;
   double jacobian_seconds = 0.0;
