@@ -9,10 +9,12 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "core/error.h"
 
@@ -89,27 +91,74 @@ ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& o
   const double sx = static_cast<double>(input.cols) / gray.cols;
   const double sy = static_cast<double>(input.rows) / gray.rows;
 
+  // Detect everything, choose the budget's locations, then describe only the kept keypoints
+  // (describing the whole detection would cost several times the budget's descriptors).
   const cv::Ptr<cv::SIFT> sift =
-      cv::SIFT::create(options.max_features, /*nOctaveLayers=*/3, options.contrast_threshold,
+      cv::SIFT::create(/*nfeatures=*/0, /*nOctaveLayers=*/3, options.contrast_threshold,
                        options.edge_threshold, /*sigma=*/1.6);
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;
-  sift->detectAndCompute(input, cv::noArray(), keypoints, descriptors);
+  std::vector<cv::KeyPoint> detected;
+  sift->detect(input, detected);
 
+  // The budget counts locations, the way COLMAP's SiftExtraction.max_num_features does on the
+  // CPU: whole octaves are kept from the coarsest down until the budget is exceeded (larger-scale
+  // keypoints repeat better), so an image may hold more than the budget. A location with a second
+  // dominant orientation keeps both descriptors (Lowe 2004 §5); OpenCV emits one keypoint per
+  // orientation with identical position, size and octave.
+  struct Location {
+    float response, x, y, size;
+    int octave;
+    std::vector<int> members;
+  };
+  std::map<std::tuple<float, float, float, int>, Location> by_location;
+  for (int i = 0; i < static_cast<int>(detected.size()); ++i) {
+    const cv::KeyPoint& kp = detected[i];
+    Location& location = by_location[{kp.pt.x, kp.pt.y, kp.size, kp.octave}];
+    if (location.members.empty()) {
+      // KeyPoint::octave packs the octave as a signed byte (-1 for the doubled image).
+      const int octave = static_cast<int8_t>(kp.octave & 255);
+      location = {kp.response, kp.pt.x, kp.pt.y, kp.size, octave, {}};
+    }
+    location.response = std::max(location.response, kp.response);
+    location.members.push_back(i);
+  }
+  std::vector<const Location*> locations;
+  locations.reserve(by_location.size());
+  for (const auto& entry : by_location) locations.push_back(&entry.second);
+  // Coarsest octave first, strongest first within it; ties broken by position so the result does
+  // not depend on thread scheduling.
+  std::sort(locations.begin(), locations.end(), [](const Location* a, const Location* b) {
+    if (a->octave != b->octave) return a->octave > b->octave;
+    if (a->response != b->response) return a->response > b->response;
+    if (a->x != b->x) return a->x < b->x;
+    if (a->y != b->y) return a->y < b->y;
+    return a->size < b->size;
+  });
+  size_t keep = 0;
+  while (keep < locations.size()) {
+    const int octave = locations[keep]->octave;
+    if (static_cast<int>(keep) >= options.max_features) break;
+    while (keep < locations.size() && locations[keep]->octave == octave) ++keep;
+  }
+  locations.resize(keep);
+  std::sort(locations.begin(), locations.end(), [](const Location* a, const Location* b) {
+    if (a->response != b->response) return a->response > b->response;
+    if (a->x != b->x) return a->x < b->x;
+    if (a->y != b->y) return a->y < b->y;
+    return a->size < b->size;
+  });
+  std::vector<cv::KeyPoint> keypoints;
+  for (const Location* location : locations) {
+    std::vector<int> members = location->members;
+    std::sort(members.begin(), members.end(),
+              [&](int i, int j) { return detected[i].angle < detected[j].angle; });
+    for (int i : members) keypoints.push_back(detected[i]);
+  }
+  cv::Mat descriptors;
+  sift->compute(input, keypoints, descriptors);
+  // compute() keeps the keypoints' order and count (it only drops none for SIFT).
+  CV_Assert(descriptors.rows == static_cast<int>(keypoints.size()));
   std::vector<int> order(keypoints.size());
   std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](int i, int j) {
-    const cv::KeyPoint& a = keypoints[i];
-    const cv::KeyPoint& b = keypoints[j];
-    if (a.response != b.response) return a.response > b.response;
-    if (a.pt.x != b.pt.x) return a.pt.x < b.pt.x;
-    if (a.pt.y != b.pt.y) return a.pt.y < b.pt.y;
-    if (a.size != b.size) return a.size < b.size;
-    if (a.angle != b.angle) return a.angle < b.angle;
-    return i < j;
-  });
-  // OpenCV keeps every keypoint tied with the weakest retained response; the budget is exact.
-  if (static_cast<int>(order.size()) > options.max_features) order.resize(options.max_features);
 
   const ByteDescriptors quantized = QuantizeSiftDescriptors(descriptors, options.root_sift);
   ImageFeatures features;

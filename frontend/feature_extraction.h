@@ -18,8 +18,9 @@
 namespace raytime {
 
 struct FeatureExtractionOptions {
-  // Keypoints kept per image, the strongest by DoG response (COLMAP's
-  // SiftExtraction.max_num_features; each orientation of a location counts as one keypoint).
+  // Keypoint locations per image, as COLMAP's SiftExtraction.max_num_features counts them:
+  // whole octaves from the coarsest down until this many locations are exceeded, and a location
+  // with a second dominant orientation keeps both descriptors; an image may hold more keypoints.
   int max_features = 8192;
   // Octave the scale space starts at (Lowe 2004 §3.3): -1 doubles the image first (COLMAP's
   // default and OpenCV's only mode), 0 starts at the native resolution (about 4x faster, fewer
@@ -62,7 +63,7 @@ struct FeatureExtractionSummary {
 // convention), scale = KeyPoint::size / 2 (pixels), orientation = KeyPoint::angle in radians.
 // Descriptors: 128 uint8 per keypoint, 512 x the unit-length (Root)SIFT vector, saturated at
 // 255 (COLMAP's quantization). Keypoints are sorted by decreasing response, then position, so the
-// output does not depend on thread scheduling; at most max_features are kept.
+// output does not depend on thread scheduling; the budget is FeatureExtractionOptions::max_features.
 ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& options);
 
 // Quantizes OpenCV's float SIFT descriptors (one per row) as described at ExtractSift.
