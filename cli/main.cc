@@ -1,24 +1,42 @@
 // The `raytime` command line: `run` for YAML pipelines, one subcommand per stage, `evaluate` on
-// any two pose files, and `resize-scene` for making small sample scenes.
+// any two pose files, `report` on a finished sweep, and `resize-scene` for making small sample
+// scenes.
+#include <spawn.h>
 #include <spdlog/spdlog.h>
+#include <sys/wait.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdlib>
 #include <filesystem>
 #include <iostream>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/version.h"
+#include "evaluate/campaign_report.h"
 #include "evaluate/pose_errors.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
 #include "pipelines/stage.h"
 
+extern char** environ;
+
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
+
+// Campaign plots are drawn by scripts/plot_campaign.py (matplotlib), found in RAYTIME_SCRIPT_DIR
+// or, by default, in the source tree this binary was built from.
+constexpr const char* kPython = "/usr/bin/python3";
+constexpr int kPlotExitNoMatplotlib = 3;  // plot_campaign.py: matplotlib is not installed
+
+fs::path ScriptDirectory() {
+  const char* env = std::getenv("RAYTIME_SCRIPT_DIR");
+  return env != nullptr && *env != '\0' ? env : RAYTIME_DEFAULT_SCRIPT_DIR;
+}
 
 // Reads the poses of `path` in `format`; "hdf5" reads pose set `set` (or the only one there).
 PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& format,
@@ -65,6 +83,72 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   }
   for (const auto& name : errors.only_in_ground_truth) {
     std::printf("not scored: %s is missing from the estimate\n", name.c_str());
+  }
+  return 0;
+}
+
+// Runs `args` with this process's output streams and returns its exit status (-1 when it could
+// not be started or did not exit normally).
+int RunProgram(const std::vector<std::string>& args) {
+  std::vector<char*> argv;
+  for (const auto& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+  argv.push_back(nullptr);
+  pid_t pid = 0;
+  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0) return -1;
+  int status = 0;
+  if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) return -1;
+  return WEXITSTATUS(status);
+}
+
+// `raytime report --sweep W`: W/sweep.json -> OUT/report.md, OUT/report_cells.csv and the plots
+// (SPEC §6 campaigns; paper §4.8, §4.9).
+int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
+                     const CampaignReportOptions& options) {
+  const std::string sweep_path = (fs::path(sweep_dir) / "sweep.json").string();
+  if (!fs::exists(sweep_path)) {
+    ThrowInput(sweep_path, 0,
+               "no such file; `raytime run PIPELINE.yaml --workdir DIR` writes it for a pipeline "
+               "with a sweep section");
+  }
+  const std::vector<nlohmann::json> rows = ReadSweepRows(sweep_path);
+  CampaignReport report;
+  try {
+    report = AggregateCampaign(rows, options);
+  } catch (const InputError& e) {
+    ThrowInput(sweep_path, 0, e.what());
+  }
+  if (out_dir.empty()) out_dir = sweep_dir;
+  fs::create_directories(out_dir);
+  const std::string markdown_path = (fs::path(out_dir) / "report.md").string();
+  const std::string cells_path = (fs::path(out_dir) / "report_cells.csv").string();
+  WriteTextFileAtomically(markdown_path, CampaignReportMarkdown(report, sweep_path));
+  WriteTextFileAtomically(cells_path, CampaignCellsCsv(report));
+  spdlog::info("report: {} runs ({} failed), {} scene(s), {} level(s), {} arm(s): {}, {}",
+               report.total_runs, report.failed_runs.size(), report.scenes.size(),
+               report.levels.size(), report.arms.size(), markdown_path, cells_path);
+
+  const std::string script = (ScriptDirectory() / "plot_campaign.py").string();
+  if (!fs::exists(kPython)) {
+    spdlog::warn("report: {} not found, no plots written", kPython);
+    return 0;
+  }
+  if (!fs::exists(script)) {
+    spdlog::warn("report: plot script {} not found (set RAYTIME_SCRIPT_DIR), no plots written",
+                 script);
+    return 0;
+  }
+  const int status = RunProgram({kPython, script, cells_path, out_dir});
+  if (status == kPlotExitNoMatplotlib) {
+    spdlog::warn(
+        "report: matplotlib is missing, no plots written (report.md and "
+        "report_cells.csv are complete)");
+  } else if (status != 0) {
+    throw std::runtime_error("report: " + script + " failed (exit status " +
+                             std::to_string(status) + "); " + markdown_path + " and " + cells_path +
+                             " were written");
+  } else {
+    spdlog::info("report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}",
+                 out_dir);
   }
   return 0;
 }
@@ -139,6 +223,30 @@ int Main(int argc, char** argv) {
       ->capture_default_str();
   evaluate->add_flag("--json", as_json, "Print JSON instead of a table");
 
+  std::string sweep_dir, report_dir;
+  CampaignReportOptions report_options;
+  CLI::App* report = app.add_subcommand(
+      "report",
+      "Campaign report of a finished sweep: Markdown tables shaped like the paper's "
+      "Tables 5, 6 and 8, a CSV of cells, plots");
+  report->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)")
+      ->required();
+  report->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
+  report
+      ->add_option("--success-deg", report_options.success_rotation_deg,
+                   "Success threshold on the mean Sim(3) rotation error, degrees")
+      ->capture_default_str();
+  report->add_option("--scene-key", report_options.scene_key, "Swept column naming the scene")
+      ->capture_default_str();
+  report
+      ->add_option("--level-key", report_options.level_key,
+                   "Swept column holding the perturbation level, degrees")
+      ->capture_default_str();
+  report
+      ->add_option("--baseline", report_options.baseline_arm,
+                   "Arm the \"halves the prior's rotation error\" count compares against")
+      ->capture_default_str();
+
   DatasetOptions resize_input;
   ResizeSceneOptions resize_options;
   std::string resize_output;
@@ -177,6 +285,7 @@ int Main(int argc, char** argv) {
     return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align,
                               success_deg, as_json);
   }
+  if (report->parsed()) return RunReportCommand(sweep_dir, report_dir, report_options);
   if (resize->parsed()) {
     const int count = ResizeScene(resize_input, resize_output, resize_options);
     spdlog::info("resize-scene: wrote {} images to {}", count, resize_output);

@@ -1,0 +1,316 @@
+// Tests of campaign reports (SPEC §6; paper §4.8 "Basin of convergence", §4.9): Wilson intervals
+// against reference values, and the aggregation of hand-made sweep rows with known counts,
+// medians, halving counts and failed runs.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/error.h"
+#include "evaluate/campaign_report.h"
+
+namespace raytime {
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+TEST(WilsonIntervalTest, MatchesReferenceValues) {
+  // Reference values: roots of (k/n - p)^2 = z^2 p (1 - p) / n found by bisection, z = 1.959964.
+  struct Case {
+    int successes, trials;
+    double lower, upper;
+  };
+  for (const Case& c :
+       {Case{8, 10, 0.4902, 0.9433}, Case{0, 10, 0.0, 0.2775}, Case{10, 10, 0.7225, 1.0},
+        Case{3, 3, 0.4385, 1.0}, Case{1, 2, 0.0945, 0.9055}, Case{72, 90, 0.7059, 0.8696}}) {
+    const ProportionInterval interval = WilsonInterval(c.successes, c.trials);
+    EXPECT_NEAR(interval.lower, c.lower, 5e-5) << c.successes << "/" << c.trials;
+    EXPECT_NEAR(interval.upper, c.upper, 5e-5) << c.successes << "/" << c.trials;
+  }
+}
+
+TEST(WilsonIntervalTest, ReproducesThePapersIntervals) {
+  // Paper §4.8: 85/85 per level [0.96, 1.00]; 17/17 scenes [0.82, 1.00]; 144/170 [0.79, 0.89].
+  EXPECT_NEAR(WilsonInterval(85, 85).lower, 0.96, 0.005);
+  EXPECT_NEAR(WilsonInterval(17, 17).lower, 0.82, 0.005);
+  EXPECT_NEAR(WilsonInterval(144, 170).lower, 0.79, 0.005);
+  EXPECT_NEAR(WilsonInterval(144, 170).upper, 0.89, 0.005);
+}
+
+TEST(WilsonIntervalTest, BoundsAreExactAtTheEnds) {
+  EXPECT_EQ(WilsonInterval(0, 0).lower, 0.0);
+  EXPECT_EQ(WilsonInterval(0, 0).upper, 1.0);
+  EXPECT_EQ(WilsonInterval(0, 7).lower, 0.0);
+  EXPECT_EQ(WilsonInterval(7, 7).upper, 1.0);
+  // A wider z widens the interval.
+  EXPECT_LT(WilsonInterval(5, 10, 2.575829).lower, WilsonInterval(5, 10).lower);
+}
+
+// Errors one arm reports in one run: Sim(3) and absolute-frame mean rotation, degrees.
+struct ArmErrors {
+  double sim3_deg;
+  double none_deg;
+};
+
+// A sweep row as `raytime run` writes it: swept values as strings, flattened metrics.
+json Row(const std::string& scene, const std::string& level, const std::string& seed,
+         const std::map<std::string, ArmErrors>& arms,
+         const std::map<std::string, double>& seconds = {}) {
+  json row = {{"run", "root=" + scene + ",level_deg=" + level + ",seed=" + seed},
+              {"dataset.root", "data/strecha/" + scene},
+              {"prior.level_deg", level},
+              {"prior.seed", seed},
+              {"status", "ok"},
+              {"seconds", 1.0}};
+  for (const auto& [arm, errors] : arms) {
+    const std::string sim3 = "metrics." + arm + ".sim3.";
+    const std::string none = "metrics." + arm + ".none.";
+    row[sim3 + "mean_rotation_deg"] = errors.sim3_deg;
+    row[sim3 + "median_rotation_deg"] = errors.sim3_deg;
+    row[sim3 + "mean_centre_m"] = 0.01 * errors.sim3_deg;
+    row[sim3 + "success"] = errors.sim3_deg < 1.0;
+    row[sim3 + "gt_from_estimate.scale"] = 1.0;
+    row[none + "mean_rotation_deg"] = errors.none_deg;
+    row[none + "mean_centre_m"] = 0.02 * errors.none_deg;
+    // Only scene A has a scene scale (2 m): the relative error is absent elsewhere (null, as a
+    // NaN metric is written).
+    row[sim3 + "mean_centre_relative"] =
+        scene == "A" ? json(0.01 * errors.sim3_deg / 2.0) : json(nullptr);
+  }
+  for (const auto& [stage, value] : seconds) row["seconds." + stage] = value;
+  row["guardrails.refine@gnc.trust_region.passed"] = true;
+  return row;
+}
+
+// Two scenes x levels {0, 4} x seeds {0, 1}; scene B's run at 4°, seed 1 failed.
+std::vector<json> HandMadeRows() {
+  std::vector<json> rows = {
+      Row("A", "0", "0",
+          {{"prior", {0, 0}}, {"refined@gnc", {0.2, 0.3}}, {"classical", {0.15, 0.1}}}),
+      Row("A", "0", "1",
+          {{"prior", {0, 0}}, {"refined@gnc", {0.3, 0.5}}, {"classical", {0.25, 0.2}}}),
+      Row("A", "4", "0",
+          {{"prior", {3.9, 4.0}}, {"refined@gnc", {0.2, 1.5}}, {"classical", {3.8, 4.1}}},
+          {{"prior", 0.1}, {"refine@gnc", 10.0}, {"classical", 3.0}}),
+      Row("A", "4", "1",
+          {{"prior", {4.1, 4.0}}, {"refined@gnc", {2.5, 1.9}}, {"classical", {3.0, 4.0}}},
+          {{"prior", 0.1}, {"refine@gnc", 20.0}, {"classical", 5.0}}),
+      Row("B", "4", "0",
+          {{"prior", {3.5, 4.0}}, {"refined@gnc", {0.4, 1.0}}, {"classical", {3.6, 3.9}}},
+          {{"prior", 0.1}, {"refine@gnc", 40.0}, {"classical", 7.0}}),
+      Row("B", "0", "0",
+          {{"prior", {0, 0}},
+           {"refined@gnc", {0.25, 0.4}},
+           {"refined", {0.3, 0.3}},
+           {"refined@plain", {0.3, 0.3}},
+           {"refined@anchored", {0.3, 0.3}},
+           {"classical@tuned", {0.3, 0.3}},
+           {"classical@mapper", {0.3, 9.0}},
+           {"ground_truth", {0, 0}}},
+          {{"refine", 30.0}, {"classical@mapper", 60.0}}),
+      Row("B", "0", "1", {{"prior", {0, 0}}, {"refined@gnc", {0.22, 0.3}}}),
+  };
+  json failed = {{"run", "root=B,level_deg=4,seed=1"},
+                 {"dataset.root", "data/strecha/B"},
+                 {"prior.level_deg", "4"},
+                 {"prior.seed", "1"},
+                 {"status", "failed"},
+                 {"error", "refine@gnc: solver | diverged"},
+                 {"seconds", 2.0}};
+  rows.push_back(failed);
+  return rows;
+}
+
+TEST(CampaignReportTest, CountsAndMediansPerCell) {
+  const CampaignReport report = AggregateCampaign(HandMadeRows());
+  EXPECT_EQ(report.total_runs, 8);
+  EXPECT_EQ(report.scenes, (std::vector<std::string>{"A", "B"}));
+  EXPECT_EQ(report.levels, (std::vector<double>{0.0, 4.0}));
+  EXPECT_EQ(report.arms, (std::vector<std::string>{
+                             "prior", "refined", "refined@plain", "refined@gnc", "refined@anchored",
+                             "classical", "classical@tuned", "classical@mapper", "ground_truth"}));
+  ASSERT_EQ(report.pooled_keys.size(), 1u);
+  EXPECT_EQ(report.pooled_keys[0].first, "prior.seed");
+  EXPECT_EQ(report.pooled_keys[0].second, 2);
+
+  // 4°, over scenes: three scored runs (the fourth failed), 0.2° and 0.4° succeed.
+  const CampaignCell* gnc = report.Find(CampaignReport::kAllScenes, 4.0, "refined@gnc");
+  ASSERT_NE(gnc, nullptr);
+  EXPECT_EQ(gnc->sim3.runs, 3);
+  EXPECT_EQ(gnc->sim3.successes, 2);
+  EXPECT_DOUBLE_EQ(gnc->sim3.median_rotation_deg, 0.4);
+  EXPECT_DOUBLE_EQ(gnc->sim3.median_centre_m, 0.004);
+  // Relative centre error only where a scene scale is known (scene A): median of 0.001, 0.0125.
+  EXPECT_DOUBLE_EQ(gnc->sim3.median_centre_relative, 0.5 * (0.001 + 0.0125));
+  // Halving under Sim(3): 0.2 <= 1.95 and 0.4 <= 1.75, not 2.5 <= 2.05; absolute: all three.
+  EXPECT_EQ(gnc->sim3.halving_runs, 3);
+  EXPECT_EQ(gnc->sim3.halves_baseline, 2);
+  EXPECT_EQ(gnc->none.halving_runs, 3);
+  EXPECT_EQ(gnc->none.halves_baseline, 3);
+  EXPECT_EQ(gnc->none.successes, 0);
+  EXPECT_DOUBLE_EQ(gnc->none.median_rotation_deg, 1.5);
+  EXPECT_EQ(gnc->stage_id, "refine@gnc");
+  EXPECT_DOUBLE_EQ(gnc->median_seconds, 20.0);
+  // Scene-level reading: A has 1 of 2 runs, B 1 of 1, so one scene of two succeeds throughout.
+  EXPECT_EQ(gnc->scene_success.scenes, 2);
+  EXPECT_EQ(gnc->scene_success.scenes_all_succeed, 1);
+
+  const CampaignCell* gnc_zero = report.Find(CampaignReport::kAllScenes, 0.0, "refined@gnc");
+  ASSERT_NE(gnc_zero, nullptr);
+  EXPECT_EQ(gnc_zero->sim3.runs, 4);
+  EXPECT_EQ(gnc_zero->sim3.successes, 4);
+  EXPECT_DOUBLE_EQ(gnc_zero->sim3.median_rotation_deg, 0.5 * (0.22 + 0.25));
+  EXPECT_TRUE(std::isnan(gnc_zero->median_seconds));  // no seconds.refine@gnc column there
+  EXPECT_EQ(gnc_zero->stage_id, "");
+  EXPECT_EQ(gnc_zero->scene_success.scenes_all_succeed, 2);
+
+  const CampaignCell* gnc_a = report.Find("A", 4.0, "refined@gnc");
+  ASSERT_NE(gnc_a, nullptr);
+  EXPECT_EQ(gnc_a->sim3.runs, 2);
+  EXPECT_EQ(gnc_a->sim3.successes, 1);
+  EXPECT_DOUBLE_EQ(gnc_a->sim3.median_rotation_deg, 0.5 * (0.2 + 2.5));
+
+  // The baseline never "halves" itself; its level-0 errors are exactly 0 and succeed.
+  const CampaignCell* prior = report.Find(CampaignReport::kAllScenes, 4.0, "prior");
+  ASSERT_NE(prior, nullptr);
+  EXPECT_EQ(prior->sim3.successes, 0);
+  EXPECT_DOUBLE_EQ(prior->sim3.median_rotation_deg, 3.9);
+  EXPECT_EQ(prior->sim3.halving_runs, 0);
+  EXPECT_DOUBLE_EQ(prior->median_seconds, 0.1);
+  EXPECT_EQ(report.Find(CampaignReport::kAllScenes, 0.0, "prior")->sim3.successes, 4);
+
+  // The classical control is scored in the runs that have it (two at 0° in scene A only).
+  const CampaignCell* classical = report.Find(CampaignReport::kAllScenes, 0.0, "classical");
+  ASSERT_NE(classical, nullptr);
+  EXPECT_EQ(classical->sim3.runs, 2);
+  EXPECT_DOUBLE_EQ(classical->sim3.median_rotation_deg, 0.2);
+  EXPECT_EQ(report.Find("B", 0.0, "classical"), nullptr);
+  EXPECT_DOUBLE_EQ(report.Find(CampaignReport::kAllScenes, 4.0, "classical")->median_seconds, 5.0);
+  EXPECT_EQ(report.Find(CampaignReport::kAllScenes, 0.0, "classical@mapper")->stage_id,
+            "classical@mapper");
+  EXPECT_EQ(report.Find(CampaignReport::kAllScenes, 0.0, "refined")->stage_id, "refine");
+  // No stage wrote the ground truth in these rows: no stage, no time.
+  const CampaignCell* ground_truth = report.Find(CampaignReport::kAllScenes, 0.0, "ground_truth");
+  EXPECT_EQ(ground_truth->stage_id, "");
+  EXPECT_TRUE(std::isnan(ground_truth->median_seconds));
+}
+
+TEST(CampaignReportTest, FailedRunsAreCountedAndListed) {
+  const CampaignReport report = AggregateCampaign(HandMadeRows());
+  ASSERT_EQ(report.failed_runs.size(), 1u);
+  EXPECT_EQ(report.failed_runs[0].run, "root=B,level_deg=4,seed=1");
+  EXPECT_EQ(report.failed_runs[0].scene, "B");
+  EXPECT_EQ(report.failed_runs[0].level_deg, 4.0);
+  EXPECT_EQ(report.FailedRunsAt(CampaignReport::kAllScenes, 4.0), 1);
+  EXPECT_EQ(report.FailedRunsAt("B", 4.0), 1);
+  EXPECT_EQ(report.FailedRunsAt("A", 4.0), 0);
+  EXPECT_EQ(report.FailedRunsAt(CampaignReport::kAllScenes, 0.0), 0);
+
+  const std::string markdown = CampaignReportMarkdown(report, "W/sweep.json");
+  EXPECT_NE(markdown.find("8 runs (7 ok, 1 failed)"), std::string::npos) << markdown;
+  EXPECT_NE(
+      markdown.find("| 4° | 0/3 (3.90°) | – | – | 2/3 (0.40°) | – | 0/3 (3.60°) | – | – | – | 1 |"),
+      std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("refine@gnc: solver \\| diverged"), std::string::npos) << markdown;
+  // Table 6 shape: the best ray-time arm (most successes) beside the controls, with seconds.
+  EXPECT_NE(markdown.find("| refined@gnc (best ray-time arm) | 4/4, "), std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find(", – | 2/3, 0.40°, 20.0 s |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("### B"), std::string::npos);
+  EXPECT_NE(markdown.find("| refined@gnc | 0/4 (abs. 0/4) | 2/3 (abs. 3/3) |"), std::string::npos)
+      << markdown;
+
+  const std::string csv = CampaignCellsCsv(report);
+  size_t lines = 0;
+  for (char c : csv) lines += c == '\n' ? 1 : 0;
+  EXPECT_EQ(lines, report.cells.size() + 1);
+  EXPECT_EQ(csv.rfind("scene,level_deg,arm,stage,failed_runs,sim3_runs,sim3_successes,", 0), 0u);
+  EXPECT_NE(csv.find("\n(all),4,refined@gnc,refine@gnc,1,3,2,0.6666666667,"), std::string::npos)
+      << csv;
+}
+
+TEST(CampaignReportTest, SuccessThresholdIsConfigurable) {
+  CampaignReportOptions options;
+  options.success_rotation_deg = 3.0;
+  const CampaignReport report = AggregateCampaign(HandMadeRows(), options);
+  EXPECT_EQ(report.Find(CampaignReport::kAllScenes, 4.0, "refined@gnc")->sim3.successes, 3);
+  EXPECT_EQ(report.Find(CampaignReport::kAllScenes, 4.0, "classical")->sim3.successes, 0);
+  EXPECT_NE(CampaignReportMarkdown(report, "x").find("below 3°"), std::string::npos);
+}
+
+TEST(CampaignReportTest, UnsweptLevelAndSceneFormOneCell) {
+  json row = Row("A", "0", "0", {{"prior", {2.0, 2.0}}});
+  row.erase("dataset.root");
+  row.erase("prior.level_deg");
+  const CampaignReport report = AggregateCampaign({row});
+  EXPECT_FALSE(report.level_swept);
+  EXPECT_EQ(report.scenes, (std::vector<std::string>{"(not swept)"}));
+  ASSERT_NE(report.Find(CampaignReport::kAllScenes, 0.0, "prior"), nullptr);
+  EXPECT_NE(CampaignReportMarkdown(report, "x").find("| (not swept) | 0/1 (2.00°) |"),
+            std::string::npos);
+}
+
+TEST(CampaignReportTest, BadLevelNamesTheRun) {
+  std::vector<json> rows = HandMadeRows();
+  rows[2]["prior.level_deg"] = "four";
+  try {
+    AggregateCampaign(rows);
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("root=A,level_deg=4,seed=0"), std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("'four'"), std::string::npos) << e.what();
+  }
+}
+
+class SweepFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("raytime_campaign_test_" + std::to_string(::getpid()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string Write(const std::string& contents) {
+    const fs::path path = dir_ / "sweep.json";
+    std::ofstream(path) << contents;
+    return path.string();
+  }
+
+  // The InputError message of reading `path`, or "" when it reads.
+  static std::string ReadError(const std::string& path) {
+    try {
+      ReadSweepRows(path);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(SweepFileTest, ReadsRowsAndNamesTheFileOnBadInput) {
+  EXPECT_EQ(ReadSweepRows(Write(json(HandMadeRows()).dump(2))).size(), 8u);
+
+  const std::string missing = (dir_ / "nothing.json").string();
+  EXPECT_NE(ReadError(missing).find(missing), std::string::npos);
+
+  const std::string malformed = Write("[\n  {\"run\": 1},\n  {\"run\": \n]\n");
+  const std::string message = ReadError(malformed);
+  EXPECT_NE(message.find(malformed + ":4"), std::string::npos) << message;
+
+  EXPECT_NE(ReadError(Write("{\"run\": 1}")).find("expected a JSON array"), std::string::npos);
+  EXPECT_NE(ReadError(Write("[1]")).find("sweep row 1 is not an object"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace raytime

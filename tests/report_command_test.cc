@@ -1,0 +1,150 @@
+// End-to-end test of `raytime report` (SPEC §6 campaigns): a tiny real sweep on the sample scene
+// (prior and evaluate only, no solver: seconds), then the report, its cells and its plots.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+// Runs `ENVIRONMENT raytime ARGS` from the source directory, so relative scene paths resolve.
+CommandResult Raytime(const std::string& args, const std::string& environment = "") {
+  const std::string command = std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + environment + " " +
+                              RAYTIME_BINARY + " " + args + " 2>&1";
+  CommandResult result;
+  FILE* pipe = popen(command.c_str(), "r");
+  char buffer[4096];
+  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+std::string ReadFile(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+bool MatplotlibInstalled() {
+  return std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") == 0;
+}
+
+class ReportCommandTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("raytime_report_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Two scenes (the sample and one that does not exist, so its runs fail) x levels 0 and 4 x
+  // two seeds; the prior is scored against the ground truth. Returns the sweep's directory.
+  std::string RunSmallSweep() {
+    const fs::path pipeline = dir_ / "sweep.yaml";
+    std::ofstream(pipeline) << R"(
+name: report-test
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {mode: iid}
+  - evaluate: {poses: [prior], alignments: [sim3, none]}
+sweep:
+  dataset.root: [data/sample/fountain-P11, data/sample/no-such-scene]
+  prior.level_deg: [0, 4]
+  prior.seed: [0, 1]
+)";
+    const std::string sweep_dir = (dir_ / "sweep").string();
+    const CommandResult run =
+        Raytime("run " + pipeline.string() + " --workdir " + sweep_dir + " --jobs 1");
+    // The missing scene's runs fail, so the sweep reports failure, but it writes every row.
+    EXPECT_EQ(run.exit_code, 2) << run.output;
+    EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "sweep.json")) << run.output;
+    return sweep_dir;
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(ReportCommandTest, ReportsCountsCellsAndPlotsOfASweep) {
+  const std::string sweep_dir = RunSmallSweep();
+  const fs::path out = dir_ / "report";
+  const CommandResult result = Raytime("report --sweep " + sweep_dir + " --out " + out.string());
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+
+  const std::string report = ReadFile(out / "report.md");
+  EXPECT_NE(report.find("8 runs (4 ok, 4 failed)"), std::string::npos) << report;
+  // The unperturbed prior is the ground truth (100 % success); at 4° every frame is 4° off, so
+  // no run succeeds, and with no alignment the error is exactly the level.
+  EXPECT_NE(report.find("| 0° | 2/2 (0.00°) | 2 |"), std::string::npos) << report;
+  EXPECT_NE(report.find("| 4° | 0/2 ("), std::string::npos) << report;
+  EXPECT_NE(report.find("| prior | 0.00° / 0.000 m | 4.00° / "), std::string::npos) << report;
+  // Failed runs are counted per level and listed with their error.
+  EXPECT_NE(report.find("| root=no-such-scene,level_deg=4,seed=1 | no-such-scene | 4° |"),
+            std::string::npos)
+      << report;
+  EXPECT_NE(report.find("### fountain-P11"), std::string::npos) << report;
+
+  const std::string cells = ReadFile(out / "report_cells.csv");
+  // scene, level, arm, stage, failed runs, then sim3 runs, successes, success rate.
+  EXPECT_NE(cells.find("\n(all),0,prior,prior,2,2,2,1,"), std::string::npos) << cells;
+  EXPECT_NE(cells.find("\n(all),4,prior,prior,2,2,0,0,"), std::string::npos) << cells;
+  EXPECT_NE(cells.find("\nfountain-P11,4,prior,prior,0,2,0,0,"), std::string::npos) << cells;
+
+  if (!MatplotlibInstalled()) GTEST_SKIP() << "no matplotlib for /usr/bin/python3: no plots";
+  for (const char* plot : {"success_vs_level", "median_error_vs_level"}) {
+    for (const char* extension : {".png", ".svg"}) {
+      const fs::path path = out / (std::string(plot) + extension);
+      ASSERT_TRUE(fs::exists(path)) << path << "\n" << result.output;
+      EXPECT_GT(fs::file_size(path), 1000u) << path;
+    }
+  }
+}
+
+TEST_F(ReportCommandTest, MissingMatplotlibWarnsAndKeepsTheReport) {
+  const std::string sweep_dir = RunSmallSweep();
+  // A matplotlib package that fails to import, first on the module path.
+  fs::create_directories(dir_ / "python" / "matplotlib");
+  std::ofstream(dir_ / "python" / "matplotlib" / "__init__.py")
+      << "raise ImportError('simulated: matplotlib is not installed')\n";
+  const CommandResult result =
+      Raytime("report --sweep " + sweep_dir, "PYTHONPATH=" + (dir_ / "python").string());
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("matplotlib is missing"), std::string::npos) << result.output;
+  EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "report.md"));
+  EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "report_cells.csv"));
+  EXPECT_FALSE(fs::exists(fs::path(sweep_dir) / "success_vs_level.png"));
+}
+
+TEST_F(ReportCommandTest, MissingOrMalformedSweepIsNamed) {
+  const std::string missing = (dir_ / "nothing").string();
+  const CommandResult no_sweep = Raytime("report --sweep " + missing);
+  EXPECT_EQ(no_sweep.exit_code, 2) << no_sweep.output;
+  EXPECT_NE(no_sweep.output.find(missing + "/sweep.json"), std::string::npos) << no_sweep.output;
+
+  fs::create_directories(dir_ / "bad");
+  std::ofstream(dir_ / "bad" / "sweep.json") << "[{\"run\": \"a\", \"status\": \"ok\"},\n{\n";
+  const CommandResult malformed = Raytime("report --sweep " + (dir_ / "bad").string());
+  EXPECT_EQ(malformed.exit_code, 2) << malformed.output;
+  EXPECT_NE(malformed.output.find((dir_ / "bad" / "sweep.json").string() + ":"), std::string::npos)
+      << malformed.output;
+  EXPECT_FALSE(fs::exists(dir_ / "bad" / "report.md"));
+}
+
+}  // namespace
