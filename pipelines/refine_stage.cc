@@ -1,7 +1,7 @@
 // The `refine` stage: the ray-time refiner (refine/, SPEC §3) on the front end's verified matches
-// from the pose set "prior". Writes the pose set "refined" ("refined@NAME" for a stage id
-// refine@NAME), the run summary as /json/refine_summary and, when self-calibrating, the refined
-// intrinsics (a new /images + /cameras group, so later stages such as export use them, and
+// from the pose set "prior" (option `prior`). Writes the pose set "refined" ("refined@NAME" for a
+// stage id refine@NAME), the run summary as /json/refine_summary and, when self-calibrating, the
+// refined intrinsics (a new /images + /cameras group, so later stages such as export use them, and
 // /json/refined_intrinsics).
 //
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
@@ -26,11 +26,15 @@ namespace {
 struct RefineStageOptions {
   // plain | gnc | cap100 | anchored | room-staged | basin (files in the preset directory).
   std::string preset = "gnc";
+  // Pose set the solve starts from, e.g. "prior@bootstrap" for a stage prior@bootstrap, so arms
+  // seeded differently can share one run.
+  std::string prior = "prior";
   RefineOptions refine;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("preset", preset);
+    v("prior", prior);
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
 };
@@ -82,6 +86,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
 
     RefineStageOptions merged;
     merged.preset = probe.preset;
+    merged.prior = probe.prior;
     const fs::path preset_path = PresetPath(merged.preset);
     YAML::Node preset;
     try {
@@ -99,10 +104,13 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     options_ = merged;
     Validate();
   }
-  void Validate() override { options_.refine.Validate(); }
+  void Validate() override {
+    options_.refine.Validate();
+    if (options_.prior.empty()) throw InputError("refine.prior must name a pose set");
+  }
 
   std::vector<std::string> Inputs() const override {
-    return {kArtifactImages, "features", "matches", PoseArtifact("prior")};
+    return {kArtifactImages, "features", "matches", PoseArtifact(options_.prior)};
   }
   std::vector<std::string> ExternalFiles() const override {
     return {PresetPath(options_.preset).string()};
@@ -113,7 +121,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     const std::vector<ImageFeatures> features =
         Hdf5Reader(context.Require("features")).ReadFeatures();
     const std::vector<PairMatches> matches = Hdf5Reader(context.Require("matches")).ReadMatches();
-    const PoseSet prior = Hdf5Reader(context.Require(PoseArtifact("prior"))).ReadPoseSet("prior");
+    const PoseSet prior =
+        Hdf5Reader(context.Require(PoseArtifact(options_.prior))).ReadPoseSet(options_.prior);
     if (features.size() != images.images.size()) {
       throw InputError(context.Require("features") + ": features for " +
                        std::to_string(features.size()) + " images, but the image list has " +
