@@ -62,11 +62,27 @@ class SimilarityPriorCost {
   double orientation_scale_;
 };
 
+// The prior terms of E (PosePriorCost) over the movable cameras.
+double PriorCost(const std::vector<Rigid3>& prior, const std::vector<bool>& movable,
+                 const std::vector<Rigid3>& world_from_cam, double position_weight,
+                 double orientation_weight) {
+  const double n = static_cast<double>(prior.size());
+  double cost = 0.0;
+  for (size_t i = 0; i < prior.size(); ++i) {
+    if (!movable[i]) continue;
+    const double angle = RotationAngle(prior[i].rotation.inverse() * world_from_cam[i].rotation);
+    cost +=
+        position_weight / n * (world_from_cam[i].translation - prior[i].translation).squaredNorm() +
+        orientation_weight / n * angle * angle;
+  }
+  return cost;
+}
+
 }  // namespace
 
 GaugePolishSummary PolishGauge(const std::vector<Rigid3>& prior, const std::vector<bool>& movable,
                                double position_weight, double orientation_weight,
-                               std::vector<Rigid3>* world_from_cam,
+                               double gauge_orientation_weight, std::vector<Rigid3>* world_from_cam,
                                std::vector<double>* ray_times) {
   GaugePolishSummary summary;
   const double n = static_cast<double>(prior.size());
@@ -82,14 +98,17 @@ GaugePolishSummary PolishGauge(const std::vector<Rigid3>& prior, const std::vect
   for (size_t i = 0; i < prior.size(); ++i) {
     if (!movable[i]) continue;
     ++num_movable;
-    problem.AddResidualBlock(SimilarityPriorCost::Create((*world_from_cam)[i], prior[i],
-                                                         std::sqrt(2.0 * position_weight / n),
-                                                         std::sqrt(2.0 * orientation_weight / n)),
-                             nullptr, rotation, translation, &log_scale);
+    problem.AddResidualBlock(
+        SimilarityPriorCost::Create((*world_from_cam)[i], prior[i],
+                                    std::sqrt(2.0 * position_weight / n),
+                                    std::sqrt(2.0 * gauge_orientation_weight / n)),
+        nullptr, rotation, translation, &log_scale);
   }
   if (num_movable == 0) return summary;
-  problem.Evaluate(ceres::Problem::EvaluateOptions(), &summary.prior_cost_before, nullptr, nullptr,
-                   nullptr);
+  double fit_cost_before = 0.0;
+  problem.Evaluate(ceres::Problem::EvaluateOptions(), &fit_cost_before, nullptr, nullptr, nullptr);
+  summary.prior_cost_before =
+      PriorCost(prior, movable, *world_from_cam, position_weight, orientation_weight);
 
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::DENSE_QR;
@@ -100,12 +119,9 @@ GaugePolishSummary PolishGauge(const std::vector<Rigid3>& prior, const std::vect
   options.logging_type = ceres::SILENT;
   ceres::Solver::Summary solver_summary;
   ceres::Solve(options, &problem, &solver_summary);
-  // Monotone by construction (the identity is the start); keep it only if it helped.
-  if (!(solver_summary.final_cost < summary.prior_cost_before)) {
-    summary.prior_cost_after = summary.prior_cost_before;
-    return summary;
-  }
-  summary.prior_cost_after = solver_summary.final_cost;
+  // Monotone by construction (the identity is the start); keep it only if it helped the fit.
+  summary.prior_cost_after = summary.prior_cost_before;
+  if (!(solver_summary.final_cost < fit_cost_before)) return summary;
 
   Sim3 similarity;
   similarity.rotation =
@@ -119,6 +135,8 @@ GaugePolishSummary PolishGauge(const std::vector<Rigid3>& prior, const std::vect
     if (movable[i]) (*world_from_cam)[i] = similarity.TransformPose((*world_from_cam)[i]);
   }
   for (double& t : *ray_times) t *= similarity.scale;
+  summary.prior_cost_after =
+      PriorCost(prior, movable, *world_from_cam, position_weight, orientation_weight);
   return summary;
 }
 

@@ -5,8 +5,11 @@
 // function tolerance first: with λR = 0 an exact prior came back up to 0.5° off in the prior's
 // own frame while the shape was exact (bench/refine_bench.cc, [5]). This step finishes those
 // directions exactly: it fits the similarity minimizing the prior terms (a 7-parameter Ceres
-// problem) and applies it to the observed cameras and the ray times. Every other term is
-// unchanged, so E can only decrease; Sim(3)-aligned errors are unchanged by construction.
+// problem) and applies it to the observed cameras and the ray times. The match term is
+// unchanged and Sim(3)-aligned errors are unchanged by construction. The fit weighs the
+// orientation prior by its own λR (RefineOptions::gauge_orientation_weight), which may differ from
+// the solve's: the prior costs reported are those of E (the solve's weights), so E decreases when
+// the two agree and may rise slightly when the fit trusts the prior's rotations more than E does.
 #pragma once
 
 #include <vector>
@@ -16,7 +19,8 @@
 namespace raytime {
 
 struct GaugePolishSummary {
-  double prior_cost_before = 0.0;  // λp/N Σ|O - O^prior|² + λR/N Σ|Log(...)|², observed cameras
+  // λp/N Σ|O - O^prior|² + λR/N Σ|Log(...)|² over the observed cameras, with the solve's λR.
+  double prior_cost_before = 0.0;
   double prior_cost_after = 0.0;
   double rotation_deg = 0.0;  // the applied similarity
   double translation = 0.0;   // prior length units
@@ -24,9 +28,11 @@ struct GaugePolishSummary {
 };
 
 // `movable[i]` marks the cameras some residual reaches (the others keep their poses); ray times
-// are scaled with the similarity's scale.
+// are scaled with the similarity's scale. The similarity minimizes the prior terms with
+// `gauge_orientation_weight` as λR; the summary's costs use `orientation_weight` (the solve's).
 GaugePolishSummary PolishGauge(const std::vector<Rigid3>& prior, const std::vector<bool>& movable,
                                double position_weight, double orientation_weight,
-                               std::vector<Rigid3>* world_from_cam, std::vector<double>* ray_times);
+                               double gauge_orientation_weight, std::vector<Rigid3>* world_from_cam,
+                               std::vector<double>* ray_times);
 
 }  // namespace raytime

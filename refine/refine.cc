@@ -120,9 +120,9 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   state->world_from_cam = problem.WorldFromCam();
   state->intrinsics = problem.Intrinsics();
   std::vector<double> solved_ray_times = problem.ray_times();
-  pass.gauge_polish =
-      PolishGauge(anchor, problem.camera_observed(), options.position_weight,
-                  settings.orientation_weight, &state->world_from_cam, &solved_ray_times);
+  pass.gauge_polish = PolishGauge(anchor, problem.camera_observed(), options.position_weight,
+                                  settings.orientation_weight, options.gauge_orientation_weight,
+                                  &state->world_from_cam, &solved_ray_times);
   for (size_t t = 0; t < solved_ray_times.size(); ++t) {
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
         solved_ray_times[t];

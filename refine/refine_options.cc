@@ -27,6 +27,7 @@ void RefineOptions::Validate() const {
   for (double scale : gnc_scales) Require(scale > 0, "gnc_scales", "a list of positive scales");
   Require(position_weight >= 0, "position_weight", "non-negative");
   Require(orientation_weight >= 0, "orientation_weight", "non-negative");
+  Require(gauge_orientation_weight >= 0, "gauge_orientation_weight", "non-negative");
   Require(ray_time_constant_m > 0, "ray_time_constant_m", "positive");
   Require(max_matches_per_pair >= 0, "max_matches_per_pair", "non-negative (0 keeps all)");
   Require(num_threads >= 0, "num_threads", "non-negative (0 = hardware concurrency)");

@@ -112,7 +112,7 @@ TEST(RefineSolveTest, GaugePolishFinishesTheSimilarityDirections) {
   moved.back() = scene.ground_truth.back();
   std::vector<double> ray_times = {10.0, 20.0};
   const GaugePolishSummary polish =
-      PolishGauge(scene.ground_truth, movable, 1e-2, 1e3, &moved, &ray_times);
+      PolishGauge(scene.ground_truth, movable, 1e-2, 1e3, 1e3, &moved, &ray_times);
   EXPECT_NEAR(polish.scale, 1.0 / 1.02, 1e-9);
   EXPECT_NEAR(polish.rotation_deg, DegreesFromRadians(0.01), 1e-7);
   EXPECT_LT(polish.prior_cost_after, 1e-16);
@@ -135,6 +135,33 @@ TEST(RefineSolveTest, GaugePolishFinishesTheSimilarityDirections) {
   EXPECT_LE(summary.passes[0].gauge_polish.prior_cost_after,
             summary.passes[0].gauge_polish.prior_cost_before);
   EXPECT_LT(absolute.mean_rotation_deg, 0.05);
+}
+
+// With λR = 0 in the solve (basin), the gauge polish may still fit the global rotation to the
+// prior's rotations: the shape (Sim(3) errors) is the same, and the frame agrees with the average
+// prior rotation instead of a rotation fitted to noisy prior centres.
+TEST(RefineSolveTest, GaugeOrientationWeightAnchorsTheFrameWithoutChangingTheShape) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  scene.input.prior_world_from_cam = PerturbedPrior(scene, 8.0, 5);
+  RefineOptions centres_only = BasinOptions();
+  centres_only.gauge_orientation_weight = 0.0;
+  RefineOptions with_rotations = BasinOptions();
+  with_rotations.gauge_orientation_weight = 1e3;
+  RefineOutput a, b;
+  RefinePoses(scene.input, centres_only, &a);
+  RefinePoses(scene.input, with_rotations, &b);
+  const PoseErrorSummary shape_a = Errors(a.world_from_cam, scene.ground_truth, "sim3");
+  const PoseErrorSummary shape_b = Errors(b.world_from_cam, scene.ground_truth, "sim3");
+  const PoseErrorSummary frame_a = Errors(a.world_from_cam, scene.ground_truth, "none");
+  const PoseErrorSummary frame_b = Errors(b.world_from_cam, scene.ground_truth, "none");
+  std::printf(
+      "gauge from centres: %.3f deg absolute, from centres + rotations: %.3f deg "
+      "(Sim(3) %.4f / %.4f deg)\n",
+      frame_a.mean_rotation_deg, frame_b.mean_rotation_deg, shape_a.mean_rotation_deg,
+      shape_b.mean_rotation_deg);
+  EXPECT_NEAR(shape_a.mean_rotation_deg, shape_b.mean_rotation_deg, 1e-3);
+  EXPECT_LT(shape_b.mean_rotation_deg, 0.1);
+  EXPECT_LT(frame_b.mean_rotation_deg, frame_a.mean_rotation_deg);
 }
 
 class RefineRecoveryTest : public ::testing::TestWithParam<const char*> {};  // parameterization
