@@ -77,18 +77,48 @@ PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
 PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
                              PriorRepairSummary* summary) {
   std::vector<Eigen::Vector3d> source, target;
+  std::vector<Eigen::Matrix3d> offsets;
   for (const auto& [name, pose] : bootstrap.world_from_cam) {
     const auto it = prior.world_from_cam.find(name);
     if (it == prior.world_from_cam.end()) continue;
     source.push_back(pose.translation);
     target.push_back(it->second.translation);
+    offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
   }
   if (source.size() < 3) {
     throw std::invalid_argument("full replacement: the bootstrap registered " +
                                 std::to_string(source.size()) +
                                 " of the prior's images, the Sim(3) gauge fit needs 3");
   }
-  const Sim3 prior_from_bootstrap = FitGaugeToPriorCentres(source, target);
+  // The gauge rotation is the median of the per-image rotation offsets, as in the rotations-only
+  // repair: a coarse prior's rotations (L° each about random axes) average down to about
+  // L/sqrt(N), while a rotation fitted to its centres (moved L x 1.25 % of the scene distance
+  // each, 80 % at 64°) can be off by any angle. Scale and translation are then the least-squares
+  // fit of the centres under that rotation; a non-positive scale (centres too noisy to say
+  // anything) falls back to the full Umeyama fit.
+  const Eigen::Matrix3d rotation = MedianRotation(offsets);
+  Eigen::Vector3d mean_source = Eigen::Vector3d::Zero(), mean_target = Eigen::Vector3d::Zero();
+  for (size_t k = 0; k < source.size(); ++k) {
+    mean_source += source[k];
+    mean_target += target[k];
+  }
+  mean_source /= static_cast<double>(source.size());
+  mean_target /= static_cast<double>(source.size());
+  double cross = 0.0, spread = 0.0;
+  for (size_t k = 0; k < source.size(); ++k) {
+    const Eigen::Vector3d rotated = rotation * (source[k] - mean_source);
+    cross += rotated.dot(target[k] - mean_target);
+    spread += rotated.squaredNorm();
+  }
+  Sim3 prior_from_bootstrap;
+  if (spread > 0.0 && cross > 0.0) {
+    prior_from_bootstrap.rotation = Eigen::Quaterniond(rotation);
+    prior_from_bootstrap.scale = cross / spread;
+    prior_from_bootstrap.translation =
+        mean_target - prior_from_bootstrap.scale * (rotation * mean_source);
+  } else {
+    prior_from_bootstrap = FitGaugeToPriorCentres(source, target);
+  }
   PoseSet replaced = prior;
   PriorRepairSummary s;
   s.mode = "replace";

@@ -41,9 +41,10 @@ struct PriorRepairSummary {
 PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
                         PriorRepairSummary* summary = nullptr);
 
-// Full replacement: bootstrap poses mapped into the prior's frame by the Sim(3) fit of their
-// centres onto the prior centres. Needs >= 3 registered, non-collinear centres
-// (std::invalid_argument otherwise).
+// Full replacement: bootstrap poses mapped into the prior's frame by a similarity whose rotation
+// is the median of R_prior_i R_bootstrap_i^T (as RepairRotations) and whose scale and translation
+// fit the bootstrap centres onto the prior centres; the Umeyama fit of centres alone when that
+// scale is not positive. Needs >= 3 registered images (std::invalid_argument otherwise).
 PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
                              PriorRepairSummary* summary = nullptr);
 

@@ -515,6 +515,24 @@ TEST(PriorRepair, RotationsOnlyAndFullReplacement) {
   }
   EXPECT_LT(MaxCentreErrorRelative(scene, centres), 1e-9);
   EXPECT_LT(MaxRotationErrorDeg(scene, replaced_rotations, std::vector<bool>(8, true)), 1e-6);
+
+  // The frame of the replacement follows the prior's rotations, not its centres: with centres
+  // moved by more than the orbit's size (a 64° prior moves them 80 % of the scene distance), the
+  // replaced poses still sit within the prior's rotation noise of the truth's frame.
+  PoseSet wild = prior;
+  wild.world_from_cam.erase("not_in_bootstrap");
+  for (auto& [name, pose] : wild.world_from_cam)
+    pose.translation += 3.0 * Eigen::Vector3d::Random();
+  const PoseSet wild_replaced = ReplaceWithBootstrap(wild, bootstrap, &summary);
+  double mean_error_deg = 0.0;
+  for (int i = 0; i < 8; ++i) {
+    mean_error_deg += DegreesFromRadians(RotationAngle(Eigen::Matrix3d(
+                          wild_replaced.world_from_cam.at(std::to_string(i)).RotationMatrix() *
+                          scene.rotations[i].transpose()))) /
+                      8.0;
+  }
+  EXPECT_LT(mean_error_deg, 20.0) << "the prior's rotations are 30° off each";
+  EXPECT_GT(summary.scale, 0.0);
 }
 
 }  // namespace
