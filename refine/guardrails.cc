@@ -53,4 +53,26 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
   return verdict;
 }
 
+InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
+                                                double pair_threshold_px, double max_fraction) {
+  InconsistentPairsVerdict verdict;
+  verdict.enabled = true;
+  verdict.pair_threshold_px = pair_threshold_px;
+  verdict.fraction_threshold = max_fraction;
+  verdict.num_pairs = static_cast<int>(pairs.size());
+  if (pairs.empty()) return verdict;
+  std::vector<double> medians;
+  for (const PairResidual& pair : pairs) {
+    medians.push_back(pair.median_px);
+    if (pair.median_px > pair_threshold_px) verdict.pairs.push_back(pair);
+  }
+  const size_t mid = medians.size() / 2;
+  std::nth_element(medians.begin(), medians.begin() + mid, medians.end());
+  verdict.median_pair_px = medians[mid];
+  verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
+  verdict.fraction = static_cast<double>(verdict.num_inconsistent) / verdict.num_pairs;
+  verdict.fired = verdict.fraction > max_fraction;
+  return verdict;
+}
+
 }  // namespace raytime

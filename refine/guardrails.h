@@ -1,6 +1,6 @@
 // Posterior guardrails (paper §3.6 "Prior trust region", §4.3 room-scale wander test): checks of
-// a finished solve against the prior it started from. Plain Eigen; RefinePoses decides what to
-// return.
+// a finished solve against the prior it started from, and one against its own matches (the
+// inconsistent-pairs test, beyond the paper). Plain Eigen; RefinePoses decides what to return.
 #pragma once
 
 #include <vector>
@@ -24,5 +24,16 @@ TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
 // Sim(3) is determined and the displacement is measured without alignment.
 WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
                           double expected, double factor);
+
+// Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): a pair whose
+// median residual at the solve (PairResidualMedians, pair_consistency.h) exceeds
+// `pair_threshold_px` is inconsistent; fires when the inconsistent fraction of `pairs` exceeds
+// `max_fraction`. Prior-independent: a correct solve explains every correct pair to the keypoint
+// noise whatever prior it started from, while the matches of a wrong pair (repeated structure
+// matched to the wrong copy) agree with another relative pose and stay off by the difference
+// between the two. A handful of such pairs is the front end's usual residue; many of them pull the
+// solution off (castle-P19). Quiet on no pairs.
+InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
+                                                double pair_threshold_px, double max_fraction);
 
 }  // namespace raytime

@@ -28,6 +28,7 @@ uint64_t ObservationKey(int image, int keypoint) {
 
 struct UsedMatches {
   std::vector<std::pair<uint64_t, uint64_t>> keys;  // (image, keypoint) keys of both ends
+  std::vector<int> pairs;                           // per used match: index into input.pairs
   int num_input = 0;
 };
 
@@ -35,7 +36,8 @@ struct UsedMatches {
 UsedMatches CollectMatches(const RefineInput& input, int max_matches_per_pair, int seed) {
   const int num_images = static_cast<int>(input.keypoints.size());
   UsedMatches used;
-  for (const PairMatchIndices& pair : input.pairs) {
+  for (size_t p = 0; p < input.pairs.size(); ++p) {
+    const PairMatchIndices& pair = input.pairs[p];
     if (pair.image1 < 0 || pair.image1 >= num_images || pair.image2 < 0 ||
         pair.image2 >= num_images) {
       throw InputError("refine: match pair (" + std::to_string(pair.image1) + ", " +
@@ -59,14 +61,14 @@ UsedMatches CollectMatches(const RefineInput& input, int max_matches_per_pair, i
       }
       used.keys.emplace_back(ObservationKey(pair.image1, static_cast<int>(k)),
                              ObservationKey(pair.image2, static_cast<int>(l)));
+      used.pairs.push_back(static_cast<int>(p));
     }
   }
   return used;
 }
 
 // Observations sorted by (image, keypoint), and each used match as a pair of their indices.
-void IndexObservations(const UsedMatches& used, ProblemLayout* layout,
-                       std::vector<std::pair<int, int>>* matches) {
+void IndexObservations(const UsedMatches& used, ProblemLayout* layout) {
   std::vector<uint64_t> keys;
   keys.reserve(2 * used.keys.size());
   for (const auto& [a, b] : used.keys) {
@@ -83,8 +85,11 @@ void IndexObservations(const UsedMatches& used, ProblemLayout* layout,
   const auto index = [&keys](uint64_t key) {
     return static_cast<int>(std::lower_bound(keys.begin(), keys.end(), key) - keys.begin());
   };
-  matches->reserve(used.keys.size());
-  for (const auto& [a, b] : used.keys) matches->emplace_back(index(a), index(b));
+  layout->matches.reserve(used.keys.size());
+  for (size_t m = 0; m < used.keys.size(); ++m) {
+    layout->matches.push_back(
+        {used.pairs[m], index(used.keys[m].first), index(used.keys[m].second)});
+  }
   layout->num_matches_used = static_cast<int>(used.keys.size());
   layout->num_matches_input = used.num_input;
 }
@@ -117,31 +122,30 @@ std::vector<int> CappedMatchIndices(int image1, int image2, int count, int cap, 
 ProblemLayout BuildPerObservationLayout(const RefineInput& input, int max_matches_per_pair,
                                         int seed) {
   ProblemLayout layout;
-  std::vector<std::pair<int, int>> matches;
-  IndexObservations(CollectMatches(input, max_matches_per_pair, seed), &layout, &matches);
+  IndexObservations(CollectMatches(input, max_matches_per_pair, seed), &layout);
   layout.ray_time_observation.resize(layout.observations.size());
   for (size_t o = 0; o < layout.observations.size(); ++o) {
     layout.observations[o].ray_time = static_cast<int>(o);
+    layout.observations[o].point_ray_time = static_cast<int>(o);
     layout.ray_time_observation[o] = static_cast<int>(o);
   }
-  layout.residuals.reserve(2 * matches.size());
-  for (const auto& [a, b] : matches) {
-    layout.residuals.push_back({a, b});
-    layout.residuals.push_back({b, a});
+  layout.residuals.reserve(2 * layout.matches.size());
+  for (const LayoutMatch& match : layout.matches) {
+    layout.residuals.push_back({match.observation1, match.observation2});
+    layout.residuals.push_back({match.observation2, match.observation1});
   }
   return layout;
 }
 
 ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_pair, int seed) {
   ProblemLayout layout;
-  std::vector<std::pair<int, int>> matches;
-  IndexObservations(CollectMatches(input, max_matches_per_pair, seed), &layout, &matches);
+  IndexObservations(CollectMatches(input, max_matches_per_pair, seed), &layout);
   const int n = static_cast<int>(layout.observations.size());
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
-  for (const auto& [a, b] : matches) {
-    const int ra = FindRoot(&parent, a);
-    const int rb = FindRoot(&parent, b);
+  for (const LayoutMatch& match : layout.matches) {
+    const int ra = FindRoot(&parent, match.observation1);
+    const int rb = FindRoot(&parent, match.observation2);
     // The smaller index becomes the root, so every root is its track's first observation in
     // (image, keypoint) order: that observation is the anchor.
     if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
@@ -159,6 +163,11 @@ ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_
     layout.residuals.push_back({anchor, o});
   }
   layout.num_tracks = static_cast<int>(layout.ray_time_observation.size());
+  // Every track spans two images (matches within one image are skipped), so its anchor owns a
+  // ray time once the loop above is done.
+  for (int o = 0; o < n; ++o) {
+    layout.observations[o].point_ray_time = layout.observations[FindRoot(&parent, o)].ray_time;
+  }
   // Residuals grouped by anchor, for memory locality of the cache reads.
   std::stable_sort(
       layout.residuals.begin(), layout.residuals.end(),

@@ -14,6 +14,16 @@ struct LayoutObservation {
   int image = 0;
   int keypoint = 0;
   int ray_time = -1;  // index of the ray time living on this observation's ray, -1 if none
+  // Index of the ray time whose ray point stands for this observation: its own (per-observation
+  // layout) or its track's, on the anchor's ray (anchored layout).
+  int point_ray_time = -1;
+};
+
+// A used match: its pair in RefineInput::pairs and its two observations (image1's, image2's).
+struct LayoutMatch {
+  int pair = 0;
+  int observation1 = 0;
+  int observation2 = 0;
 };
 
 // r = π_target_image(X_source) - û_target: projects the source observation's ray point into the
@@ -27,9 +37,10 @@ struct ProblemLayout {
   std::vector<LayoutObservation> observations;  // sorted by (image, keypoint)
   std::vector<int> ray_time_observation;        // per ray time: the observation it lives on
   std::vector<CrossProjection> residuals;
-  int num_matches_input = 0;  // between distinct images
-  int num_matches_used = 0;   // after the cap
-  int num_tracks = 0;         // anchored only
+  std::vector<LayoutMatch> matches;  // the used matches, in input order
+  int num_matches_input = 0;         // between distinct images
+  int num_matches_used = 0;          // after the cap
+  int num_tracks = 0;                // anchored only
 };
 
 // Deterministic per-pair subset (§4.7 "match capping"): indices of at most `cap` of `count`

@@ -1,9 +1,11 @@
 // RefinePoses: one pass (or the two passes of the staged room recipe, §4.3) of layout → ray-time
-// initialization → problem → GNC → gauge polish, then the posterior guardrails (§3.6, §4.3).
+// initialization → problem → GNC → gauge polish, then the posterior guardrails (§3.6, §4.3, and
+// the inconsistent-pairs test beyond the paper).
 #include "refine/refine.h"
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 #include <unordered_map>
@@ -12,6 +14,7 @@
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
+#include "refine/pair_consistency.h"
 #include "refine/problem_layout.h"
 #include "refine/ray_time_init.h"
 #include "refine/ray_time_problem.h"
@@ -51,11 +54,14 @@ struct PassSettings {
   bool refine_distortion = false;
 };
 
-// State carried from one pass to the next (the staged recipe's warm start).
+// State carried from one pass to the next (the staged recipe's warm start), and the last pass's
+// layout and solved ray times (after its gauge polish) for the inconsistent-pairs test.
 struct PassState {
   std::vector<Rigid3> world_from_cam;
   CameraIntrinsics intrinsics;
   std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
+  ProblemLayout layout;
+  std::vector<double> ray_times;  // per layout ray time
 };
 
 RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
@@ -67,10 +73,11 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.self_calibration =
       settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
   const auto build_start = std::chrono::steady_clock::now();
-  const ProblemLayout layout =
+  state->layout =
       options.parameterization == "anchored"
           ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
           : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
+  const ProblemLayout& layout = state->layout;
   std::vector<double> ray_times =
       InitialRayTimes(layout, input, state->world_from_cam, state->intrinsics,
                       options.ray_time_init, options.ray_time_constant_m, &pass.ray_time_init);
@@ -127,7 +134,46 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
         solved_ray_times[t];
   }
+  state->ray_times = std::move(solved_ray_times);
   return pass;
+}
+
+// Per image pair with used matches, its median residual at the last pass's solved state
+// (PairResidualMedians' plain arrays from the layout; input order).
+std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const PassState& state) {
+  const ProblemLayout& layout = state.layout;
+  const int num_observations = static_cast<int>(layout.observations.size());
+  Eigen::VectorXi images(num_observations), point_source(num_observations);
+  Keypoints pixels(num_observations, 2);
+  Eigen::VectorXd point_ray_time(num_observations);
+  for (int o = 0; o < num_observations; ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    images(o) = obs.image;
+    pixels.row(o) = input.keypoints[obs.image].row(obs.keypoint);
+    point_source(o) = layout.ray_time_observation[obs.point_ray_time];
+    point_ray_time(o) = state.ray_times[obs.point_ray_time];
+  }
+  std::vector<int> count(input.pairs.size(), 0);
+  for (const LayoutMatch& match : layout.matches) ++count[match.pair];
+  std::vector<PairObservationMatches> pairs;
+  std::vector<int> slot(input.pairs.size(), -1);
+  for (size_t p = 0; p < input.pairs.size(); ++p) {
+    if (count[p] == 0) continue;
+    slot[p] = static_cast<int>(pairs.size());
+    PairObservationMatches pair;
+    pair.image1 = input.pairs[p].image1;
+    pair.image2 = input.pairs[p].image2;
+    pair.observations.resize(count[p], 2);
+    pairs.push_back(std::move(pair));
+  }
+  std::vector<int> filled(pairs.size(), 0);
+  for (const LayoutMatch& match : layout.matches) {
+    const int s = slot[match.pair];
+    pairs[s].observations.row(filled[s]++) << match.observation1, match.observation2;
+  }
+  const IntrinsicsVector intrinsics(state.intrinsics.params.data());
+  return PairResidualMedians(intrinsics, state.world_from_cam, images, pixels, point_source,
+                             point_ray_time, pairs);
 }
 
 }  // namespace
@@ -200,6 +246,13 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     if (summary.wander.fired) summary.guardrails_fired.push_back("wander");
   }
   summary.returned_prior = !summary.guardrails_fired.empty();
+  // Against the solve's own matches (prior-independent), flag only.
+  if (options.inconsistent_pairs_test) {
+    summary.inconsistent_pairs =
+        CheckInconsistentPairs(SolvedPairResiduals(input, state), options.inconsistent_pair_px,
+                               options.max_inconsistent_pair_fraction);
+    if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
+  }
 
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_intrinsics = state.intrinsics;
@@ -221,9 +274,31 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         summary.wander.median_displacement, summary.wander.threshold,
         summary.wander.fired ? ": FIRED" : "");
   }
+  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  if (pairs.enabled) {
+    spdlog::info(
+        "refine: inconsistent pairs: {} of {} pairs above {:.3g} px (median pair {:.3g} px), "
+        "fraction {:.3f} (threshold {:.3g}){}",
+        pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
+        pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : "");
+  }
   if (summary.returned_prior) {
     spdlog::warn("refine: guardrail fired ({}): returning the prior",
                  summary.guardrails_fired.front());
+  }
+  if (pairs.fired) {
+    // The first few in the log; all of them in the summary.
+    constexpr size_t kLogged = 8;
+    std::string listed;
+    for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
+      listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ", pairs.pairs[p].image1,
+                            pairs.pairs[p].image2, pairs.pairs[p].median_px);
+    }
+    if (pairs.pairs.size() > kLogged) listed += ", ...";
+    spdlog::warn(
+        "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
+        "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}",
+        pairs.num_inconsistent, pairs.num_pairs, listed);
   }
   return summary;
 }
@@ -299,6 +374,23 @@ nlohmann::json RefineSummary::ToJson() const {
                          {"median_displacement", wander.median_displacement},
                          {"expected", wander.expected},
                          {"threshold", wander.threshold}}}};
+  json inconsistent = json::array();
+  for (const PairResidual& pair : inconsistent_pairs.pairs) {
+    inconsistent.push_back({{"image1", pair.image1},
+                            {"image2", pair.image2},
+                            {"median_px", pair.median_px},
+                            {"num_matches", pair.num_matches}});
+  }
+  out["guardrails"]["inconsistent_pairs"] = {
+      {"enabled", inconsistent_pairs.enabled},
+      {"fired", inconsistent_pairs.fired},
+      {"num_pairs", inconsistent_pairs.num_pairs},
+      {"num_inconsistent", inconsistent_pairs.num_inconsistent},
+      {"fraction", inconsistent_pairs.fraction},
+      {"median_pair_px", inconsistent_pairs.median_pair_px},
+      {"pair_threshold_px", inconsistent_pairs.pair_threshold_px},
+      {"fraction_threshold", inconsistent_pairs.fraction_threshold},
+      {"pairs", inconsistent}};
   return out;
 }
 

@@ -6,6 +6,7 @@
 //   RefineOutput output;
 //   const RefineSummary summary = RefinePoses(input, RefineOptions(), &output);
 //   if (summary.returned_prior) ...  // a guardrail fired: output holds the prior
+//   if (!summary.guardrails_fired.empty()) ...  // also flag-only ones ("inconsistent_pairs")
 #pragma once
 
 #include <Eigen/Core>
@@ -111,6 +112,29 @@ struct WanderVerdict {
   double threshold = 0.0;            // wander_factor * expected
 };
 
+// One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
+// of the symmetric cross-projection residual at the solved poses, intrinsics and ray times.
+struct PairResidual {
+  int image1 = 0;  // indices into RefineInput's images
+  int image2 = 0;
+  int num_matches = 0;     // used matches (after the cap)
+  double median_px = 0.0;  // pixels, root mean square of the two directions per match
+};
+
+// Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): the fraction of
+// image pairs whose matches the solution does not explain. Flag only: the solution is returned.
+struct InconsistentPairsVerdict {
+  bool enabled = false;
+  bool fired = false;
+  int num_pairs = 0;  // image pairs with used matches
+  int num_inconsistent = 0;
+  double fraction = 0.0;            // num_inconsistent / num_pairs
+  double median_pair_px = 0.0;      // median (upper) over the pairs of their medians, pixels
+  double pair_threshold_px = 0.0;   // inconsistent_pair_px
+  double fraction_threshold = 0.0;  // max_inconsistent_pair_fraction
+  std::vector<PairResidual> pairs;  // the inconsistent pairs, in input order
+};
+
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
   // Totals over passes and stages.
@@ -126,7 +150,10 @@ struct RefineSummary {
   bool solver_failed = false;  // a Ceres solve reported FAILURE
   TrustRegionVerdict trust_region;
   WanderVerdict wander;
-  std::vector<std::string> guardrails_fired;  // "solver_failure", "trust_region", "wander"
+  InconsistentPairsVerdict inconsistent_pairs;
+  // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs"
+  // (flag only), in this order.
+  std::vector<std::string> guardrails_fired;
   bool returned_prior = false;
 
   nlohmann::json ToJson() const;

@@ -38,6 +38,9 @@ void RefineOptions::Validate() const {
   Require(length_unit_m > 0, "length_unit_m", "positive");
   Require(wander_expected_m > 0, "wander_expected_m", "positive");
   Require(wander_factor > 0, "wander_factor", "positive");
+  Require(inconsistent_pair_px > 0, "inconsistent_pair_px", "positive");
+  Require(max_inconsistent_pair_fraction >= 0 && max_inconsistent_pair_fraction < 1,
+          "max_inconsistent_pair_fraction", "in [0, 1)");
   Require(stage1_orientation_weight >= 0, "stage1_orientation_weight", "non-negative");
   Require(stage1_max_matches_per_pair >= 0, "stage1_max_matches_per_pair",
           "non-negative (0 keeps all)");
