@@ -41,7 +41,7 @@ declare -A matches solve jac_per_eval
 for id in refine@all refine@all_nocache refine@all_plain refine@cap25 refine@cap50 \
           refine@cap100 refine@cap200 refine@cap400 refine@cap800 classical; do
   read -r m it je js s err < <(arm "$id")
-  per=$(awk -v a="$js" -v b="$je" 'BEGIN { printf "%.4f", b > 0 ? a / b : 0 }')
+  per=$(awk -v a="$js" -v b="$je" 'BEGIN { printf "%.4f", (b > 0 ? a / b : 0) }')
   matches[$id]=$m; solve[$id]=$s; jac_per_eval[$id]=$per
   printf '%-20s %9s %6s %6s %10s %9.2f %10.3f\n' "$id" "$m" "$it" "$je" "$per" "$s" "$err"
 done
