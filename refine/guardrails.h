@@ -26,12 +26,13 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
                           double expected, double factor);
 
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): a pair whose
-// median residual at the solve (PairResidualMedians, pair_consistency.h) exceeds
-// `pair_threshold_px` is inconsistent; fires when the inconsistent fraction of `pairs` exceeds
-// `max_fraction`. Prior-independent: a correct solve explains every correct pair to the keypoint
-// noise whatever prior it started from, while the matches of a wrong pair (repeated structure
-// matched to the wrong copy) agree with another relative pose and stay off by the difference
-// between the two. A handful of such pairs is the front end's usual residue; many of them pull the
+// median positive-ray epipolar distance at the solve (PairResidualMedians, pair_consistency.h)
+// exceeds `pair_threshold_px` is inconsistent; fires when the inconsistent fraction of `pairs`
+// exceeds `max_fraction`. Prior-independent and blind to the ray times: correct solved poses
+// explain every correct pair to the keypoint noise whatever prior the solve started from and
+// wherever its ray times ended, while the matches of a wrong pair (repeated structure matched to
+// the wrong copy) agree with another relative pose and stay off by the difference between the
+// two. A handful of such pairs is the front end's usual residue; many of them pull the
 // solution off (castle-P19). Quiet on no pairs.
 InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
                                                 double pair_threshold_px, double max_fraction);

@@ -1,38 +1,11 @@
 #include "refine/pair_consistency.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
-#include "refine/ray_geometry.h"
-
 namespace raytime {
 namespace {
-
-using PoseBlock = std::array<double, kPoseBlockSize>;
-
-// The 7-vector the cost functors read (ray_geometry.h): quaternion x, y, z, w, then the centre.
-PoseBlock ToPoseBlock(const Rigid3& world_from_cam) {
-  const Eigen::Quaterniond& q = world_from_cam.rotation;
-  const Eigen::Vector3d& centre = world_from_cam.translation;
-  return {q.x(), q.y(), q.z(), q.w(), centre.x(), centre.y(), centre.z()};
-}
-
-// CrossProjectionAutoDiffCost's arithmetic in doubles, in the same order.
-Eigen::Vector2d Residual(const double* intrinsics, const double* source_pose, double ray_time,
-                         const double* source_pixel, const double* target_pose,
-                         const double* target_pixel) {
-  double source_undistorted[2], target_undistorted[2];
-  UndistortPixel(intrinsics, source_pixel, source_undistorted);
-  UndistortPixel(intrinsics, target_pixel, target_undistorted);
-  double point[3];
-  RayPointInWorld(intrinsics, source_pose, ray_time, source_undistorted, point);
-  double projected[2];
-  ProjectWorldPoint(intrinsics, target_pose, point, projected);
-  return Eigen::Vector2d(projected[0] - target_undistorted[0],
-                         projected[1] - target_undistorted[1]);
-}
 
 double Median(std::vector<double>* values) {
   if (values->empty()) return 0.0;
@@ -46,33 +19,63 @@ double Median(std::vector<double>* values) {
 
 }  // namespace
 
-Eigen::Vector2d CrossProjectionResidual(const IntrinsicsVector& intrinsics,
-                                        const Rigid3& source_world_from_cam, double ray_time,
-                                        const Eigen::Vector2d& source_pixel,
-                                        const Rigid3& target_world_from_cam,
-                                        const Eigen::Vector2d& target_pixel) {
-  const PoseBlock source = ToPoseBlock(source_world_from_cam);
-  const PoseBlock target = ToPoseBlock(target_world_from_cam);
-  return Residual(intrinsics.data(), source.data(), ray_time, source_pixel.data(), target.data(),
-                  target_pixel.data());
+double PositiveRayEpipolarDistance(const IntrinsicsVector& intrinsics,
+                                   const Rigid3& source_world_from_cam,
+                                   const Eigen::Vector2d& source_pixel,
+                                   const Rigid3& target_world_from_cam,
+                                   const Eigen::Vector2d& target_pixel) {
+  const double* k = intrinsics.data();
+  Eigen::Vector2d source_undistorted, target_undistorted;
+  UndistortPixel(k, source_pixel.data(), source_undistorted.data());
+  UndistortPixel(k, target_pixel.data(), target_undistorted.data());
+  Eigen::Vector3d ray;
+  PixelToUnitRay(k, source_undistorted.data(), ray.data());
+  // The ray's points in the target camera's frame are c + t e; with K the pinhole matrix, their
+  // homogeneous pixels are a + t b, a = K c (the epipole), b = K e (the vanishing point), and the
+  // residual's pixel is (a + t b) dehomogenized, which is what ProjectPinhole computes.
+  const Eigen::Quaterniond target_from_world = target_world_from_cam.rotation.conjugate();
+  const Eigen::Vector3d c =
+      target_from_world * (source_world_from_cam.translation - target_world_from_cam.translation);
+  const Eigen::Vector3d e = target_from_world * (source_world_from_cam.rotation * ray);
+  const auto pinhole = [k](const Eigen::Vector3d& p) {
+    return Eigen::Vector3d(k[kFx] * p.x() + k[kCx] * p.z(), k[kFy] * p.y() + k[kCy] * p.z(), p.z());
+  };
+  const Eigen::Vector3d a = pinhole(c);
+  const Eigen::Vector3d b = pinhole(e);
+  const Eigen::Vector3d q = target_undistorted.homogeneous();
+  const auto distance_to = [&q](const Eigen::Vector3d& h) {
+    return h.z() != 0.0 ? (h.hnormalized() - q.head<2>()).norm()
+                        : std::numeric_limits<double>::infinity();
+  };
+  const Eigen::Vector3d line = a.cross(b);  // the epipolar line
+  const double normal2 = line.head<2>().squaredNorm();
+  if (normal2 == 0.0) {
+    // a ∥ b: the ray passes through the target's centre and every t has one image, b's (or none,
+    // when b lies at infinity: the ray runs in the focal plane).
+    return line.z() == 0.0 ? distance_to(b) : std::numeric_limits<double>::infinity();
+  }
+  // The foot f of the perpendicular from q, and f = α a + β b up to scale: it is the image of
+  // t = β / α, which is positive iff α and β share a sign. f × b = α (a × b) and f × a =
+  // -β (a × b) give α and β times |a × b|².
+  const double signed_offset = line.dot(q) / normal2;
+  const Eigen::Vector3d foot(q.x() - signed_offset * line.x(), q.y() - signed_offset * line.y(),
+                             1.0);
+  const double alpha = foot.cross(b).dot(line);
+  const double beta = -foot.cross(a).dot(line);
+  if (alpha * beta > 0.0) return std::abs(signed_offset) * std::sqrt(normal2);
+  return std::min(distance_to(a), distance_to(b));
 }
 
-std::vector<PairResidual> PairResidualMedians(
-    const IntrinsicsVector& intrinsics, const std::vector<Rigid3>& world_from_cam,
-    const Eigen::VectorXi& images, const Keypoints& pixels, const Eigen::VectorXi& point_source,
-    const Eigen::VectorXd& point_ray_time, const std::vector<PairObservationMatches>& pairs) {
-  std::vector<PoseBlock> poses;
-  poses.reserve(world_from_cam.size());
-  for (const Rigid3& pose : world_from_cam) poses.push_back(ToPoseBlock(pose));
-  const auto residual_norm2 = [&](int from, int to) {
-    const int source = point_source(from);
-    const Eigen::Vector2d source_pixel = pixels.row(source).transpose();
-    const Eigen::Vector2d target_pixel = pixels.row(to).transpose();
-    const double norm2 =
-        Residual(intrinsics.data(), poses[images(source)].data(), point_ray_time(from),
-                 source_pixel.data(), poses[images(to)].data(), target_pixel.data())
-            .squaredNorm();
-    return std::isfinite(norm2) ? norm2 : std::numeric_limits<double>::infinity();
+std::vector<PairResidual> PairResidualMedians(const IntrinsicsVector& intrinsics,
+                                              const std::vector<Rigid3>& world_from_cam,
+                                              const Eigen::VectorXi& images,
+                                              const Keypoints& pixels,
+                                              const std::vector<PairObservationMatches>& pairs) {
+  const auto distance2 = [&](int from, int to) {
+    const double d = PositiveRayEpipolarDistance(
+        intrinsics, world_from_cam[images(from)], pixels.row(from).transpose(),
+        world_from_cam[images(to)], pixels.row(to).transpose());
+    return std::isfinite(d) ? d * d : std::numeric_limits<double>::infinity();
   };
 
   std::vector<PairResidual> out;
@@ -83,14 +86,7 @@ std::vector<PairResidual> PairResidualMedians(
     for (Eigen::Index m = 0; m < pair.observations.rows(); ++m) {
       const int a = pair.observations(m, 0);
       const int b = pair.observations(m, 1);
-      double sum = 0.0;
-      int directions = 0;
-      for (const auto& [from, to] : {std::pair<int, int>(a, b), std::pair<int, int>(b, a)}) {
-        if (images(point_source(from)) == images(to)) continue;
-        sum += residual_norm2(from, to);
-        ++directions;
-      }
-      if (directions > 0) values.push_back(std::sqrt(sum / directions));
+      values.push_back(std::sqrt(0.5 * (distance2(a, b) + distance2(b, a))));
     }
     PairResidual result;
     result.image1 = pair.image1;

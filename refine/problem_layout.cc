@@ -126,7 +126,6 @@ ProblemLayout BuildPerObservationLayout(const RefineInput& input, int max_matche
   layout.ray_time_observation.resize(layout.observations.size());
   for (size_t o = 0; o < layout.observations.size(); ++o) {
     layout.observations[o].ray_time = static_cast<int>(o);
-    layout.observations[o].point_ray_time = static_cast<int>(o);
     layout.ray_time_observation[o] = static_cast<int>(o);
   }
   layout.residuals.reserve(2 * layout.matches.size());
@@ -163,11 +162,6 @@ ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_
     layout.residuals.push_back({anchor, o});
   }
   layout.num_tracks = static_cast<int>(layout.ray_time_observation.size());
-  // Every track spans two images (matches within one image are skipped), so its anchor owns a
-  // ray time once the loop above is done.
-  for (int o = 0; o < n; ++o) {
-    layout.observations[o].point_ray_time = layout.observations[FindRoot(&parent, o)].ray_time;
-  }
   // Residuals grouped by anchor, for memory locality of the cache reads.
   std::stable_sort(
       layout.residuals.begin(), layout.residuals.end(),

@@ -14,9 +14,6 @@ struct LayoutObservation {
   int image = 0;
   int keypoint = 0;
   int ray_time = -1;  // index of the ray time living on this observation's ray, -1 if none
-  // Index of the ray time whose ray point stands for this observation: its own (per-observation
-  // layout) or its track's, on the anchor's ray (anchored layout).
-  int point_ray_time = -1;
 };
 
 // A used match: its pair in RefineInput::pairs and its two observations (image1's, image2's).

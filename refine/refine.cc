@@ -55,13 +55,12 @@ struct PassSettings {
 };
 
 // State carried from one pass to the next (the staged recipe's warm start), and the last pass's
-// layout and solved ray times (after its gauge polish) for the inconsistent-pairs test.
+// layout (its used matches) for the inconsistent-pairs test.
 struct PassState {
   std::vector<Rigid3> world_from_cam;
   CameraIntrinsics intrinsics;
   std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
   ProblemLayout layout;
-  std::vector<double> ray_times;  // per layout ray time
 };
 
 RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
@@ -134,24 +133,20 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
         solved_ray_times[t];
   }
-  state->ray_times = std::move(solved_ray_times);
   return pass;
 }
 
-// Per image pair with used matches, its median residual at the last pass's solved state
-// (PairResidualMedians' plain arrays from the layout; input order).
+// Per image pair with used matches, its median positive-ray epipolar distance at the last pass's
+// solved poses and intrinsics (PairResidualMedians' plain arrays from the layout; input order).
 std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const PassState& state) {
   const ProblemLayout& layout = state.layout;
   const int num_observations = static_cast<int>(layout.observations.size());
-  Eigen::VectorXi images(num_observations), point_source(num_observations);
+  Eigen::VectorXi images(num_observations);
   Keypoints pixels(num_observations, 2);
-  Eigen::VectorXd point_ray_time(num_observations);
   for (int o = 0; o < num_observations; ++o) {
     const LayoutObservation& obs = layout.observations[o];
     images(o) = obs.image;
     pixels.row(o) = input.keypoints[obs.image].row(obs.keypoint);
-    point_source(o) = layout.ray_time_observation[obs.point_ray_time];
-    point_ray_time(o) = state.ray_times[obs.point_ray_time];
   }
   std::vector<int> count(input.pairs.size(), 0);
   for (const LayoutMatch& match : layout.matches) ++count[match.pair];
@@ -172,8 +167,7 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
     pairs[s].observations.row(filled[s]++) << match.observation1, match.observation2;
   }
   const IntrinsicsVector intrinsics(state.intrinsics.params.data());
-  return PairResidualMedians(intrinsics, state.world_from_cam, images, pixels, point_source,
-                             point_ray_time, pairs);
+  return PairResidualMedians(intrinsics, state.world_from_cam, images, pixels, pairs);
 }
 
 }  // namespace

@@ -113,7 +113,8 @@ struct WanderVerdict {
 };
 
 // One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
-// of the symmetric cross-projection residual at the solved poses, intrinsics and ray times.
+// of the symmetric epipolar distance restricted to positive ray times (the cross-projection
+// residual minimized over the ray time) at the solved poses and intrinsics.
 struct PairResidual {
   int image1 = 0;  // indices into RefineInput's images
   int image2 = 0;
