@@ -27,6 +27,12 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
+// XXH3 of this executable's file, computed once per process.
+const std::string& ExecutableHash() {
+  static const std::string hash = HashFileContents(fs::read_symlink("/proc/self/exe").string());
+  return hash;
+}
+
 const std::vector<std::string> kTopLevelKeys = {"name",    "description", "dataset",
                                                 "workdir", "stages",      "sweep"};
 
@@ -167,8 +173,12 @@ json RunOnce(const PipelineSpec& spec, const std::string& workdir, const RunOpti
       context.workdir = workdir;
       context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
       // The key names the id too: "refine@gnc" writes pose set "refined@gnc", not "refined".
+      // It also names the executable's contents, so a rebuilt raytime never reuses a stage
+      // output computed by different code (the version string alone does not change between
+      // development builds).
       json key_material = {{"id", stage_spec.id},
                            {"version", Version()},
+                           {"executable", ExecutableHash()},
                            {"options", stage->OptionsJson()},
                            {"inputs", json::object()},
                            {"external", json::object()}};
