@@ -47,8 +47,9 @@ PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& forma
   if (name.empty()) {
     const auto names = reader.PoseSetNames();
     if (names.size() != 1) {
-      ThrowInput(path, 0, "holds " + std::to_string(names.size()) +
-                              " pose sets: choose one with --est-set/--gt-set");
+      ThrowInput(path, 0,
+                 "holds " + std::to_string(names.size()) +
+                     " pose sets: choose one with --est-set/--gt-set");
     }
     name = names.front();
   }
@@ -73,11 +74,12 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   for (const auto& frame : errors.frames) {
     std::printf("%-24s %12.5f %12.5f\n", frame.name.c_str(), frame.rotation_deg, frame.centre_m);
   }
-  std::printf("alignment %s, %d frames: rotation mean %.5f median %.5f deg; centre mean %.5f "
-              "median %.5f m; success (< %.2f deg): %s\n",
-              errors.alignment.c_str(), errors.num_frames, errors.mean_rotation_deg,
-              errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m,
-              success_deg, errors.success ? "yes" : "no");
+  std::printf(
+      "alignment %s, %d frames: rotation mean %.5f median %.5f deg; centre mean %.5f "
+      "median %.5f m; success (< %.2f deg): %s\n",
+      errors.alignment.c_str(), errors.num_frames, errors.mean_rotation_deg,
+      errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m, success_deg,
+      errors.success ? "yes" : "no");
   for (const auto& name : errors.only_in_estimate) {
     std::printf("not scored: %s has no ground truth\n", name.c_str());
   }
@@ -158,8 +160,9 @@ void AddStageCommand(CLI::App& app, const std::string& type, std::vector<std::st
                      std::string* output, std::unique_ptr<Stage>* holder) {
   *holder = CreateStage(type);
   CLI::App* command = app.add_subcommand(type, (*holder)->description() + " (one stage alone)");
-  command->add_option("--in", *inputs, "HDF5 files from earlier stages (artifacts are looked up "
-                                       "in them, later files win)");
+  command->add_option("--in", *inputs,
+                      "HDF5 files from earlier stages (artifacts are looked up "
+                      "in them, later files win)");
   command->add_option("--out", *output, "HDF5 file to write (default: ./<stage>.h5)");
   (*holder)->BindCli(command);
 }
@@ -191,8 +194,9 @@ int Main(int argc, char** argv) {
   std::string pipeline_path, workdir;
   std::vector<std::string> overrides;
   bool force = false;
-  CLI::App* run = app.add_subcommand("run", "Run a YAML pipeline (resumes: unchanged stages are "
-                                            "skipped)");
+  CLI::App* run = app.add_subcommand("run",
+                                     "Run a YAML pipeline (resumes: unchanged stages are "
+                                     "skipped)");
   run->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
   run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
   run->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
@@ -202,13 +206,17 @@ int Main(int argc, char** argv) {
   run->add_option("--cache-dir", run_options.cache_dir,
                   "Stage outputs shared between runs, by content key (sweeps default to "
                   "WORKDIR/cache)");
+  bool no_report = false;
+  run->add_flag("--no-report", no_report,
+                "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
 
   std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
                    align = "sim3";
   double success_deg = 1.0;
   bool as_json = false;
-  CLI::App* evaluate = app.add_subcommand("evaluate", "Score a pose set against ground truth, "
-                                                      "joined by image name");
+  CLI::App* evaluate = app.add_subcommand("evaluate",
+                                          "Score a pose set against ground truth, "
+                                          "joined by image name");
   evaluate->add_option("--est", est, "Estimated poses (file or folder)")->required();
   evaluate->add_option("--est-format", est_format, "colmap, nerfstudio, tum, strecha or hdf5")
       ->capture_default_str();
@@ -218,8 +226,10 @@ int Main(int argc, char** argv) {
       ->capture_default_str();
   evaluate->add_option("--gt-set", gt_set, "Pose set name in an HDF5 file");
   evaluate->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
-  evaluate->add_option("--success-deg", success_deg, "Success threshold on the mean rotation "
-                                                     "error, degrees")
+  evaluate
+      ->add_option("--success-deg", success_deg,
+                   "Success threshold on the mean rotation "
+                   "error, degrees")
       ->capture_default_str();
   evaluate->add_flag("--json", as_json, "Print JSON instead of a table");
 
@@ -250,8 +260,9 @@ int Main(int argc, char** argv) {
   DatasetOptions resize_input;
   ResizeSceneOptions resize_options;
   std::string resize_output;
-  CLI::App* resize = app.add_subcommand("resize-scene", "Write a downsampled copy of a dataset in "
-                                                        "the Strecha layout");
+  CLI::App* resize = app.add_subcommand("resize-scene",
+                                        "Write a downsampled copy of a dataset in "
+                                        "the Strecha layout");
   resize->add_option("--format", resize_input.format, "Input dataset format")
       ->capture_default_str();
   resize->add_option("--root", resize_input.root, "Input dataset root")->required();
@@ -278,12 +289,24 @@ int Main(int argc, char** argv) {
     for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
     run_options.workdir = workdir;
     run_options.force = force;
-    RunPipeline(spec, run_options);
+    // A sweep ends with its campaign report, so one command reproduces a ladder's tables and
+    // plots; failed runs are listed in it, and the failure is still the exit status.
+    const std::string effective_workdir = workdir.empty() ? spec.workdir : workdir;
+    const bool report_after = !spec.sweep.empty() && !no_report;
+    try {
+      RunPipeline(spec, run_options);
+    } catch (...) {
+      if (report_after && fs::exists(fs::path(effective_workdir) / "sweep.json")) {
+        RunReportCommand(effective_workdir, "", CampaignReportOptions());
+      }
+      throw;
+    }
+    if (report_after) return RunReportCommand(effective_workdir, "", CampaignReportOptions());
     return 0;
   }
   if (evaluate->parsed()) {
-    return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align,
-                              success_deg, as_json);
+    return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align, success_deg,
+                              as_json);
   }
   if (report->parsed()) return RunReportCommand(sweep_dir, report_dir, report_options);
   if (resize->parsed()) {
