@@ -27,6 +27,7 @@
 #include "core/formats/strecha.h"
 #include "evaluate/classical_control.h"
 #include "evaluate/pose_errors.h"
+#include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
@@ -52,22 +53,6 @@ int Shell(const std::string& command, std::string* output) {
   const int status = pclose(pipe);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
-
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "raytime_colmapctl_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  fs::path path_;
-};
 
 // Five sample images in the Strecha layout and a COLMAP-made database of them, cached in the
 // build tree. COLMAP gets the ground-truth intrinsics as PINHOLE with the principal point moved
@@ -244,7 +229,7 @@ TEST(ColmapDatabaseReal, ImportAgreesWithSqlAndEpipolarGeometry) {
 
 TEST(ColmapDatabaseReal, ExportHasColmapsSchema) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   const ColmapDatabase db = ReadColmapDatabase(f.database);
   WriteColmapDatabase(dir / "database.db", db.images, db.features, db.pairs);
   const std::string schema_sql = "SELECT type, name, sql FROM sqlite_master ORDER BY name";
@@ -267,7 +252,7 @@ TEST(ColmapDatabaseReal, ExportHasColmapsSchema) {
 // and keeps the poses it is given (only bundle_adjuster moves them).
 TEST(ColmapDatabaseReal, PointTriangulatorRunsOnExport) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   const ColmapDatabase db = ReadColmapDatabase(f.database);
   WriteColmapDatabase(dir / "database.db", db.images, db.features, db.pairs);
   // point_triangulator needs the model's image ids to be the database's: name order for ours
@@ -311,7 +296,7 @@ TEST(ColmapDatabaseReal, PointTriangulatorRunsOnExport) {
 
 TEST(ClassicalControl, FromGroundTruthStaysAtGroundTruth) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   const ColmapDatabase db = ReadColmapDatabase(f.database);
   WriteColmapDatabase(dir / "database.db", db.images, db.features, db.pairs);
   ClassicalControlSummary summary;
@@ -343,7 +328,7 @@ TEST(ClassicalControl, FromGroundTruthStaysAtGroundTruth) {
 
 TEST(ClassicalControl, MapperRunsOnExportedDatabase) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   const ColmapDatabase db = ReadColmapDatabase(f.database);
   WriteColmapDatabase(dir / "database.db", db.images, db.features, db.pairs);
   ClassicalControlOptions options;
@@ -360,7 +345,7 @@ TEST(ClassicalControl, MapperRunsOnExportedDatabase) {
 
 TEST(ClassicalControl, FailingColmapNamesCommandAndLog) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   ClassicalControlOptions options;
   options.colmap = "false";  // exits 1 like a failing COLMAP command
   try {
@@ -384,7 +369,7 @@ TEST(ClassicalControl, FailingColmapNamesCommandAndLog) {
 // The stages end to end: colmap_import -> prior (ground truth) -> classical -> evaluate.
 TEST(ClassicalControl, PipelineStagesRunThroughTheBinary) {
   const Fixture& f = GetFixture();
-  TempDir dir;
+  TempDir dir("colmapctl");
   const auto write_pipeline = [&](const std::string& name, const std::string& root) {
     std::ofstream(dir / name) << "name: classical_test\n"
                               << "dataset: {format: strecha, root: " << root << "}\n"

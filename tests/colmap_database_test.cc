@@ -17,28 +17,12 @@
 
 #include "core/error.h"
 #include "core/formats/colmap_database.h"
+#include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
-
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "raytime_colmapdb_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
 
 // Runs SQL on a database file (to corrupt it or to read raw values).
 void Sql(const std::string& path, const std::string& sql) {
@@ -178,7 +162,7 @@ TEST(ColmapDatabase, PairIdsAreColmaps) {
 }
 
 TEST(ColmapDatabase, RoundTripIsLossless) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   const Scene s = MakeScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
@@ -222,7 +206,7 @@ TEST(ColmapDatabase, RoundTripIsLossless) {
 TEST(ColmapDatabase, KeypointShiftLosesAtMostOneUlp) {
   // Arbitrary float32 coordinates: x + 0.5 is exact unless it needs a bit more than x has (x < 1,
   // or x within 0.5 px under a power of two).
-  TempDir dir;
+  TempDir dir("colmapdb");
   Scene s = MakeScene();
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(-0.5f, 1919.5f);
@@ -254,7 +238,7 @@ TEST(ColmapDatabase, KeypointShiftLosesAtMostOneUlp) {
 // A synthetic calibrated pair: F (OpenCV pixels) from the poses must, once exported, hold for the
 // COLMAP-convention keypoints in the database, and the principal point must carry the shift.
 TEST(ColmapDatabase, ExportShiftsKeypointsPrincipalPointAndFundamentalMatrix) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   ImageSet images;
   CameraIntrinsics k;
   k.width = 768;
@@ -326,7 +310,7 @@ TEST(ColmapDatabase, ExportShiftsKeypointsPrincipalPointAndFundamentalMatrix) {
 }
 
 TEST(ColmapDatabase, OpencvCameraModelOnRequest) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   const Scene s = MakeScene();
   WriteColmapDatabase(dir / "database.db", s.images, s.features, s.pairs, "OPENCV");
   const std::string params = SqlBlob(dir / "database.db", "SELECT params FROM cameras");
@@ -347,7 +331,7 @@ TEST(ColmapDatabase, OpencvCameraModelOnRequest) {
 // COLMAP's own layout: 6-column affine keypoints (feature_extractor), 2-column locations, and
 // image ids that do not follow name order, so the pair must be turned around on import.
 TEST(ColmapDatabase, ImportsAffineKeypointsAndSwappedPairs) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   const Scene s = MakeScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
@@ -420,7 +404,7 @@ TEST(ColmapDatabase, ImportsAffineKeypointsAndSwappedPairs) {
 }
 
 TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   EXPECT_NE(ErrorOf([&] { ReadColmapDatabase(dir / "missing.db"); }).find("missing.db: no such"),
             std::string::npos);
   {
@@ -475,7 +459,7 @@ TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
 }
 
 TEST(ColmapDatabase, ExportIsAtomicAndChecksItsInput) {
-  TempDir dir;
+  TempDir dir("colmapdb");
   const Scene s = MakeScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);

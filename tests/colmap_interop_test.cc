@@ -14,6 +14,7 @@
 
 #include "core/atomic_file.h"
 #include "core/formats/colmap_model.h"
+#include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
@@ -21,22 +22,6 @@ namespace raytime {
 namespace {
 
 constexpr double kPoseTolerance = 1e-9;
-
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "raytime_colmap_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  fs::path path_;
-};
 
 std::string FindOnPath(const std::string& program) {
   const char* path = getenv("PATH");
@@ -190,7 +175,7 @@ TEST(ColmapInterop, RaytimeModelSurvivesColmapConversion) {
   ImageSet images;
   PoseSet poses;
   MakeScene(&images, &poses);
-  TempDir tmp;
+  TempDir tmp("colmap");
   WriteColmapModelBinary(ToColmapModel(images, poses), tmp / "ours_bin");
   WriteColmapModelText(ToColmapModel(images, poses), tmp / "ours_txt");
   ASSERT_NO_FATAL_FAILURE(ColmapConvert(tmp / "ours_bin", tmp / "colmap_txt", "TXT"));
@@ -216,7 +201,7 @@ TEST(ColmapInterop, RaytimeModelSurvivesColmapConversion) {
 
 TEST(ColmapInterop, EveryCameraModelKeypointAndTrackSurvives) {
   const ColmapModel model = MakeRawModel();
-  TempDir tmp;
+  TempDir tmp("colmap");
   WriteColmapModelBinary(model, tmp / "ours_bin");
   WriteColmapModelText(model, tmp / "ours_txt");
   ASSERT_NO_FATAL_FAILURE(ColmapConvert(tmp / "ours_bin", tmp / "colmap_txt", "TXT"));

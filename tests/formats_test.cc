@@ -19,6 +19,7 @@
 #include "core/formats/nerfstudio.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
+#include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
@@ -26,23 +27,6 @@ namespace raytime {
 namespace {
 
 constexpr double kPoseTolerance = 1e-9;
-
-class TempDir {
- public:
-  TempDir() {
-    std::string pattern = (fs::temp_directory_path() / "raytime_formats_XXXXXX").string();
-    path_ = mkdtemp(pattern.data());
-  }
-  ~TempDir() {
-    std::error_code ignored;
-    fs::remove_all(path_, ignored);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
 
 void WriteFile(const std::string& path, const std::string& contents) {
   fs::create_directories(fs::path(path).parent_path());
@@ -152,7 +136,7 @@ void ExpectImagesEqual(const ImageSet& expected, const ImageSet& actual) {
 
 TEST(Formats, ColmapTextBinaryAndTransformsJsonRoundTrip) {
   const Scene scene = MakeScene(12, 3, 1);
-  TempDir tmp;
+  TempDir tmp("formats");
 
   WriteColmapModelText(ToColmapModel(scene.images, scene.poses), tmp / "text");
   ImageSet images_text;
@@ -234,7 +218,7 @@ TEST(Formats, ColmapRawModelRoundTrip) {
   point.track = {{5, 1}};
   model.points3D[42] = point;
 
-  TempDir tmp;
+  TempDir tmp("formats");
   WriteColmapModelText(model, tmp / "text");
   WriteColmapModelBinary(model, tmp / "bin");
   for (const ColmapModel& read :
@@ -264,7 +248,7 @@ TEST(Formats, ColmapRawModelRoundTrip) {
 }
 
 TEST(Formats, ColmapReaderPrefersBinaryAndNormalizesQuaternions) {
-  TempDir tmp;
+  TempDir tmp("formats");
   const std::string dir = tmp / "model";
   WriteFile(dir + "/cameras.txt", "# comment\n1 PINHOLE 100 80 90 91 50.5 40.5\n");
   WriteFile(dir + "/images.txt", "\n1 2 0 0 0 1 2 3 1 a.jpg\n\n");
@@ -284,7 +268,7 @@ TEST(Formats, ColmapReaderPrefersBinaryAndNormalizesQuaternions) {
 
 TEST(Formats, TumRoundTrip) {
   const Scene scene = MakeScene(6, 1, 3);
-  TempDir tmp;
+  TempDir tmp("formats");
   WriteTumTrajectory(tmp / "poses.txt", scene.poses);
   ExpectPosesEqual(scene.poses, ReadTumTrajectory(tmp / "poses.txt"));
 
@@ -341,7 +325,7 @@ TEST(Formats, StrechaReadsRealScene) {
 TEST(Formats, StrechaRoundTrip) {
   const Scene scene = MakeScene(1, 1, 4);
   const StrechaCamera camera{scene.images.cameras[0], scene.poses.world_from_cam.begin()->second};
-  TempDir tmp;
+  TempDir tmp("formats");
   WriteStrechaCamera(tmp / "a.jpg.camera", camera);
   const StrechaCamera read = ReadStrechaCamera(tmp / "a.jpg.camera");
   EXPECT_EQ(read.intrinsics, camera.intrinsics);
@@ -354,7 +338,7 @@ TEST(Formats, StrechaRoundTrip) {
 // Bad input.
 
 TEST(FormatsBadInput, StrechaWrongNumberCount) {
-  TempDir tmp;
+  TempDir tmp("formats");
   std::string numbers;
   for (int i = 0; i < 20; ++i) numbers += "1 ";
   WriteFile(tmp / "0000.jpg.camera", numbers);
@@ -366,7 +350,7 @@ TEST(FormatsBadInput, StrechaWrongNumberCount) {
 
 TEST(FormatsBadInput, StrechaSceneMissingImage) {
   const Scene scene = MakeScene(2, 1, 5);
-  TempDir tmp;
+  TempDir tmp("formats");
   for (const auto& [name, pose] : scene.poses.world_from_cam) {
     WriteStrechaCamera(tmp / ("scene/gt_dense_cameras/" + name + ".camera"),
                        {scene.images.cameras[0], pose});
@@ -379,7 +363,7 @@ TEST(FormatsBadInput, StrechaSceneMissingImage) {
 }
 
 TEST(FormatsBadInput, TransformsJson3x3Matrix) {
-  TempDir tmp;
+  TempDir tmp("formats");
   const std::string path = tmp / "transforms.json";
   WriteFile(path, R"({"fl_x": 500, "fl_y": 500, "cx": 320, "cy": 240, "w": 640, "h": 480,
     "frames": [
@@ -398,7 +382,7 @@ TEST(FormatsBadInput, TransformsJson3x3Matrix) {
 
 TEST(FormatsBadInput, ColmapMalformedTextLine) {
   const Scene scene = MakeScene(3, 1, 6);
-  TempDir tmp;
+  TempDir tmp("formats");
   const std::string dir = tmp / "model";
   WriteColmapModelText(ToColmapModel(scene.images, scene.poses), dir);
   // images.txt: 4 header lines, then two lines per image; corrupt the second image's QX.
@@ -430,7 +414,7 @@ TEST(FormatsBadInput, ColmapMalformedTextLine) {
 
 TEST(FormatsBadInput, ColmapTruncatedBinary) {
   const Scene scene = MakeScene(3, 2, 7);
-  TempDir tmp;
+  TempDir tmp("formats");
   const std::string dir = tmp / "model";
   WriteColmapModelBinary(ToColmapModel(scene.images, scene.poses), dir);
   const std::string images = ReadTextFile(dir + "/images.bin");
@@ -472,7 +456,7 @@ TEST(FormatsBadInput, ColmapTruncatedBinary) {
 TEST(FormatsBadInput, NameMismatchIsReported) {
   Scene scene = MakeScene(3, 1, 8);
   scene.poses.world_from_cam["stray.jpg"] = Rigid3();
-  TempDir tmp;
+  TempDir tmp("formats");
   for (const auto& write : std::vector<std::function<void()>>{
            [&] { ToColmapModel(scene.images, scene.poses); },
            [&] { WriteTransformsJson(tmp / "t.json", scene.images, scene.poses); }}) {
@@ -484,7 +468,7 @@ TEST(FormatsBadInput, NameMismatchIsReported) {
 
 TEST(FormatsBadInput, WritersLeaveNoPartialFiles) {
   const Scene scene = MakeScene(3, 1, 9);
-  TempDir tmp;
+  TempDir tmp("formats");
   const std::string dir = tmp / "model";
   const ColmapModel model = ToColmapModel(scene.images, scene.poses);
   WriteColmapModelText(model, dir);
