@@ -9,6 +9,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace raytime {
 
@@ -18,17 +19,6 @@ using nlohmann::json;
 
 // Alignments a sweep row may carry (PoseErrorOptions::alignment); the report reads sim3 and none.
 const char* const kAlignmentNames[] = {"sim3", "se3", "none"};
-
-// Median; the mean of the two middle values for an even count; NaN when empty.
-double Median(std::vector<double> values) {
-  if (values.empty()) return kNoValue;
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + mid, values.end());
-  const double upper = values[mid];
-  if (values.size() % 2 == 1) return upper;
-  const double lower = *std::max_element(values.begin(), values.begin() + mid);
-  return 0.5 * (lower + upper);
-}
 
 // The errors one run reports for one arm under one alignment; NaN where a field is absent (a
 // NaN metric is written to JSON as null).
@@ -188,9 +178,9 @@ AlignedCellStats AlignedStats(const std::vector<const RunRecord*>& runs, const s
       ++stats.halves_baseline;
     }
   }
-  stats.median_rotation_deg = Median(rotations);
-  stats.median_centre_m = Median(centres);
-  stats.median_centre_relative = Median(relatives);
+  stats.median_rotation_deg = Median(rotations, kNoValue);
+  stats.median_centre_m = Median(centres, kNoValue);
+  stats.median_centre_relative = Median(relatives, kNoValue);
   return stats;
 }
 
@@ -213,7 +203,7 @@ CampaignCell MakeCell(const std::string& scene, double level_deg, const std::str
     }
   }
   if (!seconds.empty()) cell.stage_id = stage_id;
-  cell.median_seconds = Median(seconds);
+  cell.median_seconds = Median(seconds, kNoValue);
   return cell;
 }
 

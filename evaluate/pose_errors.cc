@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace raytime {
 
@@ -28,17 +29,6 @@ double Mean(const std::vector<double>& values) {
   return std::accumulate(values.begin(), values.end(), 0.0) / static_cast<double>(values.size());
 }
 
-// Median; the mean of the two middle values for an even count.
-double Median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + mid, values.end());
-  const double upper = values[mid];
-  if (values.size() % 2 == 1) return upper;
-  const double lower = *std::max_element(values.begin(), values.begin() + mid);
-  return 0.5 * (lower + upper);
-}
-
 // Median distance of the ground-truth centres from their centroid. Taken over every
 // ground-truth frame, not only the ones the estimate covers, so the relative errors of different
 // estimates of one scene share a denominator.
@@ -51,7 +41,7 @@ double SceneScale(const PoseSet& ground_truth) {
   for (const auto& [name, pose] : ground_truth.world_from_cam) {
     distances.push_back((pose.translation - centroid).norm());
   }
-  return Median(distances);
+  return Median(distances, 0.0);
 }
 
 }  // namespace
@@ -113,9 +103,9 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
   }
 
   summary.mean_rotation_deg = Mean(rotation_deg);
-  summary.median_rotation_deg = Median(rotation_deg);
+  summary.median_rotation_deg = Median(rotation_deg, 0.0);
   summary.mean_centre_m = Mean(centre_m);
-  summary.median_centre_m = Median(centre_m);
+  summary.median_centre_m = Median(centre_m, 0.0);
   summary.scene_scale_m = SceneScale(ground_truth);
   // A single ground-truth frame (or coincident centres) has no scale; relative errors stay 0.
   if (summary.scene_scale_m > 0) {

@@ -4,21 +4,9 @@
 #include <cmath>
 #include <limits>
 
+#include "core/statistics.h"
+
 namespace raytime {
-namespace {
-
-double Median(std::vector<double>* values) {
-  if (values->empty()) return 0.0;
-  const size_t mid = values->size() / 2;
-  std::nth_element(values->begin(), values->begin() + mid, values->end());
-  const double upper = (*values)[mid];
-  if (values->size() % 2 == 1) return upper;
-  const double lower = *std::max_element(values->begin(), values->begin() + mid);
-  return 0.5 * (lower + upper);
-}
-
-}  // namespace
-
 double PositiveRayEpipolarDistance(const IntrinsicsVector& intrinsics,
                                    const Rigid3& source_world_from_cam,
                                    const Eigen::Vector2d& source_pixel,
@@ -92,7 +80,7 @@ std::vector<PairResidual> PairResidualMedians(const IntrinsicsVector& intrinsics
     result.image1 = pair.image1;
     result.image2 = pair.image2;
     result.num_matches = static_cast<int>(values.size());
-    result.median_px = Median(&values);
+    result.median_px = Median(values, 0.0);
     out.push_back(result);
   }
   return out;
