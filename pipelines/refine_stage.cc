@@ -86,7 +86,6 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
 
     RefineStageOptions merged;
     merged.preset = probe.preset;
-    merged.prior = probe.prior;
     const fs::path preset_path = PresetPath(merged.preset);
     YAML::Node preset;
     try {
