@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/types.h"
+#include "core/warnings.h"
 
 namespace raytime {
 
@@ -36,6 +37,9 @@ struct Dataset {
   ImageSet images;
   std::optional<PoseSet> ground_truth;
   std::vector<std::string> files;  // every file the dataset was read from (for content hashes)
+  // What the readers accepted with a doubt (e.g. a negligible skew dropped); the dataset stage
+  // reports them in its summary.
+  Warnings warnings;
 };
 
 // Loads the dataset and checks that every image file exists (InputError naming the first
