@@ -66,27 +66,8 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
 
 }  // namespace
 
-void ValidateBootstrapOptions(const BootstrapOptions& options) {
-  if (options.positions != "lud" && options.positions != "look_at") {
-    throw std::invalid_argument("positions must be 'lud' or 'look_at', got '" + options.positions +
-                                "'");
-  }
-  if (!(options.direction_gate_deg > 0)) {
-    throw std::invalid_argument("direction_gate_deg must be > 0");
-  }
-  if (!(options.fragility_threshold_deg > 0)) {
-    throw std::invalid_argument("fragility_threshold_deg must be > 0");
-  }
-  ValidateRelativePoseOptions(options.relative_pose);
-  ValidateRotationAveragingOptions(options.rotation_averaging);
-  ValidateTranslationAveragingOptions(options.translation_averaging);
-  ValidateLookAtSeedOptions(options.look_at);
-  ValidateFocalSearchOptions(options.focal);
-  ValidateWrongPairOptions(options.wrong_pairs);
-}
-
 void SolveGlobalPoses(int num_images, const BootstrapOptions& options, BootstrapResult* result) {
-  ValidateBootstrapOptions(options);
+  ValidateOptions(options, "bootstrap");
   const auto start = std::chrono::steady_clock::now();
   const std::vector<ViewGraphEdge>& edges = result->edges;
 
@@ -163,7 +144,7 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
 BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeatures>& features,
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options) {
-  ValidateBootstrapOptions(options);
+  ValidateOptions(options, "bootstrap");
   const auto start = std::chrono::steady_clock::now();
   ViewGraphBuildResult graph = BuildViewGraph(images, features, matches, options.relative_pose,
                                               options.focal_search, options.focal);

@@ -8,6 +8,7 @@
 
 #include <string>
 #include <vector>
+#include "core/options.h"
 
 #include "bootstrap/focal_search.h"
 #include "bootstrap/look_at_seed.h"
@@ -48,11 +49,17 @@ struct BootstrapOptions {
   // Flat keys (YAML key = field name; the sub-structs' names are unique).
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("positions", positions);
-    v("direction_gate_deg", direction_gate_deg);
-    v("filter_pairs", filter_pairs);
-    v("fragility_threshold_deg", fragility_threshold_deg);
-    v("focal_search", focal_search);
+    v("positions", positions, "Centres by LUD translation averaging or the look-at seed (§4.8)",
+      OneOf({"lud", "look_at"}));
+    v("direction_gate_deg", direction_gate_deg,
+      "Pairs above this rotation-averaging residual give no direction, degrees (§4.8: 5°)",
+      Positive());
+    v("filter_pairs", filter_pairs,
+      "Solve the final poses on the pairs the wrong-pair detector keeps");
+    v("fragility_threshold_deg", fragility_threshold_deg,
+      "Fragile above this mean pairwise rotation-averaging residual, degrees (§4.8: ~10°)",
+      Positive());
+    v("focal_search", focal_search, "Unknown intrinsics: search a shared focal per camera (§4.8)");
     relative_pose.VisitFields(v);
     rotation_averaging.VisitFields(v);
     translation_averaging.VisitFields(v);
@@ -60,10 +67,8 @@ struct BootstrapOptions {
     focal.VisitFields(v);
     wrong_pairs.VisitFields(v);
   }
+  void CheckRelations(const Requirement& require) const { focal.CheckRelations(require); }
 };
-
-// Throws std::invalid_argument naming the bad option.
-void ValidateBootstrapOptions(const BootstrapOptions& options);
 
 struct FragilityReport {
   double mean_residual_deg = 0.0;  // the statistic (paper §4.8)

@@ -107,21 +107,9 @@ class Linearization {
 
 }  // namespace
 
-void ValidateRotationAveragingOptions(const RotationAveragingOptions& options) {
-  if (options.l1_iterations < 0 || options.irls_iterations < 0) {
-    throw std::invalid_argument("rotation averaging: iteration counts must be >= 0");
-  }
-  if (!(options.robust_scale_deg > 0)) {
-    throw std::invalid_argument("rotation averaging: robust_scale_deg must be > 0");
-  }
-  if (!(options.rotation_tolerance_deg > 0)) {
-    throw std::invalid_argument("rotation averaging: rotation_tolerance_deg must be > 0");
-  }
-}
-
 RotationAveragingResult AverageRotations(int num_nodes, const std::vector<RelativeRotation>& edges,
                                          const RotationAveragingOptions& options) {
-  ValidateRotationAveragingOptions(options);
+  ValidateOptions(options, "rotation averaging");
   if (num_nodes < 0) throw std::invalid_argument("AverageRotations: negative node count");
   std::vector<std::pair<int, int>> pairs;
   for (const auto& e : edges) {

@@ -129,25 +129,10 @@ class LudSubproblem {
 
 }  // namespace
 
-void ValidateTranslationAveragingOptions(const TranslationAveragingOptions& options) {
-  if (options.lud_iterations < 1) {
-    throw std::invalid_argument("translation averaging: lud_iterations must be >= 1");
-  }
-  if (!(options.lud_delta > 0)) {
-    throw std::invalid_argument("translation averaging: lud_delta must be > 0");
-  }
-  if (!(options.lud_tolerance > 0)) {
-    throw std::invalid_argument("translation averaging: lud_tolerance must be > 0");
-  }
-  if (options.lud_newton_iterations < 1) {
-    throw std::invalid_argument("translation averaging: lud_newton_iterations must be >= 1");
-  }
-}
-
 TranslationAveragingResult AverageTranslations(int num_nodes,
                                                const std::vector<RelativeDirection>& edges,
                                                const TranslationAveragingOptions& options) {
-  ValidateTranslationAveragingOptions(options);
+  ValidateOptions(options, "translation averaging");
   if (num_nodes < 0) throw std::invalid_argument("AverageTranslations: negative node count");
   std::vector<std::pair<int, int>> pairs;
   for (const auto& e : edges) {

@@ -14,6 +14,7 @@
 #include <stdexcept>
 #include <utility>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/version.h"
 
@@ -466,15 +467,6 @@ bool ParsePairName(const std::string& name, int* image1, int* image2) {
          number(name.substr(sep + 1), image2);
 }
 
-std::string TemporarySibling(const std::string& path) {
-  // The counter keeps two writers of one process (parallel stages) from sharing a name.
-  static std::atomic<int> counter{0};
-  const fs::path p(path);
-  return (p.parent_path() / ("." + p.filename().string() + ".tmp." + std::to_string(getpid()) +
-                             "." + std::to_string(counter++)))
-      .string();
-}
-
 }  // namespace
 
 // --- Hdf5Writer ----------------------------------------------------------------------------------
@@ -502,6 +494,7 @@ Hdf5Writer::Hdf5Writer(const std::string& path) : impl_(std::make_unique<Impl>()
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty()) fs::create_directories(parent);
   impl_->temporary = TemporarySibling(path);
+  RegisterTemporary(impl_->temporary);
   const Id fapl = FileAccessList();
   impl_->file =
       Id(H5Fcreate(impl_->temporary.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose);
@@ -514,11 +507,13 @@ Hdf5Writer::Hdf5Writer(const std::string& path) : impl_(std::make_unique<Impl>()
     impl_->file.Reset();
     std::error_code ignored;
     fs::remove(impl_->temporary, ignored);
+    ForgetTemporary(impl_->temporary);
     throw;
   }
 }
 
 Hdf5Writer::~Hdf5Writer() {
+  ForgetTemporary(impl_->temporary);
   if (impl_->committed) return;
   impl_->file.Reset();
   std::error_code ignored;

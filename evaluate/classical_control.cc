@@ -201,20 +201,6 @@ ClassicalControlOptions ClassicalControlOptions::Tuned() {
   return options;
 }
 
-void ValidateClassicalControlOptions(const ClassicalControlOptions& o) {
-  if (o.mode != "triangulate" && o.mode != "mapper") {
-    throw InputError(
-        UnknownKeyMessage("classical.mode", o.mode, {"triangulate", "mapper"}, "mode"));
-  }
-  if (o.rounds < 1) throw InputError("classical.rounds must be at least 1");
-  if (!(o.max_angle_error_deg > 0) || !(o.max_reproj_error_px > 0) || !(o.min_tri_angle_deg >= 0)) {
-    throw InputError(
-        "classical gates must be positive (max_angle_error_deg, max_reproj_error_px) and "
-        "min_tri_angle_deg non-negative");
-  }
-  if (o.colmap.empty()) throw InputError("classical.colmap must name the COLMAP executable");
-}
-
 nlohmann::json ClassicalControlSummary::ToJson() const {
   const auto number = [](double v) -> nlohmann::json {
     return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
@@ -243,7 +229,7 @@ nlohmann::json ClassicalControlSummary::ToJson() const {
 PoseSet RunClassicalControl(const std::string& database_path, const ImageSet& images,
                             const PoseSet& prior, const ClassicalControlOptions& options,
                             const std::string& workdir, ClassicalControlSummary* summary) {
-  ValidateClassicalControlOptions(options);
+  ValidateOptions(options, "classical control");
   const auto start = std::chrono::steady_clock::now();
   if (!fs::is_regular_file(database_path)) {
     ThrowInput(database_path, 0, "no such file (COLMAP database for the classical control)");

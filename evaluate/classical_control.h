@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -45,18 +46,22 @@ struct ClassicalControlOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("mode", mode);
-    v("rounds", rounds);
-    v("refine_intrinsics", refine_intrinsics);
-    v("max_angle_error_deg", max_angle_error_deg);
-    v("max_reproj_error_px", max_reproj_error_px);
-    v("min_tri_angle_deg", min_tri_angle_deg);
-    v("colmap", colmap);
+    v("mode", mode,
+      "COLMAP point_triangulator + bundle_adjuster from the prior (§4.1), or the prior-free "
+      "mapper (§4.8)",
+      OneOf({"triangulate", "mapper"}));
+    v("rounds", rounds, "Triangulate-adjust alternations (§4.1: 2; tuned control: 8)", Positive());
+    v("refine_intrinsics", refine_intrinsics,
+      "Refine focal, principal point and distortion (OPENCV model, room protocol §4.3)");
+    v("max_angle_error_deg", max_angle_error_deg,
+      "COLMAP triangulation angle-error gates, degrees (tuned control: 8)", Positive());
+    v("max_reproj_error_px", max_reproj_error_px,
+      "COLMAP merge/complete/filter reprojection gates, pixels (tuned control: 16)", Positive());
+    v("min_tri_angle_deg", min_tri_angle_deg, "COLMAP minimum triangulation angle, degrees",
+      NonNegative());
+    v("colmap", colmap, "The COLMAP 3.8 executable", NonEmpty());
   }
 };
-
-// Throws InputError naming the option for an invalid value.
-void ValidateClassicalControlOptions(const ClassicalControlOptions& options);
 
 struct ClassicalRoundSummary {
   double triangulate_s = 0.0;  // point_triangulator (or mapper) wall time

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -20,8 +21,11 @@ struct PoseErrorOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("alignment", alignment);
-    v("success_rotation_deg", success_rotation_deg);
+    v("alignment", alignment,
+      "Alignment before scoring: Sim(3) on centres (standard), SE(3), or none (prior's frame)",
+      OneOf({"sim3", "se3", "none"}));
+    v("success_rotation_deg", success_rotation_deg,
+      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive());
   }
 };
 

@@ -35,15 +35,6 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
-void FeatureExtractionOptions::Check(const std::string& what) const {
-  if (max_features <= 0) throw InputError(what + ": max_features must be positive");
-  if (first_octave < -1) {
-    throw InputError(what + ": first_octave must be >= -1 (OpenCV's SIFT cannot double twice)");
-  }
-  if (!(contrast_threshold > 0)) throw InputError(what + ": contrast_threshold must be positive");
-  if (!(edge_threshold > 1)) throw InputError(what + ": edge_threshold must be > 1");
-}
-
 nlohmann::json FeatureExtractionSummary::ToJson() const {
   return {{"num_images", num_images},
           {"num_keypoints", num_keypoints},
@@ -180,7 +171,7 @@ ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& o
 FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
                                          const FeatureExtractionOptions& options,
                                          std::vector<ImageFeatures>* features) {
-  options.Check("feature extraction");
+  ValidateOptions(options, "feature extraction");
   const auto start = std::chrono::steady_clock::now();
   const int num_images = static_cast<int>(images.images.size());
   features->assign(num_images, ImageFeatures());

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -23,13 +24,14 @@ struct VideoFramesOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("video", video);
-    v("stride", stride);
-    v("num_frames", num_frames);
-    v("focal_px", focal_px);
-    v("jpeg_quality", jpeg_quality);
+    v("video", video, "Video file to sample frames from; \"\" = the dataset's images");
+    v("stride", stride, "Keep every stride-th frame (frame 0 first)", Positive());
+    v("num_frames", num_frames, "Frames spread evenly over the video; overrides stride when > 0",
+      NonNegative());
+    v("focal_px", focal_px,
+      "Video focal length, pixels (principal point at the centre); 0 = unknown", NonNegative());
+    v("jpeg_quality", jpeg_quality, "JPEG quality of the written frames", AtLeast(1), AtMost(100));
   }
-  void Check(const std::string& what) const;  // InputError naming `what`
 };
 
 struct VideoFramesSummary {

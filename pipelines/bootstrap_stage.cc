@@ -25,8 +25,10 @@ struct BootstrapStageOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     bootstrap.VisitFields(v);
-    v("filter_matches", filter_matches);
+    v("filter_matches", filter_matches,
+      "Write the matches without the wrong pairs for the stages after this one");
   }
+  void CheckRelations(const Requirement& require) const { bootstrap.CheckRelations(require); }
 };
 
 nlohmann::json Number(double value) {
@@ -61,13 +63,6 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
   std::string description() const override {
     return "Prior-free poses from the match graph: relative poses, rotation and translation "
            "averaging, fragility flag, wrong-pair detection";
-  }
-  void Validate() override {
-    try {
-      ValidateBootstrapOptions(options_.bootstrap);
-    } catch (const std::invalid_argument& e) {
-      throw InputError(std::string("stage 'bootstrap': ") + e.what());
-    }
   }
   std::vector<std::string> Inputs() const override {
     return {kArtifactImages, "features", "matches"};

@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/options.h"
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
@@ -175,7 +176,7 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
 RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
                           RefineOutput* output) {
   const auto start = std::chrono::steady_clock::now();
-  options.Validate();
+  ValidateOptions(options, "refine");
   ValidateInput(input);
   RefineSummary summary;
 

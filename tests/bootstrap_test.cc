@@ -15,6 +15,7 @@
 #include "bootstrap/translation_averaging.h"
 #include "bootstrap/wrong_pairs.h"
 #include "core/camera.h"
+#include "core/error.h"
 #include "core/geometry.h"
 
 namespace raytime {
@@ -307,7 +308,7 @@ TEST(RelativePose, FlagsPureRotationAndTooFewInliers) {
   EXPECT_EQ(few.status, PairStatus::kTooFewInliers);
   RelativePoseOptions bad;
   bad.algorithm = "eight_point";
-  EXPECT_THROW(EstimateRelativePose(b1, b2, 1000.0, bad), std::invalid_argument);
+  EXPECT_THROW(EstimateRelativePose(b1, b2, 1000.0, bad), InputError);
 }
 
 TEST(LookAtSeed, NeverDegenerate) {
@@ -434,7 +435,10 @@ TEST(Bootstrap, RejectsInconsistentMatches) {
                std::invalid_argument);
   BootstrapOptions bad;
   bad.positions = "centroid";
-  EXPECT_THROW(ValidateBootstrapOptions(bad), std::invalid_argument);
+  EXPECT_THROW(ValidateOptions(bad, "bootstrap"), InputError);
+  bad = BootstrapOptions();
+  bad.focal.focal_max_ratio = bad.focal.focal_min_ratio;  // a relation between two fields
+  EXPECT_THROW(ValidateOptions(bad, "bootstrap"), InputError);
 }
 
 TEST(FocalSearch, FindsTheFocalOfAnUndistortedCamera) {

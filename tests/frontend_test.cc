@@ -341,13 +341,13 @@ TEST(Matching, SequentialPairsAreAWindowPlusAKeyframeGrid) {
 TEST(Matching, BadOptionsAreInputErrors) {
   MatchingOptions options;
   options.pairs = "sequentail";
-  EXPECT_THROW(options.Check("test"), InputError);
+  EXPECT_THROW(ValidateOptions(options, "test"), InputError);
   options = MatchingOptions();
   options.min_num_inliers = 3;
-  EXPECT_THROW(options.Check("test"), InputError);
+  EXPECT_THROW(ValidateOptions(options, "test"), InputError);
   options = MatchingOptions();
   options.estimator = "lmeds";
-  EXPECT_THROW(options.Check("test"), InputError);
+  EXPECT_THROW(ValidateOptions(options, "test"), InputError);
 }
 
 // ---- Video input. ----

@@ -1,11 +1,18 @@
 // End-to-end tests of `raytime run` through the real binary: the demo on the sample scene, a
 // shared Strecha scene, stage-by-stage skipping, overrides, sweeps, and clear errors on bad input.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <thread>
 
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 
 namespace fs = std::filesystem;
@@ -28,6 +35,25 @@ CommandResult Raytime(const std::string& args) {
   while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
   const int status = pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+// Runs `raytime ARGS` with stdout and stderr kept apart.
+CommandResult RaytimeStdoutOnly(const std::string& args, std::string* stderr_text) {
+  const std::string err =
+      (fs::temp_directory_path() / ("raytime_stderr_" + std::to_string(::getpid()) + ".txt"))
+          .string();
+  CommandResult result;
+  const std::string command =
+      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>" + err;
+  FILE* pipe = popen(command.c_str(), "r");
+  char buffer[4096];
+  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(err);
+  stderr_text->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  fs::remove(err);
   return result;
 }
 
@@ -143,8 +169,10 @@ sweep:
   ASSERT_EQ(rows.size(), 4u);
   for (const auto& row : rows) {
     EXPECT_EQ(row["status"], "ok");
-    const double level = std::stod(row["prior.level_deg"].get<std::string>());
-    EXPECT_NEAR(row["metrics.prior.none.mean_rotation_deg"].get<double>(), level, 1e-9);
+    EXPECT_EQ(row["swept"][0][0], "prior.level_deg");
+    const double level = std::stod(row["swept"][0][1].get<std::string>());
+    EXPECT_NEAR(row["errors"]["prior"]["none"]["mean_rotation_deg"].get<double>(), level, 1e-9);
+    EXPECT_EQ(row["pose_set_stage"]["prior"], "prior");
   }
   std::ifstream csv(fs::path(run_dir) / "sweep.csv");
   int lines = 0;
@@ -178,8 +206,7 @@ sweep:
   const json rows_again = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows_again.size(), 4u);
   for (size_t r = 0; r < rows.size(); ++r) {
-    EXPECT_EQ(rows_again[r]["metrics.prior.none.mean_rotation_deg"],
-              rows[r]["metrics.prior.none.mean_rotation_deg"]);
+    EXPECT_EQ(rows_again[r]["errors"], rows[r]["errors"]);
   }
   for (const auto& entry : fs::directory_iterator(fs::path(run_dir) / "runs")) {
     for (const auto& stage : ReadJson(entry.path() / "summary.json")["stages"]) {
@@ -292,6 +319,140 @@ TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
               summary["metrics"]["refined"]["none"]["mean_rotation_deg"].get<double>(), 1e-6);
   EXPECT_NEAR(errors["mean_centre_m"].get<double>(),
               summary["metrics"]["refined"]["none"]["mean_centre_m"].get<double>(), 1e-6);
+}
+
+TEST_F(PipelineTest, StageAloneWritesOnlyItsSummaryOnStdout) {
+  const std::string pipeline = WriteFile("dataset.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+)");
+  const std::string run_dir = (workdir_ / "run").string();
+  ASSERT_EQ(Raytime("run " + pipeline + " --workdir " + run_dir).exit_code, 0);
+  std::string log;
+  const CommandResult result = RaytimeStdoutOnly(
+      "prior --in " + run_dir + "/dataset.h5 --out " + run_dir + "/p.h5 --level_deg 2", &log);
+  ASSERT_EQ(result.exit_code, 0) << log;
+  // Everything on stdout is the summary: it parses whole (logs went to stderr).
+  const json summary = json::parse(result.output);
+  EXPECT_EQ(summary["num_poses"], 11);
+  EXPECT_NE(log.find("prior: iid perturbation at 2"), std::string::npos) << log;
+}
+
+// Temporary files (".NAME.tmp.PID.N") below a folder.
+std::vector<std::string> TemporaryFilesBelow(const fs::path& dir) {
+  std::vector<std::string> found;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
+      found.push_back(entry.path().string());
+    }
+  }
+  return found;
+}
+
+TEST_F(PipelineTest, InterruptedRunSaysSoAndTheRerunCleansUp) {
+  const std::string pipeline = WriteFile("features.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - features: {}
+)");
+  const fs::path run_dir = workdir_ / "run";
+  fs::create_directories(run_dir);
+  // Start the run, wait until it is inside the features stage, press Ctrl-C.
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int log = ::open((workdir_ / "run.log").c_str(), O_CREAT | O_WRONLY | O_TRUNC, 0644);
+    ::dup2(log, STDOUT_FILENO);
+    ::dup2(log, STDERR_FILENO);
+    if (::chdir(RAYTIME_SOURCE_DIR) != 0) ::_exit(127);
+    ::execl(RAYTIME_BINARY, RAYTIME_BINARY, "run", pipeline.c_str(), "--workdir", run_dir.c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  bool in_features = false;
+  while (!in_features && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::ifstream in(run_dir / "summary.json");
+    const json summary = json::parse(in, nullptr, false);
+    in_features = !summary.is_discarded() && summary.value("stage", "") == "features";
+  }
+  ASSERT_TRUE(in_features) << "the run never reached the features stage";
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  const json interrupted = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(interrupted["status"], "interrupted");
+  EXPECT_EQ(interrupted["stage"], "features");
+  EXPECT_EQ(interrupted["signal"], SIGINT);
+  EXPECT_TRUE(TemporaryFilesBelow(run_dir).empty());
+
+  // What a killed run leaves (its process is gone) goes when the next run starts here.
+  const fs::path stale = run_dir / ".features.h5.tmp.2147483646.0";
+  std::ofstream(stale) << "half-written";
+  const CommandResult rerun = Raytime("run " + pipeline + " --workdir " + run_dir.string());
+  ASSERT_EQ(rerun.exit_code, 0) << rerun.output;
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(TemporaryFilesBelow(run_dir).empty());
+  const json finished = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(finished["status"], "ok");
+  EXPECT_FALSE(finished.contains("stage"));
+
+  // The same result as a run that was never interrupted.
+  const fs::path clean_dir = workdir_ / "clean";
+  ASSERT_EQ(Raytime("run " + pipeline + " --workdir " + clean_dir.string()).exit_code, 0);
+  EXPECT_EQ(ReadJson(clean_dir / "summary.json")["stages"][1]["summary"]["num_keypoints"],
+            finished["stages"][1]["summary"]["num_keypoints"]);
+}
+
+TEST_F(PipelineTest, PriorFileWithMissingAndExtraFramesWarns) {
+  // A COLMAP model of the sample's ground truth without one image and with a pose of an image
+  // the dataset does not have: both reported, the run goes on (status ok_with_warnings).
+  const std::string run_dir = (workdir_ / "export").string();
+  const std::string export_pipeline = WriteFile("export.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {source: ground_truth}
+  - export: {poses: [prior], formats: [colmap_text]}
+)");
+  ASSERT_EQ(Raytime("run " + export_pipeline + " --workdir " + run_dir).exit_code, 0);
+  const fs::path images_txt = fs::path(run_dir) / "prior" / "images.txt";
+  std::ifstream in(images_txt);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const size_t at = text.find("0003.jpg");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, 8, "9999.jpg");  // 0003.jpg has no pose now; 9999.jpg is no image
+  std::ofstream(images_txt) << text;
+
+  const std::string pipeline = WriteFile("prior_file.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {source: file, format: colmap}
+)");
+  const std::string second = (workdir_ / "file").string();
+  const CommandResult result = Raytime("run " + pipeline + " --workdir " + second +
+                                       " --set prior.path=" + run_dir + "/prior");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadJson(fs::path(second) / "summary.json");
+  EXPECT_EQ(summary["status"], "ok_with_warnings");
+  std::map<std::string, json> by_code;
+  for (const auto& warning : summary["warnings"]) by_code[warning["code"]] = warning;
+  ASSERT_TRUE(by_code.count("missing_prior")) << summary["warnings"].dump();
+  ASSERT_TRUE(by_code.count("missing_frames")) << summary["warnings"].dump();
+  EXPECT_EQ(by_code["missing_prior"]["images"], json::array({"0003.jpg"}));
+  EXPECT_EQ(by_code["missing_frames"]["images"], json::array({"9999.jpg"}));
+  EXPECT_EQ(by_code["missing_prior"]["stage"], "prior");
+  // The log says each once, in words.
+  EXPECT_NE(result.output.find("have no prior pose"), std::string::npos) << result.output;
+
+  // prior.strict refuses the same file, naming it.
+  const CommandResult strict =
+      Raytime("run " + pipeline + " --workdir " + second + " --set prior.path=" + run_dir +
+              "/prior --set prior.strict=true");
+  EXPECT_EQ(strict.exit_code, 2);
+  EXPECT_NE(strict.output.find("9999.jpg"), std::string::npos) << strict.output;
 }
 
 }  // namespace

@@ -101,14 +101,6 @@ PoseSet ReadPoseFile(const std::string& format, const std::string& path, const I
   } else {
     throw InputError(UnknownKeyMessage("pose files", format, kPoseFileFormats, "format"));
   }
-  if (images) {
-    const NameJoin join = JoinNames(Names(poses), Names(*images));
-    if (!join.Complete()) {
-      ThrowInput(
-          path, 0,
-          "pose names do not match the dataset's images: " + join.Describe(path, "the dataset"));
-    }
-  }
   return poses;
 }
 

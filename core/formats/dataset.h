@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/options.h"
 #include "core/types.h"
 #include "core/warnings.h"
 
@@ -25,11 +26,11 @@ struct DatasetOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("format", format);
-    v("root", root);
-    v("images", images);
-    v("model", model);
-    v("transforms", transforms);
+    v("format", format, "Dataset layout", OneOf({"strecha", "colmap", "nerfstudio"}));
+    v("root", root, "Dataset folder", NonEmpty());
+    v("images", images, "colmap: image folder relative to root");
+    v("model", model, "colmap: model folder relative to root; \"\" tries sparse/0, sparse, root");
+    v("transforms", transforms, "nerfstudio: transforms file relative to root");
   }
 };
 
@@ -51,8 +52,8 @@ extern const std::vector<std::string> kPoseFileFormats;
 
 // Reads the poses of a file or folder: "colmap" (model folder), "nerfstudio" (transforms.json),
 // "tum" (trajectory), "strecha" (scene root). `images`, when given, supplies the names for TUM
-// rows (in name order) and must join completely with the poses read (InputError listing names
-// that do not match).
+// rows (in name order). Names are not joined here: the caller decides what a pose without an
+// image, or an image without a pose, means (JoinNames).
 PoseSet ReadPoseFile(const std::string& format, const std::string& path,
                      const ImageSet* images = nullptr);
 
