@@ -84,16 +84,16 @@ const char* TypeName() {
   return "a value";
 }
 
-// Short type tag for command-line help: BOOL, INT, NUMBER, TEXT, and "LIST OF ..." for lists.
+// Short type tag for command-line help: BOOL, INT, NUMBER, TEXT (lists: of their elements).
 template <typename T>
 const char* TypeTag() {
   if constexpr (std::is_same_v<T, bool>) return "BOOL";
   if constexpr (std::is_same_v<T, int> || std::is_same_v<T, int64_t>) return "INT";
   if constexpr (std::is_same_v<T, double>) return "NUMBER";
   if constexpr (std::is_same_v<T, std::string>) return "TEXT";
-  if constexpr (std::is_same_v<T, std::vector<int>>) return "INT ...";
-  if constexpr (std::is_same_v<T, std::vector<double>>) return "NUMBER ...";
-  if constexpr (std::is_same_v<T, std::vector<std::string>>) return "TEXT ...";
+  if constexpr (std::is_same_v<T, std::vector<int>>) return "INT";
+  if constexpr (std::is_same_v<T, std::vector<double>>) return "NUMBER";
+  if constexpr (std::is_same_v<T, std::vector<std::string>>) return "TEXT";
   return "VALUE";
 }
 

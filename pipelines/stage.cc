@@ -61,7 +61,7 @@ YAML::Node Stage::CliOptions() const {
   for (const OptionDoc& doc : cli_docs_) {
     const std::vector<std::string>& values = cli_values_.at(doc.key);
     if (values.empty()) continue;
-    const bool is_text = doc.type.rfind("TEXT", 0) == 0;
+    const bool is_text = doc.type == "TEXT";
     if (!doc.is_list) {
       node[doc.key] = ParseCliValue(values.front(), is_text && !doc.is_list);
       continue;
