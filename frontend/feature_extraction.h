@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/types.h"
 #include "frontend/descriptor_matching.h"
 

@@ -14,7 +14,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/types.h"
 
 namespace raytime {
