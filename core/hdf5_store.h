@@ -4,6 +4,9 @@
 // file; writers are atomic (temporary file + rename on Commit), so a failed stage leaves nothing
 // under the final name. Readers check the schema name and version and turn HDF5's failures on a
 // truncated or foreign file into an InputError that names the file.
+//
+// This is raytime's schema (groups, datasets, versions); hdf5_io.h holds the generic HDF5 calls
+// it is written with.
 #pragma once
 
 #include <memory>
