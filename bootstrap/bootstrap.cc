@@ -9,13 +9,10 @@
 
 #include "bootstrap/stats.h"
 #include "bootstrap/view_graph_builder.h"
+#include "core/timing.h"
 
 namespace raytime {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // Registered images the translation component did not place get the look-at rule around the
 // point nearest the optical axes of the placed cameras, at their median distance from it, so the

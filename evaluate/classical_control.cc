@@ -20,6 +20,7 @@
 #include "core/formats/colmap_database.h"
 #include "core/formats/colmap_model.h"
 #include "core/options.h"
+#include "core/timing.h"
 
 extern char** environ;
 
@@ -28,10 +29,6 @@ namespace fs = std::filesystem;
 namespace raytime {
 
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 std::string Quoted(const std::string& s) {
   if (!s.empty() && s.find_first_of(" \t'\"\\$`") == std::string::npos) return s;

@@ -17,6 +17,7 @@
 #include <tuple>
 
 #include "core/error.h"
+#include "core/timing.h"
 
 namespace fs = std::filesystem;
 
@@ -28,10 +29,6 @@ namespace {
 // and y at every octave (octaves are decimated from the doubled image). Measured on a synthetic
 // blob: 100.233 reported for 100.0.
 constexpr double kOpenCvUpsampleShift = 0.25;
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 }  // namespace
 

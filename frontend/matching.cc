@@ -11,6 +11,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/options.h"
+#include "core/timing.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/two_view_geometry.h"
 
@@ -18,10 +19,6 @@ namespace raytime {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 bool HasFocal(const CameraIntrinsics& camera) { return camera.fx() > 0 && camera.fy() > 0; }
 

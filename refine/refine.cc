@@ -11,6 +11,7 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/timing.h"
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
@@ -21,10 +22,6 @@
 
 namespace raytime {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 void ValidateInput(const RefineInput& input) {
   const size_t n = input.prior_world_from_cam.size();
