@@ -123,6 +123,14 @@ double MeanReprojectionError(const ColmapModel& model, int* num_observations) {
   return count ? sum / count : std::numeric_limits<double>::quiet_NaN();
 }
 
+// JSON has no NaN: the costs COLMAP's log did not report become null.
+void NullNonFinite(nlohmann::json* value) {
+  if (value->is_number_float() && !std::isfinite(value->get<double>())) *value = nullptr;
+  if (value->is_structured()) {
+    for (nlohmann::json& child : *value) NullNonFinite(&child);
+  }
+}
+
 // The model folder of a mapper run with the most registered images.
 std::string LargestMapperModel(const std::string& mapper_dir, const std::string& log_path) {
   std::string best;
@@ -167,28 +175,9 @@ void ValidateClassicalControlOptions(const ClassicalControlOptions& o) {
 }
 
 nlohmann::json ClassicalControlSummary::ToJson() const {
-  const auto number = [](double v) -> nlohmann::json {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
-  nlohmann::json rounds_json = nlohmann::json::array();
-  for (const auto& r : per_round) {
-    rounds_json.push_back({{"triangulate_s", r.triangulate_s},
-                           {"adjust_s", r.adjust_s},
-                           {"num_points", r.num_points},
-                           {"colmap_final_cost_px", number(r.colmap_final_cost_px)}});
-  }
-  return {{"mode", mode},
-          {"rounds", rounds},
-          {"per_round", rounds_json},
-          {"num_images", num_images},
-          {"num_registered", num_registered},
-          {"num_points", num_points},
-          {"num_observations", num_observations},
-          {"mean_reprojection_error_px", number(mean_reprojection_error_px)},
-          {"colmap_final_cost_px", number(colmap_final_cost_px)},
-          {"wall_time_s", wall_time_s},
-          {"model_dir", model_dir},
-          {"log_path", log_path}};
+  nlohmann::json out = *this;
+  NullNonFinite(&out);
+  return out;
 }
 
 PoseSet RunClassicalControl(const std::string& database_path, const ImageSet& images,

@@ -41,13 +41,7 @@ void FeatureExtractionOptions::Check(const std::string& what) const {
   if (!(edge_threshold > 1)) throw InputError(what + ": edge_threshold must be > 1");
 }
 
-nlohmann::json FeatureExtractionSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_keypoints", num_keypoints},
-          {"min_keypoints", min_keypoints},
-          {"max_keypoints", max_keypoints},
-          {"seconds", seconds}};
-}
+nlohmann::json FeatureExtractionSummary::ToJson() const { return *this; }
 
 ByteDescriptors QuantizeSiftDescriptors(const cv::Mat& descriptors, bool root_sift) {
   CV_Assert(descriptors.empty() || descriptors.type() == CV_32F);

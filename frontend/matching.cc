@@ -172,20 +172,7 @@ void MatchingOptions::Check(const std::string& what) const {
   if (!(ransac_error_px > 0)) throw InputError(what + ": ransac_error_px must be positive");
 }
 
-nlohmann::json MatchingSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_pairs", num_pairs},
-          {"num_verified_pairs", num_verified_pairs},
-          {"num_dropped_pairs", num_dropped_pairs},
-          {"num_putative", num_putative},
-          {"num_inliers", num_inliers},
-          {"num_inliers_first_pass", num_inliers_first_pass},
-          {"kernel", kernel},
-          {"seconds", seconds},
-          {"matching_thread_seconds", matching_thread_seconds},
-          {"verification_thread_seconds", verification_thread_seconds},
-          {"guided_thread_seconds", guided_thread_seconds}};
-}
+nlohmann::json MatchingSummary::ToJson() const { return *this; }
 
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options) {
   std::vector<std::pair<int, int>> pairs;
