@@ -7,15 +7,12 @@
 #include <limits>
 #include <stdexcept>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph_builder.h"
+#include "core/statistics.h"
+#include "core/timing.h"
 
 namespace raytime {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // Registered images the translation component did not place get the look-at rule around the
 // point nearest the optical axes of the placed cameras, at their median distance from it, so the
@@ -43,7 +40,7 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (placed[i]) distances.push_back(((*centres)[i] - centroid).norm());
   }
-  const double spread = std::max(FiniteMedian(distances), 1e-6);
+  const double spread = std::max(FiniteUpperMedian(distances), 1e-6);
   // Nearly parallel axes have no well-defined meeting point: look at a point in front of the
   // centroid instead.
   const Eigen::Vector3d target = eigen.eigenvalues()(0) > 1e-3 * eigen.eigenvalues()(2)
@@ -53,7 +50,7 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (placed[i]) distances.push_back(((*centres)[i] - target).norm());
   }
-  const double radius = std::max(FiniteMedian(distances), 1e-6);
+  const double radius = std::max(FiniteUpperMedian(distances), 1e-6);
   int filled = 0;
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (registered[i] && !placed[i]) {

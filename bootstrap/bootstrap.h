@@ -17,7 +17,7 @@
 #include "bootstrap/translation_averaging.h"
 #include "bootstrap/view_graph.h"
 #include "bootstrap/wrong_pairs.h"
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/types.h"
 
 namespace raytime {

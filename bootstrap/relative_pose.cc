@@ -11,8 +11,8 @@
 #include <memory>
 #include <stdexcept>
 
-#include "bootstrap/stats.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -130,7 +130,7 @@ RelativePoseResult EstimateRelativePose(const Eigen::Matrix3Xd& bearings1,
     const Eigen::Vector3d r2 = cam1_from_cam2 * rays2[k];
     parallax.push_back(std::atan2(rays1[k].cross(r2).norm(), rays1[k].dot(r2)));
   }
-  result.median_parallax_deg = DegreesFromRadians(FiniteMedian(std::move(parallax)));
+  result.median_parallax_deg = DegreesFromRadians(FiniteUpperMedian(std::move(parallax)));
 
   if (static_cast<int>(inliers.size()) < options.min_inliers) {
     result.status = PairStatus::kTooFewInliers;

@@ -8,9 +8,9 @@
 #include <stdexcept>
 #include <string>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -249,7 +249,7 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
     residuals.push_back(r);
   }
   result.mean_residual_deg = FiniteMean(residuals);
-  result.median_residual_deg = FiniteMedian(residuals);
+  result.median_residual_deg = FiniteUpperMedian(residuals);
   return result;
 }
 

@@ -7,9 +7,9 @@
 #include <stdexcept>
 #include <string>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -209,7 +209,7 @@ TranslationAveragingResult AverageTranslations(int num_nodes,
     residuals.push_back(result.edge_residual_deg[used[k]]);
   }
   result.mean_residual_deg = FiniteMean(residuals);
-  result.median_residual_deg = FiniteMedian(residuals);
+  result.median_residual_deg = FiniteUpperMedian(residuals);
   return result;
 }
 

@@ -1,10 +1,8 @@
 // The `raytime` command line: `run` for YAML pipelines, one subcommand per stage, `evaluate` on
 // any two pose files, `report` on a finished sweep, and `resize-scene` for making small sample
 // scenes.
-#include <spawn.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
-#include <sys/wait.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -17,14 +15,13 @@
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
 #include "core/sweep_row.h"
+#include "core/process.h"
 #include "core/version.h"
 #include "evaluate/campaign_report.h"
 #include "evaluate/pose_errors.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
 #include "pipelines/stage.h"
-
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -92,19 +89,6 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   return 0;
 }
 
-// Runs `args` with this process's output streams and returns its exit status (-1 when it could
-// not be started or did not exit normally).
-int RunProgram(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const auto& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0) return -1;
-  int status = 0;
-  if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) return -1;
-  return WEXITSTATUS(status);
-}
-
 // `raytime report --sweep W`: W/sweep.json -> OUT/report.md, OUT/report_cells.csv and the plots
 // (SPEC §6 campaigns; paper §4.8, §4.9).
 int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
@@ -142,15 +126,14 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
                  script);
     return 0;
   }
-  const int status = RunProgram({kPython, script, cells_path, out_dir});
-  if (status == kPlotExitNoMatplotlib) {
+  const ProcessStatus status = RunProcess({kPython, script, cells_path, out_dir});
+  if (status.exit_code == kPlotExitNoMatplotlib) {
     spdlog::warn(
         "report: matplotlib is missing, no plots written (report.md and "
         "report_cells.csv are complete)");
-  } else if (status != 0) {
-    throw std::runtime_error("report: " + script + " failed (exit status " +
-                             std::to_string(status) + "); " + markdown_path + " and " + cells_path +
-                             " were written");
+  } else if (!status.Succeeded()) {
+    throw std::runtime_error("report: " + script + " failed (" + status.Describe() + "); " +
+                             markdown_path + " and " + cells_path + " were written");
   } else {
     spdlog::info("report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}",
                  out_dir);

@@ -71,6 +71,8 @@ struct ClassicalRoundSummary {
   // log holds none.
   double colmap_final_cost_px = 0.0;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ClassicalRoundSummary, triangulate_s, adjust_s, num_points,
+                                   colmap_final_cost_px)
 
 struct ClassicalControlSummary {
   std::string mode;
@@ -88,8 +90,12 @@ struct ClassicalControlSummary {
   std::string model_dir;  // the final COLMAP model (binary)
   std::string log_path;   // every COLMAP command and its output
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name, NaN costs as null
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ClassicalControlSummary, mode, rounds, per_round, num_images,
+                                   num_registered, num_points, num_observations,
+                                   mean_reprojection_error_px, colmap_final_cost_px, wall_time_s,
+                                   model_dir, log_path)
 
 // Runs the control on `database_path` (a COLMAP database whose image ids are the 1-based
 // positions in `images`, as WriteColmapDatabase writes it) with the images under

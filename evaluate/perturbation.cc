@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace raytime {
 
@@ -219,10 +220,7 @@ double EstimateSceneDistance(const PoseSet& poses) {
   for (const auto& [name, pose] : poses.world_from_cam) {
     distances.push_back((pose.translation - point).norm());
   }
-  const size_t mid = distances.size() / 2;
-  std::nth_element(distances.begin(), distances.begin() + mid, distances.end());
-  if (distances.size() % 2 == 1) return distances[mid];
-  return 0.5 * (distances[mid] + *std::max_element(distances.begin(), distances.begin() + mid));
+  return Median(distances, 0.0);
 }
 
 PoseSet PerturbPoses(const PoseSet& ground_truth, const PerturbationOptions& options,

@@ -17,6 +17,7 @@
 #include <tuple>
 
 #include "core/error.h"
+#include "core/timing.h"
 
 namespace fs = std::filesystem;
 
@@ -29,19 +30,9 @@ namespace {
 // blob: 100.233 reported for 100.0.
 constexpr double kOpenCvUpsampleShift = 0.25;
 
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 }  // namespace
 
-nlohmann::json FeatureExtractionSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_keypoints", num_keypoints},
-          {"min_keypoints", min_keypoints},
-          {"max_keypoints", max_keypoints},
-          {"seconds", seconds}};
-}
+nlohmann::json FeatureExtractionSummary::ToJson() const { return *this; }
 
 ByteDescriptors QuantizeSiftDescriptors(const cv::Mat& descriptors, bool root_sift) {
   CV_Assert(descriptors.empty() || descriptors.type() == CV_32F);

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/options.h"
 #include "core/types.h"
 #include "frontend/descriptor_matching.h"
@@ -61,8 +61,10 @@ struct FeatureExtractionSummary {
   int max_keypoints = 0;
   double seconds = 0;  // wall clock, all images
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FeatureExtractionSummary, num_images, num_keypoints,
+                                   min_keypoints, max_keypoints, seconds)
 
 // Keypoints and descriptors of one 8-bit grayscale image. Keypoint rows: x, y (OpenCV pixel
 // convention), scale = KeyPoint::size / 2 (pixels), orientation = KeyPoint::angle in radians.

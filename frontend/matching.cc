@@ -11,6 +11,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/options.h"
+#include "core/timing.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/two_view_geometry.h"
 
@@ -18,10 +19,6 @@ namespace raytime {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 bool HasFocal(const CameraIntrinsics& camera) { return camera.fx() > 0 && camera.fy() > 0; }
 
@@ -148,20 +145,7 @@ void MatchPair(const PairInput& in, const MatchingOptions& options, MatchKernel 
 
 }  // namespace
 
-nlohmann::json MatchingSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_pairs", num_pairs},
-          {"num_verified_pairs", num_verified_pairs},
-          {"num_dropped_pairs", num_dropped_pairs},
-          {"num_putative", num_putative},
-          {"num_inliers", num_inliers},
-          {"num_inliers_first_pass", num_inliers_first_pass},
-          {"kernel", kernel},
-          {"seconds", seconds},
-          {"matching_thread_seconds", matching_thread_seconds},
-          {"verification_thread_seconds", verification_thread_seconds},
-          {"guided_thread_seconds", guided_thread_seconds}};
-}
+nlohmann::json MatchingSummary::ToJson() const { return *this; }
 
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options) {
   std::vector<std::pair<int, int>> pairs;

@@ -14,9 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "core/features.h"
 #include "core/options.h"
-
-#include "core/hdf5_store.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -111,8 +110,12 @@ struct MatchingSummary {
   double verification_thread_seconds = 0;
   double guided_thread_seconds = 0;
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(MatchingSummary, num_images, num_pairs, num_verified_pairs,
+                                   num_dropped_pairs, num_putative, num_inliers,
+                                   num_inliers_first_pass, kernel, seconds, matching_thread_seconds,
+                                   verification_thread_seconds, guided_thread_seconds)
 
 // Candidate pairs (i < j, indices into the image list), sorted.
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options);

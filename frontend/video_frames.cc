@@ -17,11 +17,7 @@ namespace fs = std::filesystem;
 
 namespace raytime {
 
-nlohmann::json VideoFramesSummary::ToJson() const {
-  return {{"num_frames_read", num_frames_read},
-          {"num_frames_written", num_frames_written},
-          {"seconds", seconds}};
-}
+nlohmann::json VideoFramesSummary::ToJson() const { return *this; }
 
 ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string& folder,
                             VideoFramesSummary* summary) {

@@ -39,8 +39,9 @@ struct VideoFramesSummary {
   int num_frames_written = 0;  // kept
   double seconds = 0;
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(VideoFramesSummary, num_frames_read, num_frames_written, seconds)
 
 // Decodes `options.video` and writes the kept frames to `folder`/frame_NNNNNN.jpg (NNNNNN = frame
 // number in the video, so name order is time order), replacing the folder atomically. Returns

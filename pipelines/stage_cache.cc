@@ -15,6 +15,7 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
+#include "core/timing.h"
 #include "core/version.h"
 #include "pipelines/content_hash.h"
 #include "pipelines/stage.h"
@@ -36,10 +37,6 @@ std::string UtcNow() {
   char buffer[32];
   std::strftime(buffer, sizeof(buffer), "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   return buffer;
-}
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 // Artifacts found in a stage's HDF5 output.

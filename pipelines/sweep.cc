@@ -1,10 +1,7 @@
 #include "pipelines/sweep.h"
 
-#include <fcntl.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
@@ -15,6 +12,8 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/interrupt.h"
+#include "core/process.h"
+#include "core/timing.h"
 #include "core/version.h"
 
 namespace fs = std::filesystem;
@@ -23,35 +22,21 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 // A sweep run in its own process: `raytime run RUN_DIR/pipeline.yaml --workdir RUN_DIR
 // --cache-dir CACHE`, output to RUN_DIR/run.log.
 pid_t SpawnRun(const std::string& run_dir, const std::string& cache_dir, bool force) {
-  const std::string self = fs::read_symlink("/proc/self/exe").string();
-  const std::string pipeline = (fs::path(run_dir) / "pipeline.yaml").string();
-  const std::string log = (fs::path(run_dir) / "run.log").string();
-  std::vector<std::string> args = {self,    "run",         pipeline, "--workdir",
-                                   run_dir, "--cache-dir", cache_dir};
+  std::vector<std::string> args = {fs::read_symlink("/proc/self/exe").string(),
+                                   "run",
+                                   (fs::path(run_dir) / "pipeline.yaml").string(),
+                                   "--workdir",
+                                   run_dir,
+                                   "--cache-dir",
+                                   cache_dir};
   if (force) args.push_back("--force");
-  const pid_t pid = ::fork();
-  if (pid < 0) throw std::runtime_error("cannot start a sweep run: fork failed");
-  if (pid == 0) {
-    const int fd = ::open(log.c_str(), O_CREAT | O_WRONLY | O_TRUNC, 0644);
-    if (fd >= 0) {
-      ::dup2(fd, STDOUT_FILENO);
-      ::dup2(fd, STDERR_FILENO);
-      ::close(fd);
-    }
-    std::vector<char*> argv;
-    for (auto& arg : args) argv.push_back(arg.data());
-    argv.push_back(nullptr);
-    ::execv(self.c_str(), argv.data());
-    ::_exit(127);
-  }
-  return pid;
+  ProcessOptions options;
+  options.output_path = (fs::path(run_dir) / "run.log").string();
+  options.append_output = false;
+  return StartProcess(args, options);
 }
 
 // The checks a stage's "guardrails" verdict says fired: its "fired" list, or its true flags.
@@ -163,10 +148,9 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
   // keep every row finished so far, and say the sweep was interrupted.
   const InterruptAction on_interrupt([&](int signal) {
     std::lock_guard<std::mutex> lock(mutex);
-    for (const auto& [pid, index] : running) ::kill(pid, SIGTERM);
+    for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
     for (const auto& [pid, index] : running) {
-      int status = 0;
-      ::waitpid(pid, &status, 0);
+      WaitProcess(pid);
       rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
       finished[index] = true;
     }
@@ -184,9 +168,7 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
         ++next;
       }
     }
-    int status = 0;
-    const pid_t pid = ::waitpid(-1, &status, 0);
-    if (pid < 0) throw std::runtime_error("sweep: waitpid failed");
+    const pid_t pid = WaitAnyProcess().pid;
     std::lock_guard<std::mutex> lock(mutex);
     const auto it = running.find(pid);
     if (it == running.end()) continue;
