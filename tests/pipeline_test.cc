@@ -1,35 +1,21 @@
 // End-to-end tests of `raytime run` through the real binary: the demo on the sample scene, a
 // shared Strecha scene, stage-by-stage skipping, overrides, sweeps, and clear errors on bad input.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
+#include <unistd.h>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+
+#include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-// Runs `raytime ARGS` from the source directory, so the configs' relative paths resolve.
-CommandResult Raytime(const std::string& args) {
-  const std::string command =
-      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+using raytime::CommandResult;
+using raytime::RunRaytime;
 
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
@@ -64,7 +50,7 @@ class PipelineTest : public ::testing::Test {
 
 TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   const std::string run_dir = (workdir_ / "demo").string();
-  CommandResult first = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult first = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["status"], "ok");
@@ -84,7 +70,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined" / "images.txt"));
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined_transforms.json"));
 
-  CommandResult second = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult second = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(second.exit_code, 0) << second.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             std::vector<std::string>(7, "skipped"));
@@ -92,7 +78,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // Changing the prior's seed reruns the prior and what depends on it, not the dataset or the
   // front end.
   CommandResult third =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(third.exit_code, 0) << third.output;
   EXPECT_EQ(
       StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
@@ -101,7 +87,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // A damaged intermediate is rebuilt rather than trusted.
   fs::resize_file(fs::path(run_dir) / "prior.h5", 100);
   CommandResult fourth =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(fourth.exit_code, 0) << fourth.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             (std::vector<std::string>{"skipped", "skipped", "skipped", "ran", "skipped", "skipped",
@@ -113,9 +99,9 @@ TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   if (!fs::exists(scene)) GTEST_SKIP() << "shared data not available at " << scene;
   const std::string run_dir = (workdir_ / "entry").string();
   CommandResult result =
-      Raytime("run configs/demo.yaml --workdir " + run_dir +
-              " --set dataset.format=strecha --set dataset.root=" + scene.string() +
-              " --set prior.level_deg=0");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir +
+                 " --set dataset.format=strecha --set dataset.root=" + scene.string() +
+                 " --set prior.level_deg=0");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["metrics"]["prior"]["none"]["num_frames"], 10);
@@ -137,7 +123,7 @@ sweep:
   prior.seed: [0, 1]
 )");
   const std::string run_dir = (workdir_ / "sweep").string();
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json rows = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows.size(), 4u);
@@ -173,7 +159,7 @@ sweep:
   EXPECT_EQ(dataset_cached, 3);
 
   // Rerunning the sweep skips every stage of every run and reproduces the rows.
-  CommandResult again = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult again = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   const json rows_again = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows_again.size(), 4u);
@@ -198,7 +184,7 @@ stages:
 )");
   const std::string run_dir = (workdir_ / "arms").string();
   CommandResult result =
-      Raytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
+      RunRaytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json metrics = ReadJson(fs::path(run_dir) / "summary.json")["metrics"];
   EXPECT_NEAR(metrics["prior@small"]["none"]["mean_rotation_deg"].get<double>(), 1.0, 1e-9);
@@ -210,7 +196,7 @@ stages:
   - prior: {}
   - prior: {}
 )");
-  CommandResult dup = Raytime("run " + duplicate + " --workdir " + run_dir);
+  CommandResult dup = RunRaytime("run " + duplicate + " --workdir " + run_dir);
   EXPECT_EQ(dup.exit_code, 2);
   EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
@@ -221,7 +207,7 @@ stages:
   - prior: {}
   - evalute: {}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'evaluate'"), std::string::npos) << result.output;
@@ -233,13 +219,13 @@ stages:
   - prior:
       level_degs: 4
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'level_deg'"), std::string::npos) << result.output;
 
-  CommandResult override_result = Raytime("run configs/demo.yaml --workdir " +
-                                          (workdir_ / "w").string() + " --set prior.sed=3");
+  CommandResult override_result = RunRaytime("run configs/demo.yaml --workdir " +
+                                             (workdir_ / "w").string() + " --set prior.sed=3");
   EXPECT_EQ(override_result.exit_code, 2);
   EXPECT_NE(override_result.output.find("did you mean 'seed'"), std::string::npos)
       << override_result.output;
@@ -251,7 +237,7 @@ TEST_F(PipelineTest, WrongValueTypeIsReported) {
 stages:
   - prior: {level_deg: four}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":3:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("must be a number"), std::string::npos) << result.output;
@@ -263,8 +249,8 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
            fs::copy_options::recursive);
   fs::remove(scene / "images" / "0003.jpg");
   const fs::path run_dir = workdir_ / "run";
-  CommandResult result = Raytime("run configs/demo.yaml --workdir " + run_dir.string() +
-                                 " --set dataset.root=" + scene.string());
+  CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                    " --set dataset.root=" + scene.string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find("0003.jpg"), std::string::npos) << result.output;
   EXPECT_TRUE(result.output.find("missing image") != std::string::npos ||
@@ -280,11 +266,11 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
 
 TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
   const std::string run_dir = (workdir_ / "demo").string();
-  ASSERT_EQ(Raytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
   // The exported COLMAP model scores as the pipeline's own evaluation scored the pose set.
-  CommandResult result = Raytime("evaluate --est " + run_dir +
-                                 "/refined --est-format colmap --gt data/sample/fountain-P11 "
-                                 "--gt-format strecha --align none --json");
+  CommandResult result = RunRaytime("evaluate --est " + run_dir +
+                                    "/refined --est-format colmap --gt data/sample/fountain-P11 "
+                                    "--gt-format strecha --align none --json");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json errors = json::parse(result.output);
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
