@@ -264,6 +264,27 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
   EXPECT_EQ(summary["status"], "failed");
 }
 
+TEST_F(PipelineTest, TruncatedImageFailsTheFeaturesStageNamingTheFile) {
+  const fs::path scene = workdir_ / "scene";
+  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
+           fs::copy_options::recursive);
+  const fs::path image = scene / "images" / "0003.jpg";
+  fs::resize_file(image, fs::file_size(image) / 2);
+  const fs::path run_dir = workdir_ / "run";
+  const CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                          " --set dataset.root=" + scene.string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(image.string() + ": truncated JPEG"), std::string::npos)
+      << result.output;
+  const json summary = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(summary["status"], "failed");
+  EXPECT_NE(summary["error"].get<std::string>().find(image.string() + ": truncated JPEG"),
+            std::string::npos)
+      << summary["error"];
+  EXPECT_EQ(StageStatuses(summary), std::vector<std::string>{"ran"});  // dataset only
+  EXPECT_FALSE(fs::exists(run_dir / "features.h5"));
+}
+
 TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
   const std::string run_dir = (workdir_ / "demo").string();
   ASSERT_EQ(RunRaytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
