@@ -168,20 +168,28 @@ TEST(Features, KeypointPositionsUseOpenCvPixelConvention) {
   }
 }
 
-TEST(Features, UnreadableImageIsAnInputErrorNamingTheFile) {
-  TempDir dir("frontend");
-  std::ofstream(dir / "broken.jpg") << "not a jpeg";
+// The InputError of extracting the features of the one image `name` (width x height) in `dir`, or
+// "" when there is none.
+std::string FeatureExtractionError(const TempDir& dir, const std::string& name, int width,
+                                   int height) {
   ImageSet images;
-  images.image_root = dir / "";
+  images.image_root = dir.path().string();
   images.cameras.resize(1);
-  images.images.push_back({"broken.jpg", 10, 10, 0});
+  images.images.push_back({name, width, height, 0});
   std::vector<ImageFeatures> features;
   try {
     ExtractFeatures(images, FeatureExtractionOptions(), &features);
-    FAIL() << "expected InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("broken.jpg"), std::string::npos) << e.what();
+    return e.what();
   }
+  return "";
+}
+
+TEST(Features, UnreadableImageIsAnInputErrorNamingTheFile) {
+  TempDir dir("frontend");
+  std::ofstream(dir / "broken.jpg") << "not a jpeg";
+  const std::string error = FeatureExtractionError(dir, "broken.jpg", 10, 10);
+  EXPECT_NE(error.find("broken.jpg"), std::string::npos) << error;
 }
 
 // ---- Image files: a damaged file is an error naming it, a valid one is read as OpenCV reads it.
@@ -242,18 +250,8 @@ TEST(ImageReading, TruncatedSampleJpegIsAnErrorNamingTheFile) {
         << size << " bytes";
   }
   // The features stage reports it rather than extracting features from half an image.
-  ImageSet images;
-  images.image_root = dir.path().string();
-  images.cameras.resize(1);
-  images.images.push_back({"half.jpg", 768, 512, 0});
-  std::vector<ImageFeatures> features;
-  try {
-    ExtractFeatures(images, FeatureExtractionOptions(), &features);
-    FAIL() << "expected InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("half.jpg: truncated JPEG"), std::string::npos)
-        << e.what();
-  }
+  const std::string features_error = FeatureExtractionError(dir, "half.jpg", 768, 512);
+  EXPECT_NE(features_error.find("half.jpg: truncated JPEG"), std::string::npos) << features_error;
 }
 
 TEST(ImageReading, CorruptJpegSegmentsAreErrors) {
