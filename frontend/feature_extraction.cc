@@ -18,6 +18,7 @@
 
 #include "core/error.h"
 #include "core/timing.h"
+#include "frontend/image_reading.h"
 
 namespace fs = std::filesystem;
 
@@ -171,12 +172,7 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
     const auto image_start = std::chrono::steady_clock::now();
     const ImageInfo& info = images.images[i];
     const std::string path = (fs::path(images.image_root) / info.name).string();
-    const cv::Mat gray = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (gray.empty()) {
-      ThrowInput(path, 0,
-                 "cannot read the image (missing, unreadable or not a format OpenCV "
-                 "decodes)");
-    }
+    const cv::Mat gray = ReadImage(path, cv::IMREAD_GRAYSCALE);
     if ((info.width > 0 && gray.cols != info.width) ||
         (info.height > 0 && gray.rows != info.height)) {
       ThrowInput(path, 0,

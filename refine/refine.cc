@@ -116,7 +116,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   solver_settings.scales = settings.scales;
   solver_settings.max_iterations = options.max_iterations;
   solver_settings.function_tolerance = options.function_tolerance;
-  solver_settings.num_threads = options.Threads();
+  solver_settings.num_threads = options.deterministic ? 1 : options.Threads();
   const auto solve_start = std::chrono::steady_clock::now();
   pass.stages = SolveGnc(&problem, solver_settings, &pass.elimination_group_size);
   pass.solve_seconds = SecondsSince(solve_start);

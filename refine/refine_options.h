@@ -60,9 +60,14 @@ struct RefineOptions {
   // evaluation point, copied into each residual's Jacobian. Off: every residual recomputes its
   // chain with automatic differentiation (same values and Jacobians, slower).
   bool use_evaluation_cache = true;
-  // Threads for Ceres and the cache; 0 = hardware concurrency. Results are bit-identical between
-  // runs with 1 thread; with more, Ceres' parallel reductions change the summation order.
+  // Threads for the cache (and for Ceres when not deterministic); 0 = hardware concurrency.
   int num_threads = 0;
+  // Bit-identical results for the same inputs whatever the thread count and scheduling
+  // (DEVELOPERS.md): Ceres runs on one thread, since with more it sums the cost, the gradient and
+  // the Schur complement's blocks in the order its threads finish; the cache stays parallel (each
+  // observation's entry is computed on its own). false gives Ceres num_threads too: faster on many
+  // cores, last digits differ between runs.
+  bool deterministic = true;
   // Per GNC stage: Ceres iteration limit and relative cost-change tolerance (Ceres defaults are
   // 50 and 1e-6; warm-started stages converge well before the limit).
   int max_iterations = 100;
@@ -156,6 +161,8 @@ struct RefineOptions {
     v("use_evaluation_cache", use_evaluation_cache,
       "Shared evaluation cache: undistortion and ray points once per observation (§3.7)");
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
+    v("deterministic", deterministic,
+      "Bit-identical results whatever the thread count (Ceres on one thread, the cache parallel)");
     v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive());
     v("function_tolerance", function_tolerance,
       "Ceres relative cost-change tolerance per GNC stage", Positive());

@@ -9,53 +9,21 @@
 #include <chrono>
 #include <thread>
 
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+
+#include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-// Runs `raytime ARGS` from the source directory, so the configs' relative paths resolve.
-CommandResult Raytime(const std::string& args) {
-  const std::string command =
-      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
-
-// Runs `raytime ARGS` with stdout and stderr kept apart.
-CommandResult RaytimeStdoutOnly(const std::string& args, std::string* stderr_text) {
-  const std::string err =
-      (fs::temp_directory_path() / ("raytime_stderr_" + std::to_string(::getpid()) + ".txt"))
-          .string();
-  CommandResult result;
-  const std::string command =
-      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>" + err;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  std::ifstream in(err);
-  stderr_text->assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  fs::remove(err);
-  return result;
-}
+using raytime::CommandResult;
+using raytime::RunRaytime;
+using raytime::RunRaytimeStdout;
 
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
@@ -90,7 +58,7 @@ class PipelineTest : public ::testing::Test {
 
 TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   const std::string run_dir = (workdir_ / "demo").string();
-  CommandResult first = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult first = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["status"], "ok");
@@ -110,7 +78,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined" / "images.txt"));
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined_transforms.json"));
 
-  CommandResult second = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult second = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(second.exit_code, 0) << second.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             std::vector<std::string>(7, "skipped"));
@@ -118,7 +86,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // Changing the prior's seed reruns the prior and what depends on it, not the dataset or the
   // front end.
   CommandResult third =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(third.exit_code, 0) << third.output;
   EXPECT_EQ(
       StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
@@ -127,7 +95,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // A damaged intermediate is rebuilt rather than trusted.
   fs::resize_file(fs::path(run_dir) / "prior.h5", 100);
   CommandResult fourth =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(fourth.exit_code, 0) << fourth.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             (std::vector<std::string>{"skipped", "skipped", "skipped", "ran", "skipped", "skipped",
@@ -139,9 +107,9 @@ TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   if (!fs::exists(scene)) GTEST_SKIP() << "shared data not available at " << scene;
   const std::string run_dir = (workdir_ / "entry").string();
   CommandResult result =
-      Raytime("run configs/demo.yaml --workdir " + run_dir +
-              " --set dataset.format=strecha --set dataset.root=" + scene.string() +
-              " --set prior.level_deg=0");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir +
+                 " --set dataset.format=strecha --set dataset.root=" + scene.string() +
+                 " --set prior.level_deg=0");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["metrics"]["prior"]["none"]["num_frames"], 10);
@@ -163,7 +131,7 @@ sweep:
   prior.seed: [0, 1]
 )");
   const std::string run_dir = (workdir_ / "sweep").string();
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json rows = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows.size(), 4u);
@@ -201,7 +169,7 @@ sweep:
   EXPECT_EQ(dataset_cached, 3);
 
   // Rerunning the sweep skips every stage of every run and reproduces the rows.
-  CommandResult again = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult again = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   const json rows_again = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows_again.size(), 4u);
@@ -225,7 +193,7 @@ stages:
 )");
   const std::string run_dir = (workdir_ / "arms").string();
   CommandResult result =
-      Raytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
+      RunRaytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json metrics = ReadJson(fs::path(run_dir) / "summary.json")["metrics"];
   EXPECT_NEAR(metrics["prior@small"]["none"]["mean_rotation_deg"].get<double>(), 1.0, 1e-9);
@@ -237,7 +205,7 @@ stages:
   - prior: {}
   - prior: {}
 )");
-  CommandResult dup = Raytime("run " + duplicate + " --workdir " + run_dir);
+  CommandResult dup = RunRaytime("run " + duplicate + " --workdir " + run_dir);
   EXPECT_EQ(dup.exit_code, 2);
   EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
@@ -248,7 +216,7 @@ stages:
   - prior: {}
   - evalute: {}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'evaluate'"), std::string::npos) << result.output;
@@ -260,13 +228,13 @@ stages:
   - prior:
       level_degs: 4
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'level_deg'"), std::string::npos) << result.output;
 
-  CommandResult override_result = Raytime("run configs/demo.yaml --workdir " +
-                                          (workdir_ / "w").string() + " --set prior.sed=3");
+  CommandResult override_result = RunRaytime("run configs/demo.yaml --workdir " +
+                                             (workdir_ / "w").string() + " --set prior.sed=3");
   EXPECT_EQ(override_result.exit_code, 2);
   EXPECT_NE(override_result.output.find("did you mean 'seed'"), std::string::npos)
       << override_result.output;
@@ -278,7 +246,7 @@ TEST_F(PipelineTest, WrongValueTypeIsReported) {
 stages:
   - prior: {level_deg: four}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":3:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("must be a number"), std::string::npos) << result.output;
@@ -290,8 +258,8 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
            fs::copy_options::recursive);
   fs::remove(scene / "images" / "0003.jpg");
   const fs::path run_dir = workdir_ / "run";
-  CommandResult result = Raytime("run configs/demo.yaml --workdir " + run_dir.string() +
-                                 " --set dataset.root=" + scene.string());
+  CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                    " --set dataset.root=" + scene.string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find("0003.jpg"), std::string::npos) << result.output;
   EXPECT_TRUE(result.output.find("missing image") != std::string::npos ||
@@ -305,13 +273,34 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
   EXPECT_EQ(summary["status"], "failed");
 }
 
+TEST_F(PipelineTest, TruncatedImageFailsTheFeaturesStageNamingTheFile) {
+  const fs::path scene = workdir_ / "scene";
+  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
+           fs::copy_options::recursive);
+  const fs::path image = scene / "images" / "0003.jpg";
+  fs::resize_file(image, fs::file_size(image) / 2);
+  const fs::path run_dir = workdir_ / "run";
+  const CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                          " --set dataset.root=" + scene.string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(image.string() + ": truncated JPEG"), std::string::npos)
+      << result.output;
+  const json summary = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(summary["status"], "failed");
+  EXPECT_NE(summary["error"].get<std::string>().find(image.string() + ": truncated JPEG"),
+            std::string::npos)
+      << summary["error"];
+  EXPECT_EQ(StageStatuses(summary), std::vector<std::string>{"ran"});  // dataset only
+  EXPECT_FALSE(fs::exists(run_dir / "features.h5"));
+}
+
 TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
   const std::string run_dir = (workdir_ / "demo").string();
-  ASSERT_EQ(Raytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
   // The exported COLMAP model scores as the pipeline's own evaluation scored the pose set.
-  CommandResult result = Raytime("evaluate --est " + run_dir +
-                                 "/refined --est-format colmap --gt data/sample/fountain-P11 "
-                                 "--gt-format strecha --align none --json");
+  CommandResult result = RunRaytime("evaluate --est " + run_dir +
+                                    "/refined --est-format colmap --gt data/sample/fountain-P11 "
+                                    "--gt-format strecha --align none --json");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json errors = json::parse(result.output);
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
@@ -326,9 +315,9 @@ TEST_F(PipelineTest, StageAloneWritesOnlyItsSummaryOnStdout) {
 dataset: {format: strecha, root: data/sample/fountain-P11}
 )");
   const std::string run_dir = (workdir_ / "run").string();
-  ASSERT_EQ(Raytime("run " + pipeline + " --workdir " + run_dir).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run " + pipeline + " --workdir " + run_dir).exit_code, 0);
   std::string log;
-  const CommandResult result = RaytimeStdoutOnly(
+  const CommandResult result = RunRaytimeStdout(
       "prior --in " + run_dir + "/dataset.h5 --out " + run_dir + "/p.h5 --level_deg 2", &log);
   ASSERT_EQ(result.exit_code, 0) << log;
   // Everything on stdout is the summary: it parses whole (logs went to stderr).
@@ -391,7 +380,7 @@ stages:
   // What a killed run leaves (its process is gone) goes when the next run starts here.
   const fs::path stale = run_dir / ".features.h5.tmp.2147483646.0";
   std::ofstream(stale) << "half-written";
-  const CommandResult rerun = Raytime("run " + pipeline + " --workdir " + run_dir.string());
+  const CommandResult rerun = RunRaytime("run " + pipeline + " --workdir " + run_dir.string());
   ASSERT_EQ(rerun.exit_code, 0) << rerun.output;
   EXPECT_FALSE(fs::exists(stale));
   EXPECT_TRUE(TemporaryFilesBelow(run_dir).empty());
@@ -401,7 +390,7 @@ stages:
 
   // The same result as a run that was never interrupted.
   const fs::path clean_dir = workdir_ / "clean";
-  ASSERT_EQ(Raytime("run " + pipeline + " --workdir " + clean_dir.string()).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run " + pipeline + " --workdir " + clean_dir.string()).exit_code, 0);
   EXPECT_EQ(ReadJson(clean_dir / "summary.json")["stages"][1]["summary"]["num_keypoints"],
             finished["stages"][1]["summary"]["num_keypoints"]);
 }
@@ -416,7 +405,7 @@ stages:
   - prior: {source: ground_truth}
   - export: {poses: [prior], formats: [colmap_text]}
 )");
-  ASSERT_EQ(Raytime("run " + export_pipeline + " --workdir " + run_dir).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run " + export_pipeline + " --workdir " + run_dir).exit_code, 0);
   const fs::path images_txt = fs::path(run_dir) / "prior" / "images.txt";
   std::ifstream in(images_txt);
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -432,8 +421,8 @@ stages:
   - prior: {source: file, format: colmap}
 )");
   const std::string second = (workdir_ / "file").string();
-  const CommandResult result = Raytime("run " + pipeline + " --workdir " + second +
-                                       " --set prior.path=" + run_dir + "/prior");
+  const CommandResult result = RunRaytime("run " + pipeline + " --workdir " + second +
+                                          " --set prior.path=" + run_dir + "/prior");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json summary = ReadJson(fs::path(second) / "summary.json");
   EXPECT_EQ(summary["status"], "ok_with_warnings");
@@ -449,8 +438,8 @@ stages:
 
   // prior.strict refuses the same file, naming it.
   const CommandResult strict =
-      Raytime("run " + pipeline + " --workdir " + second + " --set prior.path=" + run_dir +
-              "/prior --set prior.strict=true");
+      RunRaytime("run " + pipeline + " --workdir " + second + " --set prior.path=" + run_dir +
+                 "/prior --set prior.strict=true");
   EXPECT_EQ(strict.exit_code, 2);
   EXPECT_NE(strict.output.find("9999.jpg"), std::string::npos) << strict.output;
 }
