@@ -89,14 +89,18 @@ struct BootstrapResult {
   RotationAveragingResult rotations;
   TranslationAveragingResult translations;  // positions "lud"
   LookAtSeedResult look_at;                 // positions "look_at"
-  // Per image: camera-to-world rotation and centre; registered = in the rotation component.
+  // Per image: camera-to-world rotation and centre. An image in the rotation component has a
+  // rotation and so a pose; its centre is estimated by translation averaging, or filled by the
+  // look-at rule (positions "lud": outside the translation component, placed around the point
+  // nearest the optical axes of the estimated ones; all of them when no direction survived), or
+  // is the requested look-at seed (positions "look_at").
   std::vector<Eigen::Matrix3d> world_from_cam;
   std::vector<Eigen::Vector3d> centres;
-  std::vector<bool> registered;
-  int num_registered = 0;
-  // "lud": registered images outside the translation component, placed by the look-at rule
-  // around the point nearest the optical axes of the placed ones.
-  int num_centres_filled = 0;
+  std::vector<bool> rotation_registered;  // in the rotation component: has a pose
+  std::vector<bool> position_estimated;   // centre from translation averaging
+  int num_rotations_registered = 0;
+  int num_positions_estimated = 0;
+  int num_positions_filled = 0;
 
   double relative_pose_seconds = 0.0;
   double global_seconds = 0.0;
@@ -111,7 +115,7 @@ BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeat
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options);
 
-// The registered images' poses, keyed by image name.
+// The poses of the images with a rotation, keyed by image name.
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result);
 
 }  // namespace raytime

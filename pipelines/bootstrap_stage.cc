@@ -102,16 +102,16 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
                  result.fragility.fragile ? "FRAGILE" : "not fragile");
     spdlog::info("bootstrap: wrong-pair detector rejects {} of {} usable pairs ({} rounds)",
                  result.pairs.num_wrong, usable, result.pairs.rounds);
-    spdlog::info("bootstrap: {} of {} images registered, positions by {}{}", result.num_registered,
-                 images.images.size(), options_.bootstrap.positions,
-                 result.num_centres_filled
-                     ? " (" + std::to_string(result.num_centres_filled) + " by the look-at rule)"
-                     : std::string());
-    if (result.num_registered < static_cast<int>(images.images.size())) {
+    spdlog::info(
+        "bootstrap: {} of {} images have a rotation; positions by {}: {} estimated, {} filled by "
+        "the look-at fallback",
+        result.num_rotations_registered, images.images.size(), options_.bootstrap.positions,
+        result.num_positions_estimated, result.num_positions_filled);
+    if (result.num_rotations_registered < static_cast<int>(images.images.size())) {
       spdlog::warn(
           "bootstrap: {} images are outside the largest connected pair graph and get "
           "no pose",
-          images.images.size() - result.num_registered);
+          images.images.size() - result.num_rotations_registered);
     }
 
     const PoseSet poses = BootstrapPoses(images, result);
@@ -151,8 +151,9 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
         {"num_pairs", result.edges.size()},
         {"num_usable_pairs", usable},
         {"num_pure_rotation_pairs", pure_rotation},
-        {"num_registered", result.num_registered},
-        {"num_centres_filled", result.num_centres_filled},
+        {"num_rotations_registered", result.num_rotations_registered},
+        {"num_positions_estimated", result.num_positions_estimated},
+        {"num_positions_filled", result.num_positions_filled},
         {"positions", options_.bootstrap.positions},
         {"fragility",
          {{"mean_residual_deg", result.fragility.mean_residual_deg},
@@ -190,7 +191,9 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
          {{"bootstrap",
            {{"fragility_deg", result.fragility.mean_residual_deg},
             {"num_wrong_pairs", result.pairs.num_wrong},
-            {"num_registered", result.num_registered}}}}}};
+            {"num_rotations_registered", result.num_rotations_registered},
+            {"num_positions_estimated", result.num_positions_estimated},
+            {"num_positions_filled", result.num_positions_filled}}}}}};
     if (options_.filter_matches) summary["num_matches_pairs_written"] = written_pairs;
     return summary;
   }

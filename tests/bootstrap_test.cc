@@ -196,8 +196,8 @@ TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
   }
   ASSERT_GT(num_outliers, 15);
   SolveGlobalPoses(16, BootstrapOptions(), &result);
-  EXPECT_EQ(result.num_registered, 16);
-  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.registered), 0.5);
+  EXPECT_EQ(result.num_rotations_registered, 16);
+  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.rotation_registered), 0.5);
   EXPECT_LT(MaxCentreErrorRelative(scene, result.centres), 0.02);
 
   int flagged_outliers = 0, false_positives = 0;
@@ -241,9 +241,11 @@ TEST(Bootstrap, PureRotationPairsServeRotationsOnly) {
     }
   }
   SolveGlobalPoses(8, BootstrapOptions(), &result);
-  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.registered), 1e-6);
+  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.rotation_registered), 1e-6);
   // Camera 0 has no translation direction left: it is placed by the look-at fill.
-  EXPECT_EQ(result.num_centres_filled, 1);
+  EXPECT_EQ(result.num_positions_filled, 1);
+  EXPECT_EQ(result.num_positions_estimated, 7);
+  EXPECT_FALSE(result.position_estimated[0]);
   EXPECT_EQ(result.pairs.num_wrong, 0);
 }
 
@@ -413,12 +415,17 @@ TEST(Bootstrap, RecoversSyntheticCaptureFromKeypoints) {
     options.positions = positions;
     const BootstrapResult result =
         RunBootstrap(capture.images, capture.features, capture.matches, options);
-    EXPECT_EQ(result.num_registered, 8);
-    EXPECT_LT(MaxRotationErrorDeg(capture.scene, result.world_from_cam, result.registered), 0.1)
+    EXPECT_EQ(result.num_rotations_registered, 8);
+    EXPECT_LT(MaxRotationErrorDeg(capture.scene, result.world_from_cam, result.rotation_registered),
+              0.1)
         << positions;
     EXPECT_EQ(result.pairs.num_wrong, 0) << positions;
+    EXPECT_EQ(result.num_positions_filled, 0) << positions;
     if (positions == "lud") {
+      EXPECT_EQ(result.num_positions_estimated, 8);
       EXPECT_LT(MaxCentreErrorRelative(capture.scene, result.centres), 0.02);
+    } else {
+      EXPECT_EQ(result.num_positions_estimated, 0) << "requested look-at seed, not estimated";
     }
     const PoseSet poses = BootstrapPoses(capture.images, result);
     EXPECT_EQ(poses.size(), 8u);
