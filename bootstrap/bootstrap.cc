@@ -83,6 +83,7 @@ void ValidateBootstrapOptions(const BootstrapOptions& options) {
   ValidateLookAtSeedOptions(options.look_at);
   ValidateFocalSearchOptions(options.focal);
   ValidateWrongPairOptions(options.wrong_pairs);
+  ValidateGraphSupportOptions(options.graph_support);
 }
 
 void SolveGlobalPoses(int num_images, const BootstrapOptions& options, BootstrapResult* result) {
@@ -162,6 +163,11 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
       result->centres[index[k]] = result->look_at.centres[k];
     if (options.positions == "lud") result->num_positions_filled = static_cast<int>(index.size());
   }
+  result->support =
+      AssessGraphSupport(edges,
+                         {num_images, result->num_rotations_registered,
+                          result->num_positions_estimated, result->num_positions_filled},
+                         options.graph_support);
   result->global_seconds = SecondsSince(start);
 }
 
@@ -180,6 +186,27 @@ BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeat
   result.relative_pose_seconds = SecondsSince(start);
   SolveGlobalPoses(static_cast<int>(images.images.size()), options, &result);
   return result;
+}
+
+const char* FragilityVerdict(const BootstrapResult& result) {
+  if (result.fragility.fragile) return result.support.weak ? "fragile and weak" : "fragile";
+  return result.support.weak ? "weak" : "not fragile";
+}
+
+Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result) {
+  if (!result.support.weak) return {};
+  Warning warning;
+  warning.code = "weak_bootstrap";
+  warning.message = "The view graph cannot support the bootstrap's estimate: " +
+                    DescribeWeakness(result.support) + ".";
+  const bool filled = result.num_positions_filled > 0;
+  for (size_t i = 0; i < images.images.size() && i < result.rotation_registered.size(); ++i) {
+    if (!result.rotation_registered[i] || (filled && !result.position_estimated[i])) {
+      warning.images.push_back(images.images[i].name);
+    }
+  }
+  warning.details = GraphSupportJson(result.support);
+  return {warning};
 }
 
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result) {

@@ -1,6 +1,7 @@
 // Prior-free poses from the match graph (SPEC §4; paper §4.8 "Refinement without an external
 // prior"): relative poses per verified pair, the pre-solve fragility flag, wrong-pair detection,
-// rotation averaging, then centres by LUD translation averaging or the look-at seed.
+// rotation averaging, then centres by LUD translation averaging or the look-at seed, and whether
+// the graph can support that estimate at all (graph_support.h).
 //
 // The bootstrap never reads a pose prior or ground truth; gauge fits onto a prior live in
 // prior_repair.h and take the prior as an explicit argument.
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "bootstrap/focal_search.h"
+#include "bootstrap/graph_support.h"
 #include "bootstrap/look_at_seed.h"
 #include "bootstrap/relative_pose.h"
 #include "bootstrap/rotation_averaging.h"
@@ -18,6 +20,7 @@
 #include "bootstrap/wrong_pairs.h"
 #include "core/hdf5_store.h"
 #include "core/types.h"
+#include "core/warnings.h"
 
 namespace raytime {
 
@@ -44,6 +47,7 @@ struct BootstrapOptions {
   LookAtSeedOptions look_at;
   FocalSearchOptions focal;
   WrongPairOptions wrong_pairs;
+  GraphSupportOptions graph_support;
 
   // Flat keys (YAML key = field name; the sub-structs' names are unique).
   template <class Visitor>
@@ -59,6 +63,7 @@ struct BootstrapOptions {
     look_at.VisitFields(v);
     focal.VisitFields(v);
     wrong_pairs.VisitFields(v);
+    graph_support.VisitFields(v);
   }
 };
 
@@ -101,6 +106,8 @@ struct BootstrapResult {
   int num_rotations_registered = 0;
   int num_positions_estimated = 0;
   int num_positions_filled = 0;
+  // Whether the graph supports the estimate (too little parallax, too many filled centres).
+  GraphSupport support;
 
   double relative_pose_seconds = 0.0;
   double global_seconds = 0.0;
@@ -114,6 +121,15 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
 BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeatures>& features,
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options);
+
+// "weak" when the graph cannot support the estimate, "fragile" when the fragility flag fires,
+// "fragile and weak" for both, else "not fragile".
+const char* FragilityVerdict(const BootstrapResult& result);
+
+// "weak_bootstrap" when the graph cannot support the estimate (issue 13): the reasons in words,
+// the images whose pose is not estimated from the graph (no rotation, or a centre filled by the
+// look-at fallback) and GraphSupportJson as details. Empty otherwise.
+Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result);
 
 // The poses of the images with a rotation, keyed by image name.
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result);
