@@ -106,26 +106,31 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
   }
 
   result->world_from_cam = result->rotations.world_from_cam;
-  result->registered = result->rotations.registered;
-  result->num_registered = result->rotations.num_registered;
+  result->rotation_registered = result->rotations.registered;
+  result->num_rotations_registered = result->rotations.num_registered;
   result->centres.assign(num_images, Eigen::Vector3d::Zero());
-  result->num_centres_filled = 0;
+  result->position_estimated.assign(num_images, false);
+  result->num_positions_estimated = 0;
+  result->num_positions_filled = 0;
   const bool lud = options.positions == "lud" && result->translations.num_registered >= 2;
   if (lud) {
-    std::vector<bool> placed(num_images, false);
+    std::vector<bool>& placed = result->position_estimated;
     for (int i = 0; i < num_images; ++i) {
-      placed[i] = result->registered[i] && result->translations.registered[i];
-      if (placed[i]) result->centres[i] = result->translations.centres[i];
+      placed[i] = result->rotation_registered[i] && result->translations.registered[i];
+      if (placed[i]) {
+        result->centres[i] = result->translations.centres[i];
+        ++result->num_positions_estimated;
+      }
     }
-    result->num_centres_filled =
-        FillMissingCentres(result->world_from_cam, result->registered, placed, &result->centres);
+    result->num_positions_filled = FillMissingCentres(
+        result->world_from_cam, result->rotation_registered, placed, &result->centres);
   } else {
     // The look-at seed; also the fallback when no translation direction survived (a graph of
     // pure rotations), since a seed with every camera at one point is degenerate (paper §4.8).
     std::vector<Eigen::Matrix3d> rotations;
     std::vector<int> index;
     for (int i = 0; i < num_images; ++i) {
-      if (result->registered[i]) {
+      if (result->rotation_registered[i]) {
         rotations.push_back(result->world_from_cam[i]);
         index.push_back(i);
       }
@@ -133,8 +138,13 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
     result->look_at = LookAtSeed(rotations, options.look_at);
     for (size_t k = 0; k < index.size(); ++k)
       result->centres[index[k]] = result->look_at.centres[k];
-    if (options.positions == "lud") result->num_centres_filled = static_cast<int>(index.size());
+    if (options.positions == "lud") result->num_positions_filled = static_cast<int>(index.size());
   }
+  result->support =
+      AssessGraphSupport(edges,
+                         {num_images, result->num_rotations_registered,
+                          result->num_positions_estimated, result->num_positions_filled},
+                         options.graph_support);
   result->global_seconds = SecondsSince(start);
 }
 
@@ -155,10 +165,31 @@ BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeat
   return result;
 }
 
+const char* FragilityVerdict(const BootstrapResult& result) {
+  if (result.fragility.fragile) return result.support.weak ? "fragile and weak" : "fragile";
+  return result.support.weak ? "weak" : "not fragile";
+}
+
+Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result) {
+  if (!result.support.weak) return {};
+  Warning warning;
+  warning.code = "weak_bootstrap";
+  warning.message = "The view graph cannot support the bootstrap's estimate: " +
+                    DescribeWeakness(result.support) + ".";
+  const bool filled = result.num_positions_filled > 0;
+  for (size_t i = 0; i < images.images.size() && i < result.rotation_registered.size(); ++i) {
+    if (!result.rotation_registered[i] || (filled && !result.position_estimated[i])) {
+      warning.images.push_back(images.images[i].name);
+    }
+  }
+  warning.details = GraphSupportJson(result.support);
+  return {warning};
+}
+
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result) {
   PoseSet poses;
-  for (size_t i = 0; i < images.images.size() && i < result.registered.size(); ++i) {
-    if (!result.registered[i]) continue;
+  for (size_t i = 0; i < images.images.size() && i < result.rotation_registered.size(); ++i) {
+    if (!result.rotation_registered[i]) continue;
     poses.world_from_cam[images.images[i].name] =
         Rigid3(Eigen::Quaterniond(result.world_from_cam[i]).normalized(), result.centres[i]);
   }

@@ -89,7 +89,9 @@ SweepRow SweepRowFromRun(const std::string& label,
                                                             : stage.value("previous_seconds", 0.0);
   }
   for (const auto& [arm, by_alignment] : metrics.items()) {
+    if (!by_alignment.is_object()) continue;
     for (const auto& [alignment, errors] : by_alignment.items()) {
+      if (!errors.is_object()) continue;
       row.errors[arm][alignment] = SweepPoseErrors::FromJson(errors);
     }
   }
