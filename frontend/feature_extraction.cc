@@ -61,11 +61,85 @@ ByteDescriptors QuantizeSiftDescriptors(const cv::Mat& descriptors, bool root_si
   return out;
 }
 
+std::vector<cv::KeyPoint> SelectKeypoints(const std::vector<cv::KeyPoint>& detected,
+                                          int max_features) {
+  // The budget (FeatureExtractionOptions::max_features) bounds the keypoints kept, after
+  // COLMAP's per-DoG-level rule (SiftExtractionOptions::max_num_features on the CPU): DoG levels
+  // are taken whole from the coarsest down (larger-scale keypoints repeat better), but where
+  // COLMAP keeps the level that crosses the budget whole (so an image may hold several times the
+  // budget), that level gives only its strongest locations by DoG response, as many as fit. A
+  // location with a second dominant orientation (Lowe 2004 §5; OpenCV emits one keypoint per
+  // orientation with identical position, size and octave) keeps both descriptors and counts
+  // twice, so the matcher never sees more than max_features rows per image.
+  struct Location {
+    float response, x, y, size;
+    int octave, layer;
+    std::vector<int> members;
+  };
+  std::map<std::tuple<float, float, float, int>, Location> by_location;
+  for (int i = 0; i < static_cast<int>(detected.size()); ++i) {
+    const cv::KeyPoint& kp = detected[i];
+    Location& location = by_location[{kp.pt.x, kp.pt.y, kp.size, kp.octave}];
+    if (location.members.empty()) {
+      // KeyPoint::octave packs the octave as a signed byte (-1 for the doubled image) and the
+      // DoG layer within it (1 to nOctaveLayers) in the next byte.
+      const int octave = static_cast<int8_t>(kp.octave & 255);
+      const int layer = (kp.octave >> 8) & 255;
+      location = {kp.response, kp.pt.x, kp.pt.y, kp.size, octave, layer, {}};
+    }
+    location.response = std::max(location.response, kp.response);
+    location.members.push_back(i);
+  }
+  std::vector<const Location*> locations;
+  locations.reserve(by_location.size());
+  for (const auto& entry : by_location) locations.push_back(&entry.second);
+  const auto stronger = [](const Location* a, const Location* b) {
+    if (a->response != b->response) return a->response > b->response;
+    if (a->x != b->x) return a->x < b->x;
+    if (a->y != b->y) return a->y < b->y;
+    return a->size < b->size;
+  };
+  // Coarsest DoG level first, strongest first within it; ties broken by position so the result
+  // does not depend on thread scheduling.
+  std::sort(locations.begin(), locations.end(), [&](const Location* a, const Location* b) {
+    if (a->octave != b->octave) return a->octave > b->octave;
+    if (a->layer != b->layer) return a->layer > b->layer;
+    return stronger(a, b);
+  });
+  size_t keep = 0;
+  size_t num_keypoints = 0;
+  const size_t budget = static_cast<size_t>(std::max(0, max_features));
+  while (keep < locations.size() && num_keypoints + locations[keep]->members.size() <= budget) {
+    num_keypoints += locations[keep]->members.size();
+    ++keep;
+  }
+  locations.resize(keep);
+  std::sort(locations.begin(), locations.end(), stronger);
+  std::vector<cv::KeyPoint> keypoints;
+  keypoints.reserve(num_keypoints);
+  for (const Location* location : locations) {
+    std::vector<int> members = location->members;
+    std::sort(members.begin(), members.end(),
+              [&](int i, int j) { return detected[i].angle < detected[j].angle; });
+    for (int i : members) keypoints.push_back(detected[i]);
+  }
+  return keypoints;
+}
+
+int EffectiveFirstOctave(int width, int height, const FeatureExtractionOptions& options) {
+  if (options.first_octave == -1 && options.upsample_max_size > 0 &&
+      std::max(width, height) > options.upsample_max_size) {
+    return 0;
+  }
+  return options.first_octave;
+}
+
 ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& options) {
   CV_Assert(gray.type() == CV_8UC1);
   cv::Mat input = gray;
-  if (options.first_octave >= 0) {
-    const double factor = std::ldexp(1.0, -(options.first_octave + 1));
+  const int first_octave = EffectiveFirstOctave(gray.cols, gray.rows, options);
+  if (first_octave >= 0) {
+    const double factor = std::ldexp(1.0, -(first_octave + 1));
     const int width = std::max(1, static_cast<int>(std::lround(gray.cols * factor)));
     const int height = std::max(1, static_cast<int>(std::lround(gray.rows * factor)));
     cv::resize(gray, input, cv::Size(width, height), 0, 0, cv::INTER_AREA);
@@ -82,60 +156,7 @@ ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& o
   std::vector<cv::KeyPoint> detected;
   sift->detect(input, detected);
 
-  // The budget counts locations, the way COLMAP's SiftExtraction.max_num_features does on the
-  // CPU: whole octaves are kept from the coarsest down until the budget is exceeded (larger-scale
-  // keypoints repeat better), so an image may hold more than the budget. A location with a second
-  // dominant orientation keeps both descriptors (Lowe 2004 §5); OpenCV emits one keypoint per
-  // orientation with identical position, size and octave.
-  struct Location {
-    float response, x, y, size;
-    int octave;
-    std::vector<int> members;
-  };
-  std::map<std::tuple<float, float, float, int>, Location> by_location;
-  for (int i = 0; i < static_cast<int>(detected.size()); ++i) {
-    const cv::KeyPoint& kp = detected[i];
-    Location& location = by_location[{kp.pt.x, kp.pt.y, kp.size, kp.octave}];
-    if (location.members.empty()) {
-      // KeyPoint::octave packs the octave as a signed byte (-1 for the doubled image).
-      const int octave = static_cast<int8_t>(kp.octave & 255);
-      location = {kp.response, kp.pt.x, kp.pt.y, kp.size, octave, {}};
-    }
-    location.response = std::max(location.response, kp.response);
-    location.members.push_back(i);
-  }
-  std::vector<const Location*> locations;
-  locations.reserve(by_location.size());
-  for (const auto& entry : by_location) locations.push_back(&entry.second);
-  // Coarsest octave first, strongest first within it; ties broken by position so the result does
-  // not depend on thread scheduling.
-  std::sort(locations.begin(), locations.end(), [](const Location* a, const Location* b) {
-    if (a->octave != b->octave) return a->octave > b->octave;
-    if (a->response != b->response) return a->response > b->response;
-    if (a->x != b->x) return a->x < b->x;
-    if (a->y != b->y) return a->y < b->y;
-    return a->size < b->size;
-  });
-  size_t keep = 0;
-  while (keep < locations.size()) {
-    const int octave = locations[keep]->octave;
-    if (static_cast<int>(keep) >= options.max_features) break;
-    while (keep < locations.size() && locations[keep]->octave == octave) ++keep;
-  }
-  locations.resize(keep);
-  std::sort(locations.begin(), locations.end(), [](const Location* a, const Location* b) {
-    if (a->response != b->response) return a->response > b->response;
-    if (a->x != b->x) return a->x < b->x;
-    if (a->y != b->y) return a->y < b->y;
-    return a->size < b->size;
-  });
-  std::vector<cv::KeyPoint> keypoints;
-  for (const Location* location : locations) {
-    std::vector<int> members = location->members;
-    std::sort(members.begin(), members.end(),
-              [&](int i, int j) { return detected[i].angle < detected[j].angle; });
-    for (int i : members) keypoints.push_back(detected[i]);
-  }
+  std::vector<cv::KeyPoint> keypoints = SelectKeypoints(detected, options.max_features);
   cv::Mat descriptors;
   sift->compute(input, keypoints, descriptors);
   // compute() keeps the keypoints' order and count (it only drops none for SIFT).
@@ -167,7 +188,7 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
   const auto start = std::chrono::steady_clock::now();
   const int num_images = static_cast<int>(images.images.size());
   features->assign(num_images, ImageFeatures());
-  std::atomic<int> done{0};
+  std::atomic<int> done{0}, upsampled{0};
   tbb::parallel_for(0, num_images, [&](int i) {
     const auto image_start = std::chrono::steady_clock::now();
     const ImageInfo& info = images.images[i];
@@ -181,12 +202,14 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
                      "x" + std::to_string(info.height));
     }
     (*features)[i] = ExtractSift(gray, options);
+    if (EffectiveFirstOctave(gray.cols, gray.rows, options) < 0) ++upsampled;
     spdlog::info("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images, info.name,
                  (*features)[i].keypoints.rows(), SecondsSince(image_start));
   });
 
   FeatureExtractionSummary summary;
   summary.num_images = num_images;
+  summary.num_upsampled = upsampled.load();
   summary.min_keypoints = num_images > 0 ? std::numeric_limits<int>::max() : 0;
   for (const ImageFeatures& f : *features) {
     const int count = static_cast<int>(f.keypoints.rows());

@@ -148,6 +148,11 @@ void MatchPair(const PairInput& in, const MatchingOptions& options, MatchKernel 
 nlohmann::json MatchingSummary::ToJson() const { return *this; }
 
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options) {
+  if (options.pairs == "prior") {
+    throw InputError(
+        "matching: pairs 'prior' are chosen from the prior's poses by the matches stage "
+        "(core/pair_selection.h) and handed to MatchImagePairs");
+  }
   std::vector<std::pair<int, int>> pairs;
   for (int i = 0; i < num_images; ++i) {
     for (int j = i + 1; j < num_images; ++j) {
@@ -162,6 +167,15 @@ std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptio
 
 MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatures>& features,
                             const MatchingOptions& options, std::vector<PairMatches>* pairs) {
+  ValidateOptions(options, "matching");
+  return MatchImagePairs(images, features, options,
+                         SelectPairs(static_cast<int>(images.images.size()), options), pairs);
+}
+
+MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                                const MatchingOptions& options,
+                                const std::vector<std::pair<int, int>>& candidates,
+                                std::vector<PairMatches>* pairs) {
   ValidateOptions(options, "matching");
   const auto start = Clock::now();
   const int num_images = static_cast<int>(images.images.size());
@@ -186,7 +200,14 @@ MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatu
     }
   }
 
-  const std::vector<std::pair<int, int>> candidates = SelectPairs(num_images, options);
+  for (size_t p = 0; p < candidates.size(); ++p) {
+    const auto [i, j] = candidates[p];
+    if (i < 0 || i >= j || j >= num_images || (p > 0 && candidates[p - 1] >= candidates[p])) {
+      throw InputError("matching: candidate pair " + std::to_string(p) + " (" + std::to_string(i) +
+                       ", " + std::to_string(j) + ") of " + std::to_string(num_images) +
+                       " images is not an ordered pair of valid indices in sorted order");
+    }
+  }
   const int num_pairs = static_cast<int>(candidates.size());
   std::vector<PairMatches> results(num_pairs);
   std::vector<PairStats> stats(num_pairs);

@@ -6,7 +6,8 @@
 // competes with keypoints near its epipolar line under the estimated F, verified again. Pairs
 // with fewer than min_num_inliers verified inliers are dropped. No pose prior enters: the pairs
 // come from the image list alone (all pairs, or a window along the name order plus a keyframe
-// grid for loop closures).
+// grid for loop closures), or are handed over as a list (`pairs: prior`: the matches stage chooses
+// them from the prior's poses, core/pair_selection.h); matching and verification never see a pose.
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -22,7 +23,9 @@ namespace raytime {
 
 struct MatchingOptions {
   // "exhaustive": every pair (the paper's setting, O(N^2)). "sequential": images in name order
-  // (video frames), each with the next `window` images, plus loop candidates (below).
+  // (video frames), each with the next `window` images, plus loop candidates (below). "prior":
+  // the pairs the matches stage chooses from the prior's poses (SPEC §5, O(N k)), handed to
+  // MatchImagePairs; MatchImages refuses it.
   std::string pairs = "exhaustive";
   int window = 10;  // sequential: neighbours matched after each image
   // Sequential loop candidates: every pair of keyframes (images whose index in name order is a
@@ -64,8 +67,10 @@ struct MatchingOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("pairs", pairs, "Pairs to match: every pair, or name-order neighbours (video)",
-      OneOf({"exhaustive", "sequential"}));
+    v("pairs", pairs,
+      "Pairs to match: every pair, name-order neighbours (video), or chosen from the prior's "
+      "poses (the prior stage must come first)",
+      OneOf({"exhaustive", "sequential", "prior"}));
     v("window", window, "Sequential: neighbours matched after each image", Positive());
     v("loop_stride", loop_stride,
       "Sequential: keyframe stride of loop-closure candidates; 0 disables", NonNegative());
@@ -117,14 +122,22 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(MatchingSummary, num_images, num_pairs, num_v
                                    num_inliers_first_pass, kernel, seconds, matching_thread_seconds,
                                    verification_thread_seconds, guided_thread_seconds)
 
-// Candidate pairs (i < j, indices into the image list), sorted.
+// Candidate pairs (i < j, indices into the image list), sorted, for pairs "exhaustive" and
+// "sequential"; InputError for "prior" (chosen by the caller from poses).
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options);
 
-// Matches and verifies the candidate pairs of `images`, in parallel over pairs. features[i]
-// belongs to images.images[i]. Output: the kept pairs sorted by (image1, image2); `matches` holds
-// the first-pass putative matches plus the guided ones (so inlier_matches is a subset of it).
+// Matches and verifies the given candidate pairs of `images` (i < j, indices into the image list,
+// sorted, no duplicates; otherwise an InputError), in parallel over pairs. features[i] belongs to
+// images.images[i]. Output: the kept pairs sorted by (image1, image2); `matches` holds the
+// first-pass putative matches plus the guided ones (so inlier_matches is a subset of it).
 // Keypoints are undistorted (core/camera.h) before estimation when the camera has distortion;
 // the stored indices refer to the original keypoints.
+MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                                const MatchingOptions& options,
+                                const std::vector<std::pair<int, int>>& candidates,
+                                std::vector<PairMatches>* pairs);
+
+// MatchImagePairs on SelectPairs(options).
 MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatures>& features,
                             const MatchingOptions& options, std::vector<PairMatches>* pairs);
 

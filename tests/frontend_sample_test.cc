@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
+#include <limits>
 #include <set>
 #include <string>
 #include <vector>
@@ -146,6 +148,47 @@ TEST_F(SampleScene, Deterministic) {
     EXPECT_TRUE(it->geometry.inlier_matches == pair.geometry.inlier_matches);
     EXPECT_TRUE(it->geometry.E == pair.geometry.E);
   }
+}
+
+// The default budget does not bind on the sample scene (768x512, about 4-5k keypoints per image
+// with the doubled first octave): its features are the whole detection, as with the previous
+// whole-octave rule, so the new selection changes nothing there.
+TEST(FeatureBudget, DefaultBudgetKeepsTheWholeSampleDetection) {
+  ImageSet images;
+  PoseSet ground_truth;
+  ReadStrechaScene(kSampleScene, &images, &ground_truth);
+  images.images.resize(2);
+  FeatureExtractionOptions defaults, unbounded;
+  unbounded.max_features = std::numeric_limits<int>::max();
+  std::vector<ImageFeatures> bounded_features, unbounded_features;
+  const FeatureExtractionSummary summary = ExtractFeatures(images, defaults, &bounded_features);
+  ExtractFeatures(images, unbounded, &unbounded_features);
+  EXPECT_EQ(summary.num_upsampled, 2);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_LT(bounded_features[i].keypoints.rows(), defaults.max_features);
+    EXPECT_TRUE(bounded_features[i].keypoints == unbounded_features[i].keypoints) << i;
+    EXPECT_TRUE(bounded_features[i].descriptors == unbounded_features[i].descriptors) << i;
+  }
+}
+
+// A real phone image (3D Scanner App, 1920x1440, textured ground): the default budget holds. The
+// previous whole-octave rule with the doubled first octave kept 64k-83k keypoints per image here.
+TEST(FeatureBudget, HoldsOnARealPhoneImage) {
+  const std::string capture = std::string(RAYTIME_SHARED_DATA_DIR) + "/captures/3dscanner-chair";
+  if (!std::filesystem::exists(capture + "/frame_00000.jpg")) {
+    GTEST_SKIP() << capture << " not found";
+  }
+  ImageSet images;
+  images.image_root = capture;
+  images.cameras.resize(1);
+  images.images.push_back({"frame_00000.jpg", 1920, 1440, 0});
+  std::vector<ImageFeatures> features;
+  const FeatureExtractionOptions defaults;
+  const FeatureExtractionSummary summary = ExtractFeatures(images, defaults, &features);
+  EXPECT_EQ(summary.num_upsampled, 0);  // longer side 1920 > upsample_max_size
+  EXPECT_LE(features[0].keypoints.rows(), defaults.max_features);
+  // The native-resolution pyramid of this image holds more than the budget: it is filled.
+  EXPECT_GE(features[0].keypoints.rows(), defaults.max_features - 4);
 }
 
 }  // namespace

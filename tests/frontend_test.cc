@@ -9,12 +9,15 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 #include <random>
 #include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/camera.h"
@@ -166,6 +169,96 @@ TEST(Features, KeypointPositionsUseOpenCvPixelConvention) {
     EXPECT_NEAR(features.keypoints(0, 2), sigma, 1.0);
     EXPECT_EQ(features.descriptors.cols(), 128);
   }
+}
+
+// A large textured image: smoothed random noise, so every DoG level holds many extrema.
+cv::Mat TexturedImage(int width, int height, unsigned seed) {
+  cv::Mat noise(height, width, CV_32F);
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> gauss(0.0f, 1.0f);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) noise.at<float>(y, x) = gauss(rng);
+  }
+  cv::Mat fine, coarse, image;
+  cv::GaussianBlur(noise, fine, cv::Size(), 2.0);
+  cv::GaussianBlur(noise, coarse, cv::Size(), 8.0);
+  cv::normalize(fine + 4.0f * coarse, image, 0, 255, cv::NORM_MINMAX, CV_8U);
+  return image;
+}
+
+// DoG level of an OpenCV SIFT keypoint, ordered coarsest first: (octave, layer).
+std::pair<int, int> Level(const cv::KeyPoint& kp) {
+  return {static_cast<int8_t>(kp.octave & 255), (kp.octave >> 8) & 255};
+}
+
+// The budget holds on a large image and keeps the coarsest DoG levels whole, then the strongest of
+// the level that crosses it (COLMAP's per-level rule, cut within the last level by response).
+TEST(Features, BudgetKeepsWholeCoarseLevelsThenTheStrongest) {
+  const cv::Mat image = TexturedImage(1000, 750, 5);
+  const cv::Ptr<cv::SIFT> sift = cv::SIFT::create(0, 3, 0.02, 10.0, 1.6);
+  std::vector<cv::KeyPoint> detected;
+  sift->detect(image, detected);
+  const int budget = 1500;
+  ASSERT_GT(static_cast<int>(detected.size()), 2 * budget) << "the image must exceed the budget";
+  const std::vector<cv::KeyPoint> kept = SelectKeypoints(detected, budget);
+  EXPECT_LE(static_cast<int>(kept.size()), budget);
+  EXPECT_GE(static_cast<int>(kept.size()), budget - 4);  // a location's orientations stay together
+
+  const auto key = [](const cv::KeyPoint& kp) {
+    return std::make_tuple(kp.pt.x, kp.pt.y, kp.size, kp.octave, kp.angle);
+  };
+  std::set<std::tuple<float, float, float, int, float>> kept_keys;
+  for (const auto& kp : kept) kept_keys.insert(key(kp));
+  // The finest level with a kept keypoint is the cut level (levels sort coarsest first as the
+  // larger (octave, layer)).
+  std::pair<int, int> cut = Level(kept.front());
+  for (const auto& kp : kept) cut = std::min(cut, Level(kp));
+  float weakest_kept_at_cut = std::numeric_limits<float>::max();
+  float strongest_dropped_at_cut = 0;
+  int coarser = 0, finer_kept = 0, cut_dropped = 0;
+  for (const auto& kp : detected) {
+    const bool is_kept = kept_keys.count(key(kp)) > 0;
+    if (Level(kp) > cut) {
+      ++coarser;
+      EXPECT_TRUE(is_kept) << "a coarser level than the cut lost a keypoint";
+    } else if (Level(kp) < cut) {
+      finer_kept += is_kept;
+    } else if (is_kept) {
+      weakest_kept_at_cut = std::min(weakest_kept_at_cut, kp.response);
+    } else {
+      ++cut_dropped;
+      strongest_dropped_at_cut = std::max(strongest_dropped_at_cut, kp.response);
+    }
+  }
+  EXPECT_EQ(finer_kept, 0);
+  EXPECT_GT(coarser, 0);
+  EXPECT_GT(cut_dropped, 0) << "the budget should cut within a level";
+  EXPECT_GE(weakest_kept_at_cut, strongest_dropped_at_cut);
+  // Output order: strongest first.
+  for (size_t k = 1; k < kept.size(); ++k) EXPECT_GE(kept[k - 1].response, kept[k].response);
+
+  // The same through ExtractSift, which describes only the kept keypoints.
+  FeatureExtractionOptions options;
+  options.max_features = budget;
+  options.first_octave = 0;
+  const ImageFeatures features = ExtractSift(image, options);
+  EXPECT_LE(features.keypoints.rows(), budget);
+  EXPECT_GE(features.keypoints.rows(), budget - 4);
+  EXPECT_EQ(features.descriptors.rows(), features.keypoints.rows());
+  // A budget above the detection keeps everything.
+  EXPECT_EQ(SelectKeypoints(detected, static_cast<int>(detected.size())).size(), detected.size());
+}
+
+TEST(Features, LargeImagesAreNotUpsampled) {
+  FeatureExtractionOptions options;  // first_octave -1, upsample_max_size 1600
+  EXPECT_EQ(EffectiveFirstOctave(768, 512, options), -1);    // the sample scene
+  EXPECT_EQ(EffectiveFirstOctave(1536, 1024, options), -1);  // the shared Strecha scenes
+  EXPECT_EQ(EffectiveFirstOctave(1920, 1440, options), 0);   // 3D Scanner App
+  EXPECT_EQ(EffectiveFirstOctave(1440, 1920, options), 0);   // Record3D, portrait
+  options.upsample_max_size = 0;
+  EXPECT_EQ(EffectiveFirstOctave(1920, 1440, options), -1);
+  options.first_octave = 1;
+  EXPECT_EQ(EffectiveFirstOctave(768, 512, options), 1);
 }
 
 // The InputError of extracting the features of the one image `name` (width x height) in `dir`, or
