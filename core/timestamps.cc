@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 namespace raytime {
@@ -70,12 +71,20 @@ TimestampJoin JoinByTimestamp(const std::map<std::string, double>& frame_times,
   return join;
 }
 
+namespace {
+std::string Short(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%g", value);
+  return buffer;
+}
+}  // namespace
+
 Warning UnjoinedFramesWarning(const TimestampJoin& join, const std::string& what,
                               const TimestampJoinOptions& options) {
   Warning warning;
   warning.code = "unjoined_frames";
   warning.message = std::to_string(join.left_out.size()) + " frame(s) have no pose in " + what +
-                    " within " + std::to_string(options.max_time_gap_s) +
+                    " within " + Short(options.max_time_gap_s) +
                     " s on both sides and are left out (" + std::to_string(join.num_before_start) +
                     " before its first pose, " + std::to_string(join.num_after_end) +
                     " after its last, " + std::to_string(join.num_in_gaps) + " in gaps)";
