@@ -103,7 +103,8 @@ class PriorStage : public StageWithOptions<PriorOptions> {
 
   std::string type() const override { return "prior"; }
   std::string description() const override {
-    return "Make the pose prior: perturbed ground truth, a pose file, or the ground truth";
+    return "Make the pose prior: perturbed ground truth, the capture's poses, a pose file, or the "
+           "ground truth";
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
