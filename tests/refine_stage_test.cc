@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "core/error.h"
+#include "core/formats/colmap_model.h"
 #include "core/hdf5_store.h"
 #include "evaluate/pose_errors.h"
 #include "pipelines/stage.h"
@@ -30,7 +31,7 @@ std::string Name(int i) {
   return name;
 }
 
-TwoScenes MakeTwoScenes(bool with_lonely_image) {
+TwoScenes MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) {
   SyntheticSceneOptions a_options;
   a_options.num_cameras = 5;
   SyntheticSceneOptions b_options;
@@ -54,6 +55,10 @@ TwoScenes MakeTwoScenes(bool with_lonely_image) {
     if (&scene == &b) pose.translation += Eigen::Vector3d(100, 0, 0);
     out.ground_truth.world_from_cam[Name(index)] = pose;
     Rigid3 prior = pose;
+    if (exact_prior_for_b && &scene == &b) {
+      out.prior.world_from_cam[Name(index)] = prior;
+      return;
+    }
     prior.rotation =
         (Eigen::AngleAxisd(M_PI / 180.0, Eigen::Vector3d::UnitY()) * prior.rotation).normalized();
     out.prior.world_from_cam[Name(index)] = prior;
@@ -78,7 +83,9 @@ TwoScenes MakeTwoScenes(bool with_lonely_image) {
 
 // Writes the scene's HDF5 inputs and runs the refine stage (preset plain, one thread; no trust
 // region: its thresholds are object-scale, these scenes are 16 m deep).
-nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* refined) {
+nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* refined,
+                         const std::string& options =
+                             "{preset: plain, num_threads: 1, trust_region: false}") {
   {
     Hdf5Writer writer(dir / "inputs.h5");
     writer.WriteImages(scene.images);
@@ -88,7 +95,7 @@ nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* re
     writer.Commit();
   }
   std::unique_ptr<Stage> stage = CreateStage("refine");
-  stage->Configure(YAML::Load("{preset: plain, num_threads: 1, trust_region: false}"), "test");
+  stage->Configure(YAML::Load(options), "test");
   StageContext context;
   context.stage_id = "refine";
   context.workdir = dir.path().string();
@@ -100,6 +107,25 @@ nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* re
   *refined = Hdf5Reader(context.output_path).ReadPoseSet("refined");
   return summary;
 }
+
+// Runs the export stage on the refine stage's output (COLMAP text model of "refined").
+nlohmann::json RunExport(const TempDir& dir) {
+  std::unique_ptr<Stage> stage = CreateStage("export");
+  stage->Configure(YAML::Load("{poses: [refined], formats: [colmap_text]}"), "test");
+  StageContext context;
+  context.stage_id = "export";
+  context.workdir = dir.path().string();
+  context.output_path = dir / "export.h5";
+  context.artifacts["images"] = dir / "inputs.h5";
+  context.artifacts["poses/refined"] = dir / "refine.h5";
+  return stage->Run(context);
+}
+
+// A trust region far below the correction of a 1°-off prior: the solve keeps the orientations
+// (the orientation prior holds this common 1° rotation, a gauge) but moves the centres ~0.16 m.
+const char* kTinyTrustRegion =
+    "{preset: plain, num_threads: 1, trust_region: true, trust_region_rotation_deg: 10, "
+    "trust_region_translation_m: 0.05}";
 
 const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::string& code) {
   for (const auto& warning : summary["warnings"]) {
@@ -154,6 +180,42 @@ TEST(RefineStageTest, NoVerifiedPairIsAnErrorNotACopyOfThePrior) {
     EXPECT_NE(std::string(e.what()).find("nothing to refine"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "refine.h5"));
+}
+
+TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
+  TempDir dir("refine_stage");
+  // Scene A's prior is 1° off (its solve leaves the tiny trust region and returns the prior);
+  // scene B's prior is exact (its solve stays inside and is refined).
+  const TwoScenes scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
+  PoseSet refined;
+  const nlohmann::json summary = RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  const nlohmann::json* returned = FindWarning(summary, "returned_prior");
+  ASSERT_NE(returned, nullptr) << summary["warnings"].dump();
+  EXPECT_EQ((*returned)["images"].size(), 5u);
+  const nlohmann::json exported = RunExport(dir);
+  const nlohmann::json* left_out = FindWarning(exported, "unrefined_not_exported");
+  ASSERT_NE(left_out, nullptr) << exported.dump();
+  EXPECT_EQ((*left_out)["images"], (*returned)["images"]);
+  const ColmapModel model = ReadColmapModel(dir / "refined");
+  ASSERT_EQ(model.images.size(), 3u);
+  for (const auto& [id, image] : model.images) {
+    EXPECT_GE(image.name, "0005.jpg") << "a prior pose exported as refined";
+  }
+}
+
+TEST(RefineStageTest, ExportOfARefinedSetWithNothingRefinedFails) {
+  TempDir dir("refine_stage");
+  const TwoScenes scene = MakeTwoScenes(false);
+  PoseSet refined;
+  RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  try {
+    RunExport(dir);
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' was refined"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "refined"));
 }
 
 }  // namespace
