@@ -60,7 +60,8 @@ struct PriorOptions {
 
 // The dataset formats that bring the capture app's poses (pose set "capture").
 const char* kFormatsWithCapturePoses =
-    "record3d, polycam, stray, scanner3d, nerfcapture, scannetpp_iphone, lamar";
+    "record3d, polycam, stray, scanner3d, nerfcapture, scannetpp_iphone, lamar, and "
+    "mobilebrick with PoRF's cameras_arkit.npz";
 
 class PriorStage : public StageWithOptions<PriorOptions> {
  public:

@@ -1,6 +1,7 @@
 #include "tests/capture_fixtures.h"
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -8,6 +9,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 #include <stdexcept>
+#include <utility>
+#include <vector>
 
 #include "core/formats/strecha.h"
 #include "core/types.h"
@@ -231,10 +234,65 @@ void WriteNerfCapture(const Capture& capture, const std::string& root) {
   WriteText(root + "/transforms.json", top.dump(2));
 }
 
-void WriteMobileBrick(const Capture& capture, const std::string& root) {
+// A ZIP archive of stored (uncompressed) entries, as np.savez writes .npz files.
+std::string Crc32Zip(const std::vector<std::pair<std::string, std::string>>& entries) {
+  const auto crc32 = [](const std::string& data) {
+    uint32_t crc = 0xFFFFFFFFu;
+    for (unsigned char byte : data) {
+      crc ^= byte;
+      for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+    }
+    return ~crc;
+  };
+  const auto le = [](uint32_t value, int n) {
+    std::string out;
+    for (int i = 0; i < n; ++i) out += static_cast<char>((value >> (8 * i)) & 0xFF);
+    return out;
+  };
+  std::string zip, directory;
+  for (const auto& [name, data] : entries) {
+    const uint32_t offset = static_cast<uint32_t>(zip.size());
+    const uint32_t crc = crc32(data), size = static_cast<uint32_t>(data.size());
+    zip += le(0x04034b50, 4) + le(20, 2) + le(0, 2) + le(0, 2) + le(0, 2) + le(0, 2) + le(crc, 4) +
+           le(size, 4) + le(size, 4) + le(static_cast<uint32_t>(name.size()), 2) + le(0, 2) + name +
+           data;
+    directory += le(0x02014b50, 4) + le(20, 2) + le(20, 2) + le(0, 2) + le(0, 2) + le(0, 2) +
+                 le(0, 2) + le(crc, 4) + le(size, 4) + le(size, 4) +
+                 le(static_cast<uint32_t>(name.size()), 2) + le(0, 2) + le(0, 2) + le(0, 2) +
+                 le(0, 2) + le(0, 4) + le(offset, 4) + name;
+  }
+  const uint32_t directory_offset = static_cast<uint32_t>(zip.size());
+  zip += directory + le(0x06054b50, 4) + le(0, 2) + le(0, 2) +
+         le(static_cast<uint32_t>(entries.size()), 2) +
+         le(static_cast<uint32_t>(entries.size()), 2) +
+         le(static_cast<uint32_t>(directory.size()), 4) + le(directory_offset, 4) + le(0, 2);
+  return zip;
+}
+
+// A 4x4 float64 array in .npy format 1.0 (C order).
+std::string Npy4x4(const Eigen::Matrix4d& m) {
+  std::string header = "{'descr': '<f8', 'fortran_order': False, 'shape': (4, 4), }";
+  while ((10 + header.size() + 1) % 64 != 0) header += ' ';
+  header += '\n';
+  std::string out = std::string("\x93NUMPY\x01\x00", 8);
+  out += static_cast<char>(header.size() & 0xFF);
+  out += static_cast<char>(header.size() >> 8);
+  out += header;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      const double value = m(r, c);
+      out.append(reinterpret_cast<const char*>(&value), 8);
+    }
+  }
+  return out;
+}
+
+void WriteMobileBrick(const Capture& capture, const std::string& root,
+                      const Rigid3* arkit_from_world) {
+  std::vector<std::pair<std::string, std::string>> npz;
   for (size_t i = 0; i < capture.frames.size(); ++i) {
     const Frame& frame = capture.frames[i];
-    char stem[16];
+    char stem[32];
     std::snprintf(stem, sizeof(stem), "%06zu", i);
     Copy(frame.image, root + "/image/" + stem + ".jpg");
     std::string k, pose;
@@ -249,6 +307,21 @@ void WriteMobileBrick(const Capture& capture, const std::string& root) {
     pose += "0 0 0 1\n";
     WriteText(root + "/intrinsic/" + stem + ".txt", k);
     WriteText(root + "/pose/" + stem + ".txt", pose);
+    if (arkit_from_world) {
+      const Rigid3 arkit = *arkit_from_world * frame.world_from_cam;
+      Eigen::Matrix4d world_from_cam = Eigen::Matrix4d::Identity();
+      world_from_cam.topLeftCorner<3, 3>() = arkit.RotationMatrix();
+      world_from_cam.topRightCorner<3, 1>() = arkit.translation;
+      Eigen::Matrix4d K4 = Eigen::Matrix4d::Identity();
+      K4.topLeftCorner<3, 3>() = frame.K;
+      npz.push_back({"scale_mat_" + std::to_string(i) + ".npy",
+                     Npy4x4(Eigen::Vector4d(2, 2, 2, 1).asDiagonal())});
+      npz.push_back(
+          {"world_mat_" + std::to_string(i) + ".npy", Npy4x4(K4 * world_from_cam.inverse())});
+    }
+  }
+  if (arkit_from_world) {
+    std::ofstream(root + "/cameras_arkit.npz", std::ios::binary) << Crc32Zip(npz);
   }
 }
 

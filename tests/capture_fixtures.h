@@ -56,8 +56,10 @@ std::string Scanner3dName(int index);
 void WriteNerfCapture(const Capture& capture, const std::string& root);
 
 // MobileBrick: ROOT/image/NNNNNN.jpg, intrinsic/NNNNNN.txt, pose/NNNNNN.txt (the capture's poses
-// written as the ground truth).
-void WriteMobileBrick(const Capture& capture, const std::string& root);
+// written as the ground truth) and, when `arkit_from_world` is given, PoRF's cameras_arkit.npz
+// (as np.savez writes it) with world_mat_<i> = K inv(arkit_from_world * pose_i) and a scale_mat.
+void WriteMobileBrick(const Capture& capture, const std::string& root,
+                      const Rigid3* arkit_from_world = nullptr);
 
 // ScanNet++ iPhone: ROOT/iphone/rgb/frame_NNNNNN.jpg and ROOT/iphone/pose_intrinsic_imu.json with
 // the capture's poses as `aligned_pose` and `arkit_from_world` * those poses as `pose` (ARKit's own

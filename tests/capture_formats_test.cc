@@ -205,6 +205,20 @@ TEST(PaperDatasets, MobileBrickFixtureReadsBackAsGroundTruth) {
   ExpectGroundTruthRead(capture, dataset, names);
   EXPECT_FALSE(dataset.capture.has_value());
   EXPECT_EQ(ReadPoseFile("mobilebrick", dir.path().string()).size(), 11u);
+
+  // With PoRF's cameras_arkit.npz the ARKit poses are the capture poses.
+  const Rigid3 arkit_from_world(
+      Eigen::Quaterniond(Eigen::AngleAxisd(1.0, Eigen::Vector3d(0, 1, 1).normalized())),
+      Eigen::Vector3d(0.5, -1, 2));
+  TempDir with_arkit("mobilebrick_arkit");
+  fixtures::WriteMobileBrick(capture, with_arkit.path().string(), &arkit_from_world);
+  const Dataset arkit = Load("mobilebrick", with_arkit.path().string());
+  ExpectGroundTruthRead(capture, arkit, names);
+  ASSERT_TRUE(arkit.capture.has_value());
+  for (int i = 0; i < 11; ++i) {
+    ExpectPoseNear(arkit.capture->world_from_cam.at(names[i]),
+                   arkit_from_world * capture.frames[i].world_from_cam, 1e-9, names[i]);
+  }
 }
 
 TEST(PaperDatasets, ScanNetPPFixtureReadsArkitPosesAndAlignedGroundTruth) {

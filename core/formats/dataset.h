@@ -104,7 +104,8 @@ extern const std::vector<std::string> kPoseFileFormats;
 // "polycam" (export folder), "stray" (export folder or odometry.csv, names frame_NNNNNN.jpg as
 // the dataset's video frames), "scanner3d" (export folder), "nerfcapture" (folder or
 // transforms.json); the paper's datasets (their capture poses where they have them, else their
-// ground truth): "mobilebrick" (sequence folder: ground truth), "scannetpp_iphone" (scene
+// ground truth): "mobilebrick" (sequence folder: the ARKit poses of cameras_arkit.npz, else the
+// ground truth), "scannetpp_iphone" (scene
 // folder: the ARKit poses), "arkitscenes" (video folder: ground truth, frames joined by time),
 // "lamar" (session folder: the device's tracking).
 // `images`, when given, supplies the names for TUM rows (in name order). Names are not joined here:

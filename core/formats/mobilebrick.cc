@@ -1,13 +1,41 @@
 #include "core/formats/mobilebrick.h"
 
+#include <Eigen/QR>
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "core/error.h"
+#include "core/formats/npz.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
+
+namespace {
+
+// The camera of an IDR-style projection P = K [R | t] (world to image, 3x4): R from the RQ
+// decomposition of P's left 3x3 with K's diagonal positive, the centre -M^-1 p4.
+Rigid3 PoseOfProjection(const Eigen::Matrix<double, 3, 4>& P, const std::string& path,
+                        const std::string& where) {
+  const Eigen::Matrix3d M = P.leftCols<3>();
+  if (!(std::abs(M.determinant()) > 0)) ThrowInput(path, 0, where + ": singular projection");
+  // RQ through QR of the row-reversed transpose: M = K R.
+  const Eigen::Matrix3d flip = Eigen::Matrix3d::Identity().rowwise().reverse();
+  const Eigen::HouseholderQR<Eigen::Matrix3d> qr((flip * M).transpose());
+  const Eigen::Matrix3d q = qr.householderQ();
+  const Eigen::Matrix3d r = qr.matrixQR().triangularView<Eigen::Upper>();
+  Eigen::Matrix3d K = flip * r.transpose() * flip;
+  Eigen::Matrix3d R = flip * q.transpose();
+  const Eigen::Vector3d signs(K(0, 0) < 0 ? -1 : 1, K(1, 1) < 0 ? -1 : 1, K(2, 2) < 0 ? -1 : 1);
+  K = K * signs.asDiagonal();
+  R = signs.asDiagonal() * R;
+  if (R.determinant() < 0) R = -R;  // P is projective: -P is the same camera
+  const Eigen::Vector3d centre = -M.inverse() * P.col(3);
+  return PoseFromCameraToWorld(R.transpose(), centre, path, where);
+}
+
+}  // namespace
 
 CaptureRecording ReadMobileBrick(const std::string& path) {
   const fs::path root(path);
@@ -58,6 +86,28 @@ CaptureRecording ReadMobileBrick(const std::string& path) {
     frame.ground_truth = PoseFromCameraToWorld(pose.topLeftCorner<3, 3>(),
                                                pose.topRightCorner<3, 1>(), pose_path, "");
     recording.frames.push_back(std::move(frame));
+  }
+  // The ARKit prior as PoRF distributes it (cameras_arkit.npz beside the sequence's files):
+  // world_mat_<i> = K [R | t] of image i in name order; scale_mat_<i> (a normalization) ignored.
+  const fs::path arkit = root / "cameras_arkit.npz";
+  if (fs::exists(arkit)) {
+    recording.files.push_back(arkit.string());
+    const auto arrays = ReadNpz(arkit.string());
+    for (size_t i = 0; i < recording.frames.size(); ++i) {
+      const std::string key = "world_mat_" + std::to_string(i);
+      const auto it = arrays.find(key);
+      if (it == arrays.end()) {
+        ThrowInput(arkit.string(), 0,
+                   "no " + key + " for image " + recording.frames[i].name +
+                       " (one world_mat_<i> "
+                       "per image of image/, in name order, expected)");
+      }
+      const Eigen::MatrixXd& m = it->second;
+      if (!((m.rows() == 4 || m.rows() == 3) && m.cols() == 4)) {
+        ThrowInput(arkit.string(), 0, key + " must be 3x4 or 4x4");
+      }
+      recording.frames[i].capture = PoseOfProjection(m.topRows<3>(), arkit.string(), key);
+    }
   }
   return recording;
 }
