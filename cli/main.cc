@@ -224,11 +224,11 @@ int Main(int argc, char** argv) {
   CLI::Option_group* files = evaluate->add_option_group(
       "pose files", "Score two pose files instead of running the stage (needs --est and --gt)");
   CLI::Option* est_option = files->add_option("--est", est, "Estimated poses (file or folder)");
-  files->add_option("--est-format", est_format, "colmap, nerfstudio, tum, strecha or hdf5")
+  files->add_option("--est-format", est_format, "A pose file format (prior.format) or hdf5")
       ->capture_default_str();
   files->add_option("--est-set", est_set, "Pose set name in an HDF5 file");
   CLI::Option* gt_option = files->add_option("--gt", gt, "Ground-truth poses (file or folder)");
-  files->add_option("--gt-format", gt_format, "colmap, nerfstudio, tum, strecha or hdf5")
+  files->add_option("--gt-format", gt_format, "A pose file format (prior.format) or hdf5")
       ->capture_default_str();
   files->add_option("--gt-set", gt_set, "Pose set name in an HDF5 file");
   files->add_option("--align", align, "sim3, se3 or none")->capture_default_str();

@@ -20,7 +20,7 @@ namespace raytime {
 nlohmann::json VideoFramesSummary::ToJson() const { return *this; }
 
 ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string& folder,
-                            VideoFramesSummary* summary) {
+                            VideoFramesSummary* summary, std::vector<DecodedFrame>* frames) {
   ValidateOptions(options, "video");
   const auto start = std::chrono::steady_clock::now();
   if (!fs::is_regular_file(options.video)) ThrowInput(options.video, 0, "video file not found");
@@ -46,14 +46,21 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
     }
   }
 
+  const double fps = capture.get(cv::CAP_PROP_FPS);
   ImageSet images;
   images.image_root = folder;
+  std::vector<DecodedFrame> kept;
+  bool container_times = true;  // false once a presentation time fails to increase
+  double previous_time = -1.0;
   VideoFramesSummary local;
   WriteDirectoryAtomically(folder, [&](const std::string& dir) {
     fs::create_directories(dir);
     cv::Mat frame;
     for (int index = 0; capture.read(frame); ++index) {
       ++local.num_frames_read;
+      const double time_s = capture.get(cv::CAP_PROP_POS_MSEC) / 1000.0;
+      if (!(time_s > previous_time)) container_times = false;
+      previous_time = time_s;
       const bool keep = by_count ? wanted.count(index) > 0 : index % options.stride == 0;
       if (!keep) continue;
       if (images.images.empty()) {
@@ -74,6 +81,7 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
         throw std::runtime_error("cannot write " + (fs::path(dir) / name).string());
       }
       images.images.push_back({name, frame.cols, frame.rows, 0});
+      kept.push_back({index, time_s});
       ++local.num_frames_written;
       if (local.num_frames_written % 50 == 0) {
         spdlog::info("video: {} frames kept of {} read", local.num_frames_written,
@@ -82,6 +90,18 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
     }
   });
   if (images.images.empty()) ThrowInput(options.video, 0, "no frames could be decoded");
+  if (frames) {
+    if (!container_times) {
+      if (!(fps > 0)) {
+        ThrowInput(options.video, 0,
+                   "the video has neither increasing frame timestamps nor a frame rate");
+      }
+      spdlog::warn("video: {} has no increasing frame timestamps; using frame number / {} fps",
+                   options.video, fps);
+      for (DecodedFrame& frame : kept) frame.time_s = frame.number / fps;
+    }
+    *frames = std::move(kept);
+  }
   local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   spdlog::info("video: kept {} of {} frames of {} in {}", local.num_frames_written,
                local.num_frames_read, options.video, folder);

@@ -5,8 +5,10 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "core/options.h"
+#include "core/timestamps.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -46,8 +48,11 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(VideoFramesSummary, num_frames_read, num_fram
 // Decodes `options.video` and writes the kept frames to `folder`/frame_NNNNNN.jpg (NNNNNN = frame
 // number in the video, so name order is time order), replacing the folder atomically. Returns
 // the image list (image_root = folder, one shared camera). A video that cannot be opened or
-// yields no frames is an InputError naming the file.
+// yields no frames is an InputError naming the file. `frames`, when given, receives each kept
+// frame's number and presentation time (the container's timestamps; frame number / frame rate
+// where those do not increase), in the order of the image list.
 ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string& folder,
-                            VideoFramesSummary* summary);
+                            VideoFramesSummary* summary,
+                            std::vector<DecodedFrame>* frames = nullptr);
 
 }  // namespace raytime

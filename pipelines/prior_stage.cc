@@ -1,7 +1,8 @@
 // The `prior` stage: the pose prior the refiner starts from. Either the dataset's ground truth
-// perturbed by the paper's protocol (§4.8 "Basin of convergence"), a pose file (a phone capture's
-// ARKit/ARCore poses, a COLMAP model, ...), or the ground truth itself; or the prior-free
-// bootstrap's poses, which can also repair a given coarse prior (§4.8 "Basin of convergence").
+// perturbed by the paper's protocol (§4.8 "Basin of convergence"), the capture app's own poses
+// that came with the dataset (ARKit/ARCore: pose set "capture"), a pose file (a COLMAP model, a
+// capture app's files, ...), or the ground truth itself; or the prior-free bootstrap's poses,
+// which can also repair a given coarse prior (§4.8 "Basin of convergence").
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
@@ -17,11 +18,12 @@ namespace raytime {
 namespace {
 
 struct PriorOptions {
-  // "perturb": ground truth perturbed with the options below; "file": read `path` in `format`;
+  // "perturb": ground truth perturbed with the options below; "capture": the poses the capture
+  // app recorded, read with the dataset (pose set "capture"); "file": read `path` in `format`;
   // "ground_truth": the ground truth unchanged (a 0° control that skips the perturbation);
   // "bootstrap": the pose set "bootstrap" of the bootstrap stage (prior-free, SPEC §4).
   std::string source = "perturb";
-  std::string format = "colmap";  // for source "file": colmap, nerfstudio, tum, strecha
+  std::string format = "colmap";  // for source "file": one of kPoseFileFormats
   std::string path;               // for source "file"
   PerturbationOptions perturbation;
   // Repair of the prior above with the bootstrap's poses (paper §4.8): "none"; "rotations"
@@ -35,9 +37,9 @@ struct PriorOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("source", source,
-      "Prior: ground truth perturbed (below), a pose file, the ground truth, or the bootstrap's "
-      "poses",
-      OneOf({"perturb", "file", "ground_truth", "bootstrap"}));
+      "Prior: ground truth perturbed (below), the capture app's poses that came with the dataset, "
+      "a pose file, the ground truth, or the bootstrap's poses",
+      OneOf({"perturb", "capture", "file", "ground_truth", "bootstrap"}));
     v("format", format, "Pose file format for source 'file'", OneOf(kPoseFileFormats));
     v("path", path, "Pose file or folder for source 'file'");
     v("repair", repair,
@@ -56,21 +58,33 @@ struct PriorOptions {
   }
 };
 
+// The dataset formats that bring the capture app's poses (pose set "capture").
+const char* kFormatsWithCapturePoses =
+    "record3d, polycam, stray, scanner3d, nerfcapture, scannetpp_iphone, lamar, and "
+    "mobilebrick with PoRF's cameras_arkit.npz";
+
 class PriorStage : public StageWithOptions<PriorOptions> {
  public:
+  // Where the prior's poses came from, for messages.
+  std::string SourceName() const {
+    if (options_.source == "file") return options_.path;
+    if (options_.source == "capture") return "the capture's poses";
+    return options_.source;
+  }
   // Poses of images the dataset does not have (a capture app's poses for frames that were not
   // extracted, say) are dropped: missing_frames, or an error when strict.
   void DropPosesWithoutImages(const ImageSet& images, PoseSet* prior, Warnings* warnings) const {
     const NameJoin join = JoinNames(Names(*prior), Names(images));
     if (join.only_left.empty()) return;
     if (options_.strict) {
-      ThrowInput(options_.path, 0,
-                 "pose names do not match the dataset's images (prior.strict): " +
-                     join.Describe(options_.path, "the dataset"));
+      const std::string message = "pose names do not match the dataset's images (prior.strict): " +
+                                  join.Describe(SourceName(), "the dataset");
+      if (options_.source == "file") ThrowInput(options_.path, 0, message);
+      throw InputError("prior: " + message);
     }
     for (const auto& name : join.only_left) prior->world_from_cam.erase(name);
     warnings->push_back({"missing_frames",
-                         std::to_string(join.only_left.size()) + " pose(s) in " + options_.path +
+                         std::to_string(join.only_left.size()) + " pose(s) in " + SourceName() +
                              " name no image of the dataset and are left out",
                          join.only_left,
                          {},
@@ -90,13 +104,15 @@ class PriorStage : public StageWithOptions<PriorOptions> {
 
   std::string type() const override { return "prior"; }
   std::string description() const override {
-    return "Make the pose prior: perturbed ground truth, a pose file, or the ground truth";
+    return "Make the pose prior: perturbed ground truth, the capture's poses, a pose file, or the "
+           "ground truth";
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
     if (options_.source == "perturb" || options_.source == "ground_truth") {
       inputs.push_back(PoseArtifact("ground_truth"));
     }
+    if (options_.source == "capture") inputs.push_back(PoseArtifact("capture"));
     if (options_.source == "bootstrap" || options_.repair != "none") {
       inputs.push_back(PoseArtifact("bootstrap"));
     }
@@ -124,9 +140,25 @@ class PriorStage : public StageWithOptions<PriorOptions> {
     if (options_.source == "file") {
       prior = ReadPoseFile(options_.format, options_.path, &images);
       DropPosesWithoutImages(images, &prior, &warnings);
+    } else if (options_.source == "capture") {
+      if (!context.artifacts.count(PoseArtifact("capture"))) {
+        throw InputError(
+            "prior.source 'capture': this dataset has no capture poses (the dataset formats "
+            "that bring the capture app's poses are " +
+            std::string(kFormatsWithCapturePoses) +
+            "); use prior.source 'file' with the poses' file, or 'perturb' on ground truth");
+      }
+      prior = Hdf5Reader(context.Require(PoseArtifact("capture"))).ReadPoseSet("capture");
+      DropPosesWithoutImages(images, &prior, &warnings);
     } else if (options_.source == "bootstrap") {
       prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
     } else {
+      if (!context.artifacts.count(PoseArtifact("ground_truth"))) {
+        throw InputError("prior.source '" + options_.source + "': " + options_.source +
+                         " needs ground truth; this dataset has none — use source: capture "
+                         "(the capture app's poses, formats " +
+                         kFormatsWithCapturePoses + ") or file");
+      }
       const PoseSet ground_truth =
           Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
       if (options_.source == "ground_truth") {

@@ -4,8 +4,18 @@
 #include <filesystem>
 
 #include "core/error.h"
+#include "core/formats/arkitscenes.h"
+#include "core/formats/capture.h"
 #include "core/formats/colmap_model.h"
+#include "core/formats/lamar.h"
+#include "core/formats/mobilebrick.h"
+#include "core/formats/nerfcapture.h"
 #include "core/formats/nerfstudio.h"
+#include "core/formats/polycam.h"
+#include "core/formats/record3d.h"
+#include "core/formats/scanner3d.h"
+#include "core/formats/scannetpp.h"
+#include "core/formats/stray.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
 #include "core/intrinsics.h"
@@ -15,7 +25,13 @@ namespace fs = std::filesystem;
 
 namespace raytime {
 
-const std::vector<std::string> kPoseFileFormats = {"colmap", "nerfstudio", "tum", "strecha"};
+const std::vector<std::string> kDatasetFormats = {
+    "strecha",   "colmap",      "nerfstudio",  "record3d",         "polycam",     "stray",
+    "scanner3d", "nerfcapture", "mobilebrick", "scannetpp_iphone", "arkitscenes", "lamar"};
+const std::vector<std::string> kPoseFileFormats = {
+    "colmap",           "nerfstudio",  "tum",       "strecha",     "record3d",
+    "polycam",          "stray",       "scanner3d", "nerfcapture", "mobilebrick",
+    "scannetpp_iphone", "arkitscenes", "lamar"};
 
 namespace {
 
@@ -55,13 +71,18 @@ void AddFilesBelow(const std::string& dir, std::vector<std::string>* files) {
   }
 }
 
+// The transforms file of a nerfcapture export given as its folder or the file itself.
+std::string TransformsPath(const std::string& path, const std::string& file) {
+  return fs::is_directory(path) ? (fs::path(path) / file).string() : path;
+}
+
 }  // namespace
 
 Dataset LoadDataset(const DatasetOptions& options) {
   if (options.root.empty()) throw InputError("dataset.root is not set");
   if (!fs::is_directory(options.root)) ThrowInput(options.root, 0, "dataset root is not a folder");
   Dataset dataset;
-  PoseSet poses;
+  PoseSet poses;  // ground truth of the strecha, colmap and nerfstudio layouts
   if (options.format == "strecha") {
     ReadStrechaScene(options.root, &dataset.images, &poses, &dataset.warnings);
     AddFilesBelow((fs::path(options.root) / "gt_dense_cameras").string(), &dataset.files);
@@ -74,9 +95,31 @@ Dataset LoadDataset(const DatasetOptions& options) {
     const std::string path = (fs::path(options.root) / options.transforms).string();
     ReadTransformsJson(path, &dataset.images, &poses);
     dataset.files.push_back(path);
+  } else if (options.format == "record3d") {
+    dataset = DatasetFromRecording(ReadRecord3d(options.root));
+  } else if (options.format == "polycam") {
+    dataset = DatasetFromRecording(ReadPolycam(options.root));
+  } else if (options.format == "scanner3d") {
+    dataset = DatasetFromRecording(ReadScanner3d(options.root));
+  } else if (options.format == "nerfcapture") {
+    dataset =
+        DatasetFromRecording(ReadNerfCapture(TransformsPath(options.root, options.transforms)));
+  } else if (options.format == "mobilebrick") {
+    dataset = DatasetFromRecording(ReadMobileBrick(options.root));
+  } else if (options.format == "scannetpp_iphone") {
+    dataset = DatasetFromRecording(ReadScanNetPPIphone(options.root));
+  } else if (options.format == "arkitscenes") {
+    dataset = DatasetFromRecording(ReadArkitScenes(options.root, options.timestamps));
+  } else if (options.format == "lamar") {
+    dataset = DatasetFromRecording(ReadLamar(options.root, options.timestamps));
+  } else if (options.format == "stray") {
+    // The frames are decoded by the caller (AttachVideoFrames); nothing more to check here.
+    dataset = ReadStray(options.root);
+    std::sort(dataset.files.begin(), dataset.files.end());
+    return dataset;
   } else {
-    throw InputError(UnknownKeyMessage("dataset.format", options.format,
-                                       {"strecha", "colmap", "nerfstudio"}, "format"));
+    throw InputError(
+        UnknownKeyMessage("dataset.format", options.format, kDatasetFormats, "format"));
   }
   // Per-view cameras that differ only by numerical noise (DTU's K) are one camera, for every
   // format alike.
@@ -102,6 +145,24 @@ PoseSet ReadPoseFile(const std::string& format, const std::string& path, const I
     poses = ReadTumTrajectory(path, images ? Names(*images) : std::vector<std::string>{});
   } else if (format == "strecha") {
     ReadStrechaScene(path, &unused, &poses);
+  } else if (format == "record3d") {
+    poses = PosesOfRecording(ReadRecord3d(path));
+  } else if (format == "polycam") {
+    poses = PosesOfRecording(ReadPolycam(path));
+  } else if (format == "scanner3d") {
+    poses = PosesOfRecording(ReadScanner3d(path));
+  } else if (format == "nerfcapture") {
+    poses = PosesOfRecording(ReadNerfCapture(TransformsPath(path, "transforms.json")));
+  } else if (format == "stray") {
+    poses = ReadStrayPoses(path);
+  } else if (format == "mobilebrick") {
+    poses = PosesOfRecording(ReadMobileBrick(path));
+  } else if (format == "scannetpp_iphone") {
+    poses = PosesOfRecording(ReadScanNetPPIphone(path));
+  } else if (format == "arkitscenes") {
+    poses = PosesOfRecording(ReadArkitScenes(path, TimestampJoinOptions()));
+  } else if (format == "lamar") {
+    poses = PosesOfRecording(ReadLamar(path, TimestampJoinOptions()));
   } else {
     throw InputError(UnknownKeyMessage("pose files", format, kPoseFileFormats, "format"));
   }
