@@ -3,7 +3,9 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
+#include <cctype>
 #include <cmath>
+#include <numeric>
 #include <set>
 #include <string>
 
@@ -135,8 +137,42 @@ std::vector<double> SceneDepths(const std::vector<PairSelectionView>& views, dou
   return depths;
 }
 
+bool NaturalNameLess(const std::string& a, const std::string& b) {
+  const auto digit = [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; };
+  size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (digit(a[i]) && digit(b[j])) {
+      size_t i_end = i, j_end = j;
+      while (i_end < a.size() && digit(a[i_end])) ++i_end;
+      while (j_end < b.size() && digit(b[j_end])) ++j_end;
+      // Compare the runs as numbers without overflow: strip leading zeros, then length, then text.
+      size_t i_lead = i, j_lead = j;
+      while (i_lead + 1 < i_end && a[i_lead] == '0') ++i_lead;
+      while (j_lead + 1 < j_end && b[j_lead] == '0') ++j_lead;
+      const std::string_view x(a.data() + i_lead, i_end - i_lead);
+      const std::string_view y(b.data() + j_lead, j_end - j_lead);
+      if (x.size() != y.size()) return x.size() < y.size();
+      if (x != y) return x < y;
+      i = i_end;
+      j = j_end;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  if ((a.size() - i) != (b.size() - j)) return a.size() - i < b.size() - j;
+  return a < b;
+}
+
 std::vector<PairSelectionView> PairSelectionViews(const ImageSet& images, const PoseSet& poses) {
   std::vector<PairSelectionView> views(images.images.size());
+  std::vector<int> order(images.images.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return NaturalNameLess(images.images[a].name, images.images[b].name);
+  });
+  for (size_t s = 0; s < order.size(); ++s) views[order[s]].sequence = static_cast<int>(s);
   for (size_t i = 0; i < images.images.size(); ++i) {
     const ImageInfo& info = images.images[i];
     const CameraIntrinsics& camera = images.cameras.at(info.camera_index);
@@ -208,8 +244,14 @@ std::vector<std::pair<int, int>> SelectPriorPairs(const std::vector<PairSelectio
     }
   }
   out.num_overlap_pairs = static_cast<int64_t>(chosen.size());
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j <= std::min(n - 1, i + options.prior_window); ++j) {
+  std::vector<int> by_sequence(n);
+  std::iota(by_sequence.begin(), by_sequence.end(), 0);
+  std::stable_sort(by_sequence.begin(), by_sequence.end(),
+                   [&](int a, int b) { return views[a].sequence < views[b].sequence; });
+  for (int s = 0; s < n; ++s) {
+    for (int t = s + 1; t <= std::min(n - 1, s + options.prior_window); ++t) {
+      const int i = std::min(by_sequence[s], by_sequence[t]);
+      const int j = std::max(by_sequence[s], by_sequence[t]);
       if (chosen.insert({i, j}).second) ++out.num_window_pairs;
     }
   }

@@ -43,7 +43,14 @@ struct PairSelectionView {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // camera centre in the world
   double fx = 0, fy = 0, cx = 0, cy = 0;             // pixels
   int width = 0, height = 0;                         // pixels
+  // Position in capture order (the window's order): frame names in natural order, so a video's
+  // "2.jpg" comes before "10.jpg" (Record3D names frames 0.jpg ... N.jpg without padding).
+  int sequence = 0;
 };
+
+// Natural name order: runs of digits compare as numbers ("frame2" < "frame10"), the rest as text;
+// equal numbers with different padding fall back to plain text order.
+bool NaturalNameLess(const std::string& a, const std::string& b);
 
 // Options of `matches` with `pairs: prior` (YAML keys = field names, flat in the matches stage).
 struct PriorPairOptions {
@@ -51,7 +58,7 @@ struct PriorPairOptions {
   // image may end up in more pairs. 10 gives every frame of a video or an orbit a few partners on
   // either side beyond its immediate neighbours (COLMAP's spatial matcher keeps 50 by distance).
   int prior_neighbors = 10;
-  // Also pair each image with the next prior_window images in the image list's order (name
+  // Also pair each image with the next prior_window images in capture order (natural name
   // order: video frames), whatever their poses; 0 = none. Keeps consecutive frames matched where
   // the prior is wrong, and pairs images that have no prior pose.
   int prior_window = 0;
@@ -74,7 +81,7 @@ struct PriorPairOptions {
       "pairs: prior: partners per image, the best by view overlap under the prior (SPEC §5)",
       Positive());
     v("prior_window", prior_window,
-      "pairs: prior: also pair each image with the next N in name order (video); 0 = none",
+      "pairs: prior: also pair each image with the next N in natural name order (video); 0 = none",
       NonNegative());
     v("prior_max_angle_deg", prior_max_angle_deg,
       "pairs: prior: largest viewpoint change of a pair (optical axes, rays to a point), degrees",

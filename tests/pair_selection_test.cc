@@ -4,9 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <set>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -175,6 +177,42 @@ TEST(PairSelection, WindowIsJoinedInNameOrder) {
   EXPECT_EQ(pairs, Pairs(expected.begin(), expected.end()));
   EXPECT_EQ(summary.num_overlap_pairs, n);
   EXPECT_EQ(summary.num_window_pairs, static_cast<int64_t>(expected.size()) - n);
+}
+
+TEST(PairSelection, NaturalNameOrderComparesDigitRunsAsNumbers) {
+  EXPECT_TRUE(NaturalNameLess("2.jpg", "10.jpg"));
+  EXPECT_FALSE(NaturalNameLess("10.jpg", "2.jpg"));
+  EXPECT_TRUE(NaturalNameLess("frame_9.png", "frame_10.png"));
+  EXPECT_TRUE(NaturalNameLess("a99999999999999999999999.jpg", "a100000000000000000000000.jpg"));
+  EXPECT_TRUE(NaturalNameLess("b1.jpg", "c0.jpg"));
+  EXPECT_FALSE(NaturalNameLess("3.jpg", "3.jpg"));
+  // Same number, other padding: a strict order all the same (text order).
+  EXPECT_NE(NaturalNameLess("01.jpg", "1.jpg"), NaturalNameLess("1.jpg", "01.jpg"));
+}
+
+TEST(PairSelection, WindowFollowsCaptureOrderOfUnpaddedFrameNames) {
+  // Record3D names frames 0.jpg ... N.jpg: the image list (sorted as text) holds 0, 1, 10, 11,
+  // 2, ...; the window must pair 1 with 2, never 1 with 10.
+  ImageSet images;
+  images.cameras.resize(1);
+  const int n = 12;
+  std::vector<std::string> names;
+  for (int i = 0; i < n; ++i) names.push_back(std::to_string(i) + ".jpg");
+  std::sort(names.begin(), names.end());
+  for (const auto& name : names) images.images.push_back({name, 0, 0, 0});
+  const std::vector<PairSelectionView> views = PairSelectionViews(images, PoseSet());
+  PriorPairOptions options;
+  options.prior_window = 1;
+  PairSelectionSummary summary;
+  const Pairs pairs = SelectPriorPairs(views, options, &summary);
+  std::set<std::pair<std::string, std::string>> named;
+  for (const auto& [i, j] : pairs) named.insert({names[i], names[j]});
+  std::set<std::pair<std::string, std::string>> expected;
+  for (int k = 0; k + 1 < n; ++k) {
+    std::string a = std::to_string(k) + ".jpg", b = std::to_string(k + 1) + ".jpg";
+    expected.insert({std::min(a, b), std::max(a, b)});
+  }
+  EXPECT_EQ(named, expected);
 }
 
 TEST(PairSelection, ImagesWithoutAPoseArePairedByTheWindowOnly) {
