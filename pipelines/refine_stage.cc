@@ -122,11 +122,12 @@ RefineInput ComponentInput(const ImageSet& images, const std::vector<ImageFeatur
                            const std::vector<PairMatches>& matches, const PoseSet& prior,
                            const std::vector<int>& component, std::vector<std::string>* names) {
   RefineInput input;
-  input.intrinsics = images.cameras.at(images.images.front().camera_index);
+  input.cameras = images.cameras;
   std::vector<int> refine_index(images.images.size(), -1);
   for (int i : component) {
     refine_index[i] = static_cast<int>(names->size());
     names->push_back(images.images[i].name);
+    input.camera_index.push_back(images.images[i].camera_index);
     input.prior_world_from_cam.push_back(prior.world_from_cam.at(images.images[i].name));
     input.keypoints.push_back(features[i].keypoints.leftCols<2>().cast<double>());
   }
@@ -283,7 +284,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       returned_prior = returned_prior || summary.returned_prior;
       if (c == 0) {
         result = summary.ToJson();
-        intrinsics = output.intrinsics;
+        intrinsics = output.cameras.at(images.images.front().camera_index);
       }
       component_summaries.push_back({{"num_images", names.size()},
                                      {"first_image", names.front()},

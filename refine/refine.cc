@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/options.h"
 #include "core/timing.h"
+#include "refine/camera_blocks.h"
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
@@ -30,10 +31,23 @@ void ValidateInput(const RefineInput& input) {
     throw InputError("refine: " + std::to_string(n) + " prior poses but keypoints for " +
                      std::to_string(input.keypoints.size()) + " images");
   }
-  const auto& p = input.intrinsics.params;
-  if (!(p[kFx] > 0) || !(p[kFy] > 0)) {
-    throw InputError("refine: the shared intrinsics need positive focal lengths, got fx = " +
-                     std::to_string(p[kFx]) + ", fy = " + std::to_string(p[kFy]));
+  if (input.camera_index.size() != n) {
+    throw InputError("refine: " + std::to_string(n) + " prior poses but camera indices for " +
+                     std::to_string(input.camera_index.size()) + " images");
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const int camera = input.camera_index[i];
+    if (camera < 0 || camera >= static_cast<int>(input.cameras.size())) {
+      throw InputError("refine: image " + std::to_string(i) + " has camera index " +
+                       std::to_string(camera) + " but there are " +
+                       std::to_string(input.cameras.size()) + " cameras");
+    }
+    const auto& p = input.cameras[camera].params;
+    if (!(p[kFx] > 0) || !(p[kFy] > 0)) {
+      throw InputError("refine: camera " + std::to_string(camera) +
+                       " needs positive focal lengths, got fx = " + std::to_string(p[kFx]) +
+                       ", fy = " + std::to_string(p[kFy]));
+    }
   }
 }
 
@@ -56,7 +70,7 @@ struct PassSettings {
 // layout (its used matches) for the inconsistent-pairs test.
 struct PassState {
   std::vector<Rigid3> world_from_cam;
-  CameraIntrinsics intrinsics;
+  CameraBlocks cameras;  // the intrinsics blocks, at their current values
   std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
   ProblemLayout layout;
 };
@@ -76,8 +90,8 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
           : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
   const ProblemLayout& layout = state->layout;
   std::vector<double> ray_times =
-      InitialRayTimes(layout, input, state->world_from_cam, state->intrinsics,
-                      options.ray_time_init, options.ray_time_constant_m, &pass.ray_time_init);
+      InitialRayTimes(layout, input, state->world_from_cam, state->cameras, options.ray_time_init,
+                      options.ray_time_constant_m, &pass.ray_time_init);
   // A later pass starts every ray time an earlier pass solved from its solved value.
   for (size_t t = 0; t < ray_times.size(); ++t) {
     const auto it = state->ray_time_by_observation.find(
@@ -94,7 +108,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   problem_settings.refine_distortion = settings.refine_distortion;
   problem_settings.use_evaluation_cache = options.use_evaluation_cache;
   problem_settings.num_threads = options.Threads();
-  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->intrinsics, ray_times,
+  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
                          problem_settings);
   pass.build_seconds = SecondsSince(build_start);
 
@@ -122,7 +136,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.solve_seconds = SecondsSince(solve_start);
 
   state->world_from_cam = problem.WorldFromCam();
-  state->intrinsics = problem.Intrinsics();
+  state->cameras.cameras = problem.Intrinsics();
   std::vector<double> solved_ray_times = problem.ray_times();
   pass.gauge_polish = PolishGauge(anchor, problem.camera_observed(), options.position_weight,
                                   settings.orientation_weight, options.gauge_orientation_weight,
@@ -164,8 +178,11 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
     const int s = slot[match.pair];
     pairs[s].observations.row(filled[s]++) << match.observation1, match.observation2;
   }
-  const IntrinsicsVector intrinsics(state.intrinsics.params.data());
-  return PairResidualMedians(intrinsics, state.world_from_cam, images, pixels, pairs);
+  std::vector<IntrinsicsVector> image_intrinsics;
+  for (size_t i = 0; i < input.prior_world_from_cam.size(); ++i) {
+    image_intrinsics.emplace_back(state.cameras.Of(static_cast<int>(i)).params.data());
+  }
+  return PairResidualMedians(image_intrinsics, state.world_from_cam, images, pixels, pairs);
 }
 
 }  // namespace
@@ -181,7 +198,8 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   for (Rigid3& pose : prior) pose.rotation.normalize();
   PassState state;
   state.world_from_cam = prior;
-  state.intrinsics = input.intrinsics;
+  // One intrinsics block per camera (refine/camera_blocks.h), the same in every pass.
+  state.cameras = PerCameraBlocks(input);
 
   PassSettings nominal;
   nominal.name = "solve";
@@ -247,9 +265,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   }
 
   output->solved_world_from_cam = state.world_from_cam;
-  output->solved_intrinsics = state.intrinsics;
+  output->solved_cameras = InputCameras(input, state.cameras);
   output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
-  output->intrinsics = summary.returned_prior ? input.intrinsics : state.intrinsics;
+  output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
   summary.total_seconds = SecondsSince(start);
   if (summary.trust_region.enabled) {
     spdlog::info(

@@ -50,8 +50,9 @@ struct RefineOptions {
   int max_matches_per_pair = 0;
   int match_cap_seed = 0;
 
-  // Self-calibration of the shared intrinsics (§3.1, §4.3); all off in headline object runs,
-  // where the intrinsics block is constant.
+  // Self-calibration of the intrinsics (§3.1, §4.3), one set per camera of the input; all off in
+  // headline object runs, where the intrinsics blocks are constant and every image keeps its own
+  // camera's intrinsics as given.
   bool refine_focal = false;            // fx, fy (bounded positive)
   bool refine_principal_point = false;  // cx, cy
   bool refine_distortion = false;       // k1, k2, p1, p2

@@ -39,7 +39,7 @@ TwoScenes MakeTwoScenes(bool with_lonely_image) {
   const SyntheticScene a = MakeSyntheticScene(a_options);
   const SyntheticScene b = MakeSyntheticScene(b_options);
   TwoScenes out;
-  const CameraIntrinsics camera = a.input.intrinsics;
+  const CameraIntrinsics camera = a.input.cameras.at(0);
   out.images.cameras = {camera};
   const auto add = [&](const SyntheticScene& scene, int k) {
     const int index = static_cast<int>(out.images.images.size());
