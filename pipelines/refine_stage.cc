@@ -42,6 +42,7 @@ struct RefineStageOptions {
     v("prior", prior, "Pose set the solve starts from (e.g. prior, prior@bootstrap)", NonEmpty());
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
+  void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
 
 fs::path PresetDirectory() {

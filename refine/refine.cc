@@ -185,6 +185,22 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
   return PairResidualMedians(image_intrinsics, state.world_from_cam, images, pixels, pairs);
 }
 
+// The blocks of the last pass's layout and the fewest observations one of them has.
+void CountBlocks(const PassState& state, CameraBlocksSummary* summary) {
+  std::vector<int> observations(state.cameras.cameras.size(), 0);
+  for (const LayoutObservation& obs : state.layout.observations) {
+    ++observations[state.cameras.camera_of_image[obs.image]];
+  }
+  summary->num_blocks = 0;
+  summary->min_block_observations = 0;
+  for (const int count : observations) {
+    if (count == 0) continue;
+    summary->min_block_observations =
+        summary->num_blocks == 0 ? count : std::min(summary->min_block_observations, count);
+    ++summary->num_blocks;
+  }
+}
+
 }  // namespace
 
 RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
@@ -198,8 +214,27 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   for (Rigid3& pose : prior) pose.rotation.normalize();
   PassState state;
   state.world_from_cam = prior;
-  // One intrinsics block per camera (refine/camera_blocks.h), the same in every pass.
-  state.cameras = PerCameraBlocks(input);
+  // The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating
+  // one, else the images' own cameras. Every pass of the run uses the same blocks.
+  summary.cameras.sharing = options.intrinsics_sharing;
+  std::vector<bool> camera_in_use(input.cameras.size(), false);
+  for (const int camera : input.camera_index) camera_in_use[camera] = true;
+  summary.cameras.num_cameras =
+      static_cast<int>(std::count(camera_in_use.begin(), camera_in_use.end(), true));
+  if (options.intrinsics_sharing == "shared") {  // self-calibrating (RefineOptions relations)
+    state.cameras = SharedBlock(input, &summary.cameras.max_start_disagreement_px);
+    summary.cameras.cameras_differ =
+        summary.cameras.max_start_disagreement_px > kSharedCameraTolerancePx;
+    if (summary.cameras.cameras_differ) {
+      spdlog::warn(
+          "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
+          "started at their median (intrinsics_sharing: shared); their per-image values are "
+          "replaced by one refined set",
+          summary.cameras.num_cameras, summary.cameras.max_start_disagreement_px);
+    }
+  } else {
+    state.cameras = PerCameraBlocks(input);
+  }
 
   PassSettings nominal;
   nominal.name = "solve";
@@ -236,6 +271,14 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
       summary.solver_failed = summary.solver_failed || stage.termination == "FAILURE";
     }
   }
+  CountBlocks(state, &summary.cameras);
+  spdlog::info(
+      "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: "
+      "{}",
+      summary.cameras.num_cameras, summary.cameras.num_blocks,
+      options.SelfCalibrates() ? "self-calibrated, " : "fixed",
+      options.SelfCalibrates() ? options.intrinsics_sharing : "",
+      summary.cameras.min_block_observations);
   summary.initial_cost = summary.passes.front().stages.front().initial_cost;
   const RefinePassSummary& last = summary.passes.back();
   summary.final_cost = last.stages.back().final_cost -
@@ -315,6 +358,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
 
 nlohmann::json RefineSummary::ToJson() const {
   return {{"passes", passes},
+          {"cameras", cameras},
           {"total_iterations", total_iterations},
           {"initial_cost", initial_cost},
           {"final_cost", final_cost},

@@ -46,7 +46,8 @@ struct RefineInput {
 
 struct RefineOutput {
   std::vector<Rigid3> world_from_cam;  // the solution, or the prior when a guardrail fired
-  // Per camera of the input: refined when self-calibrating, else the input's; the input's also
+  // Per camera of the input: refined when self-calibrating (with intrinsics_sharing 'shared',
+  // every camera an image uses holds the one shared set), else the input's; the input's also
   // when a guardrail fired.
   std::vector<CameraIntrinsics> cameras;
   // The solve's own result even when the prior was returned (for diagnostics).
@@ -163,8 +164,27 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num
                                    num_inconsistent, fraction, median_pair_px, pair_threshold_px,
                                    fraction_threshold, pairs)
 
+// How the images' cameras became the solve's intrinsics blocks (refine/camera_blocks.h).
+struct CameraBlocksSummary {
+  std::string sharing;  // RefineOptions::intrinsics_sharing
+  int num_cameras = 0;  // distinct cameras among the images (RefineInput::cameras in use)
+  // Intrinsics blocks the last pass's residuals reach (held constant unless self-calibrating),
+  // and the fewest observations (undistorted in its camera) one of them has.
+  int num_blocks = 0;
+  int min_block_observations = 0;
+  // 'shared' only: the largest CameraDisagreementPx between an image's given camera and the
+  // shared start, and whether it exceeds kSharedCameraTolerancePx (the given per-image
+  // intrinsics were replaced by one set: the stage's warning cameras_shared).
+  double max_start_disagreement_px = 0.0;
+  bool cameras_differ = false;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(CameraBlocksSummary, sharing, num_cameras, num_blocks,
+                                   min_block_observations, max_start_disagreement_px,
+                                   cameras_differ)
+
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
+  CameraBlocksSummary cameras;
   // Totals over passes and stages.
   int total_iterations = 0;
   double initial_cost = 0.0;  // first stage of the first pass

@@ -399,6 +399,13 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
   CollectKeyPaths(json, "", &keys);
   const std::set<std::string> expected = {
       "passes",
+      "cameras",
+      "cameras.sharing",
+      "cameras.num_cameras",
+      "cameras.num_blocks",
+      "cameras.min_block_observations",
+      "cameras.max_start_disagreement_px",
+      "cameras.cameras_differ",
       "passes[].name",
       "passes[].num_cameras",
       "passes[].num_observations",
