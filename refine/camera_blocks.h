@@ -1,6 +1,6 @@
 // Which intrinsics parameter blocks a solve has. The paper's cameras share one set of 2 + 2 + 4
 // intrinsics (§3.1, §3.4); phone captures carry intrinsics per frame (MobileBrick's focal drifts
-// 0.9–2.9 % per scene, §4.7 "Ablation"), and a shared set forces that drift into the poses.
+// 0.9–2.9 % per scene, §4.6 "Ablation"), and a shared set forces that drift into the poses.
 // - Fixed intrinsics, and self-calibration `per_camera`: one block per camera of the input, every
 //   image on its own camera's block (images that share a camera share its block, so a
 //   single-camera capture has the paper's one block).

@@ -56,7 +56,7 @@ struct RefineOptions {
   bool refine_principal_point = false;  // cx, cy
   bool refine_distortion = false;       // k1, k2, p1, p2
   // What self-calibration refines when the images come with several cameras (per-frame intrinsics
-  // of phone captures; MobileBrick's focal drifts 0.9–2.9 % per scene, §4.7 "Ablation"):
+  // of phone captures; MobileBrick's focal drifts 0.9–2.9 % per scene, §4.6 "Ablation"):
   // "per_camera" = one set per camera of the input, each image on its own camera's set (a
   // single-camera capture has the paper's one shared set, §3.1); "shared" = one set for every
   // image, started at the per-parameter median over the images of their cameras' values, with the
@@ -170,7 +170,7 @@ struct RefineOptions {
       "Self-calibrate the distortion k1, k2, p1, p2 (§3.1, §4.3)");
     v("intrinsics_sharing", intrinsics_sharing,
       "Self-calibration of several cameras: one set per camera, or one set for all images started "
-      "at their median (§3.1, §4.7 focal drift)",
+      "at their median (§3.1, §4.6 focal drift)",
       OneOf({"per_camera", "shared"}));
     v("use_evaluation_cache", use_evaluation_cache,
       "Shared evaluation cache: undistortion and ray points once per observation (§3.7)");

@@ -26,7 +26,7 @@ struct SyntheticSceneOptions {
   // Fraction of each pair's matches whose second keypoint is replaced by a random one.
   double outlier_fraction = 0.0;
   // Per-image intrinsics, as phone captures record them (MobileBrick's focal drifts 0.9–2.9 % per
-  // scene, paper §4.7): image i's fx and fy are the shared camera's times (1 + focal_drift · u_i)
+  // scene, paper §4.6): image i's fx and fy are the shared camera's times (1 + focal_drift · u_i)
   // and its principal point moves by principal_point_drift_px · (v_i, w_i), u, v, w uniform in
   // [-1, 1] from a generator of their own (the rest of the scene is the same as without drift).
   // Both 0: one camera for all images.
