@@ -330,11 +330,15 @@ int Main(int argc, char** argv) {
 int main(int argc, char** argv) {
   raytime::InstallInterruptHandler();
   try {
-    return raytime::Main(argc, argv);
+    const int status = raytime::Main(argc, argv);
+    if (raytime::Interrupting()) raytime::AwaitInterruptExit();
+    return status;
   } catch (const raytime::InputError& e) {
+    if (raytime::Interrupting()) raytime::AwaitInterruptExit();
     spdlog::error("{}", e.what());
     return 2;
   } catch (const std::exception& e) {
+    if (raytime::Interrupting()) raytime::AwaitInterruptExit();
     spdlog::error("{}", e.what());
     return 1;
   }

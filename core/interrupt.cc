@@ -4,7 +4,9 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -15,6 +17,7 @@ namespace raytime {
 namespace {
 
 int g_pipe[2] = {-1, -1};
+std::atomic<bool> g_interrupting{false};
 
 std::mutex& ActionsMutex() {
   static std::mutex mutex;
@@ -39,6 +42,7 @@ void Watch() {
     if (errno != EINTR) return;
   }
   const int signal = byte;
+  g_interrupting = true;
   {
     std::lock_guard<std::mutex> lock(ActionsMutex());
     for (auto it = Actions().rbegin(); it != Actions().rend(); ++it) {
@@ -54,6 +58,12 @@ void Watch() {
 }
 
 }  // namespace
+
+bool Interrupting() { return g_interrupting; }
+
+void AwaitInterruptExit() {
+  for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
+}
 
 void InstallInterruptHandler() {
   if (g_pipe[0] >= 0) return;

@@ -13,6 +13,12 @@ namespace raytime {
 // later get the default dispositions back when they exec.
 void InstallInterruptHandler();
 
+// True once a signal has been taken: the watcher is running the actions and will exit the process.
+bool Interrupting();
+// For a thread whose work failed because of the interruption (a child it waited for was stopped):
+// waits for the watcher to end the process rather than racing it with a second exit status.
+[[noreturn]] void AwaitInterruptExit();
+
 // Registers `action` for the lifetime of this object. Actions run on the watcher thread, newest
 // first, with the signal number; they must not wait for the thread that registered them.
 class InterruptAction {

@@ -1,5 +1,6 @@
 // The `evaluate` stage: errors of pose sets against the dataset's ground truth under each
-// requested alignment (SPEC §6). Its summary becomes the run's metrics.
+// requested alignment (SPEC §6). Its summary becomes the run's metrics. Without ground truth it
+// scores nothing and says so ("scored": false).
 #include <spdlog/spdlog.h>
 
 #include "core/hdf5_store.h"
@@ -39,9 +40,20 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
   }
 
   nlohmann::json Run(const StageContext& context) override {
+    nlohmann::json metrics = nlohmann::json::object();
+    // Ground truth is optional everywhere (a phone capture has none): then nothing is scored,
+    // and the summary and the log say so.
+    if (!context.artifacts.count(PoseArtifact("ground_truth"))) {
+      spdlog::info("evaluate: the dataset has no ground truth; nothing scored");
+      Hdf5Writer writer(context.output_path);
+      writer.WriteJson("metrics", metrics);
+      writer.Commit();
+      return {{"metrics", metrics},
+              {"scored", false},
+              {"reason", "the dataset has no ground truth"}};
+    }
     const PoseSet ground_truth =
         Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
-    nlohmann::json metrics = nlohmann::json::object();
     for (const auto& name : options_.poses) {
       const PoseSet estimate = Hdf5Reader(context.Require(PoseArtifact(name))).ReadPoseSet(name);
       for (const auto& alignment : options_.alignments) {
@@ -63,7 +75,7 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
     Hdf5Writer writer(context.output_path);
     writer.WriteJson("metrics", metrics);
     writer.Commit();
-    return {{"metrics", metrics}};
+    return {{"metrics", metrics}, {"scored", true}};
   }
 };
 

@@ -7,7 +7,9 @@
 #include "core/formats/colmap_model.h"
 #include "core/formats/nerfstudio.h"
 #include "core/formats/tum.h"
+#include "core/error.h"
 #include "core/hdf5_store.h"
+#include "core/warnings.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;
@@ -41,6 +43,37 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
   return poses + "_tum.txt";
 }
 
+// The poses of set `name` that may be exported under its name. A refined set leaves out the
+// images a guardrail returned unrefined: users train on these files, and a prior pose under the
+// name "refined" is a quiet wrong answer. Each left-out image is named in a warning; a set with
+// nothing left is an error, so the run fails instead of writing an empty model.
+PoseSet ExportablePoses(const StageContext& context, const std::string& name,
+                        Warnings* warnings) {
+  const Hdf5Reader reader(context.Require(PoseArtifact(name)));
+  PoseRole role = PoseRole::kPrior;
+  PoseSet poses = reader.ReadPoseSet(name, &role);
+  if (role != PoseRole::kRefined || !reader.HasJson(kUnrefinedImagesJson)) return poses;
+  std::vector<std::string> left_out;
+  for (const std::string& image : reader.ReadJson(kUnrefinedImagesJson)) {
+    if (poses.world_from_cam.erase(image)) left_out.push_back(image);
+  }
+  if (left_out.empty()) return poses;
+  if (poses.world_from_cam.empty()) {
+    throw InputError("export: no pose of '" + name +
+                     "' was refined (a guardrail returned the prior for every image; see the "
+                     "refine stage's warnings); nothing exported. Export the pose set 'prior' "
+                     "explicitly if that is what you want to train on");
+  }
+  warnings->push_back({"unrefined_not_exported",
+                       std::to_string(left_out.size()) + " image(s) of '" + name +
+                           "' kept the prior's pose (guardrail) and are left out of its export",
+                       left_out,
+                       {},
+                       {{"pose_set", name}}});
+  spdlog::warn("export: {}", warnings->back().message);
+  return poses;
+}
+
 class ExportStage : public StageWithOptions<ExportStageOptions> {
  public:
   std::string type() const override { return "export"; }
@@ -63,8 +96,9 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
   nlohmann::json Run(const StageContext& context) override {
     const ImageSet images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
     nlohmann::json written = nlohmann::json::array();
+    Warnings warnings;
     for (const auto& name : options_.poses) {
-      const PoseSet poses = Hdf5Reader(context.Require(PoseArtifact(name))).ReadPoseSet(name);
+      const PoseSet poses = ExportablePoses(context, name, &warnings);
       for (const auto& format : options_.formats) {
         const std::string path = (fs::path(context.workdir) / ExportPath(name, format)).string();
         if (format == "colmap_text") {
@@ -84,7 +118,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     Hdf5Writer writer(context.output_path);
     writer.WriteJson("exported", written);
     writer.Commit();
-    return {{"written", written}};
+    return {{"written", written}, {"warnings", WarningsToJson(warnings)}};
   }
 };
 

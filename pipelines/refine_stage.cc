@@ -308,6 +308,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     nlohmann::json component_summaries = nlohmann::json::array();
     std::set<std::string> fired;
     bool returned_prior = false;
+    // Images whose "refined" pose is the prior's (a guardrail returned it): the export leaves
+    // them out of a refined model rather than hand them to a trainer as refined.
+    std::vector<std::string> unrefined;
     std::vector<CameraIntrinsics> cameras = images.cameras;
     for (size_t c = 0; c < num_solved; ++c) {
       std::vector<std::string> names;
@@ -334,6 +337,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       }
       fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
       returned_prior = returned_prior || summary.returned_prior;
+      if (summary.returned_prior) unrefined.insert(unrefined.end(), names.begin(), names.end());
       if (c == 0) {
         result = summary.ToJson();
         cameras = output.cameras;
@@ -369,6 +373,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     }
     result["warnings"] = WarningsToJson(warnings);
     writer.WriteJson("refine_summary", result);
+    writer.WriteJson(kUnrefinedImagesJson, unrefined);
     writer.Commit();
     return result;
   }

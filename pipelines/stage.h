@@ -18,6 +18,9 @@ namespace raytime {
 // wrote it last.
 inline constexpr const char* kArtifactImages = "images";
 inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
+// JSON document beside a refined pose set: the names whose pose a guardrail returned unrefined
+// (the prior's). Written by refine, read by export ("never a silent wrong result").
+inline constexpr const char* kUnrefinedImagesJson = "unrefined_images";
 
 struct StageContext {
   // The stage's id in the pipeline: its type, or "type@name" when a pipeline runs one stage type

@@ -37,7 +37,7 @@ std::string Name(int i) {
 
 // Two synthetic scenes side by side in one image list (A: images 0-4, B: images 5-7) and, when
 // asked, a ninth image with keypoints but no verified pair.
-SceneInputs MakeTwoScenes(bool with_lonely_image) {
+SceneInputs MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) {
   SyntheticSceneOptions a_options;
   a_options.num_cameras = 5;
   SyntheticSceneOptions b_options;
@@ -61,6 +61,10 @@ SceneInputs MakeTwoScenes(bool with_lonely_image) {
     if (&scene == &b) pose.translation += Eigen::Vector3d(100, 0, 0);
     out.ground_truth.world_from_cam[Name(index)] = pose;
     Rigid3 prior = pose;
+    if (exact_prior_for_b && &scene == &b) {
+      out.prior.world_from_cam[Name(index)] = prior;
+      return;
+    }
     prior.rotation =
         (Eigen::AngleAxisd(M_PI / 180.0, Eigen::Vector3d::UnitY()) * prior.rotation).normalized();
     out.prior.world_from_cam[Name(index)] = prior;
@@ -148,6 +152,12 @@ nlohmann::json RunRefine(
   return summary;
 }
 
+// A trust region far below the correction of a 1°-off prior: the solve keeps the orientations
+// (the orientation prior holds this common 1° rotation, a gauge) but moves the centres ~0.16 m.
+const char* kTinyTrustRegion =
+    "{preset: plain, num_threads: 1, trust_region: true, trust_region_rotation_deg: 10, "
+    "trust_region_translation_m: 0.05}";
+
 const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::string& code) {
   for (const auto& warning : summary["warnings"]) {
     if (warning["code"] == code) return &warning;
@@ -209,7 +219,7 @@ double MeanRotationErrorDeg(const PoseSet& estimate, const PoseSet& truth) {
 
 // Runs the export stage on the refine stage's output (its /images when it wrote one): a COLMAP
 // text model in dir/refined/ and dir/refined_transforms.json.
-void RunExport(const TempDir& dir) {
+nlohmann::json RunExport(const TempDir& dir) {
   std::unique_ptr<Stage> stage = CreateStage("export");
   stage->Configure(YAML::Load("{poses: [refined], formats: [colmap_text, transforms_json]}"),
                    "test");
@@ -220,7 +230,7 @@ void RunExport(const TempDir& dir) {
   const bool refined_images = Hdf5Reader(dir / "refine.h5").HasImages();
   context.artifacts["images"] = refined_images ? dir / "refine.h5" : dir / "inputs.h5";
   context.artifacts["poses/refined"] = dir / "refine.h5";
-  stage->Run(context);
+  return stage->Run(context);
 }
 
 nlohmann::json ReadJsonFile(const std::string& path) {
@@ -315,6 +325,42 @@ TEST(RefineStageTest, SelfCalibratedCamerasAreWrittenAndExportedPerCamera) {
     const nlohmann::json transforms = ReadJsonFile(dir / "refined_transforms.json");
     EXPECT_NEAR(transforms["fl_x"].get<double>(), written.cameras[0].params[kFx], 1e-9);
   }
+}
+
+TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
+  TempDir dir("refine_stage");
+  // Scene A's prior is 1° off (its solve leaves the tiny trust region and returns the prior);
+  // scene B's prior is exact (its solve stays inside and is refined).
+  const SceneInputs scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
+  PoseSet refined;
+  const nlohmann::json summary = RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  const nlohmann::json* returned = FindWarning(summary, "returned_prior");
+  ASSERT_NE(returned, nullptr) << summary["warnings"].dump();
+  EXPECT_EQ((*returned)["images"].size(), 5u);
+  const nlohmann::json exported = RunExport(dir);
+  const nlohmann::json* left_out = FindWarning(exported, "unrefined_not_exported");
+  ASSERT_NE(left_out, nullptr) << exported.dump();
+  EXPECT_EQ((*left_out)["images"], (*returned)["images"]);
+  const ColmapModel model = ReadColmapModel(dir / "refined");
+  ASSERT_EQ(model.images.size(), 3u);
+  for (const auto& [id, image] : model.images) {
+    EXPECT_GE(image.name, "0005.jpg") << "a prior pose exported as refined";
+  }
+}
+
+TEST(RefineStageTest, ExportOfARefinedSetWithNothingRefinedFails) {
+  TempDir dir("refine_stage");
+  const SceneInputs scene = MakeTwoScenes(false);
+  PoseSet refined;
+  RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  try {
+    RunExport(dir);
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' was refined"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "refined"));
 }
 
 }  // namespace
