@@ -1,7 +1,8 @@
 // The `refine` stage: the ray-time refiner (refine/, SPEC §3) on the front end's verified matches
-// from the pose set "prior" (option `prior`). Writes the pose set "refined" ("refined@NAME" for a
-// stage id refine@NAME), the run summary as /json/refine_summary and, when self-calibrating, the
-// refined intrinsics (a new /images + /cameras group, so later stages such as export use them, and
+// from the pose set "prior" (option `prior`), each image with its own camera's intrinsics. Writes
+// the pose set "refined" ("refined@NAME" for a stage id refine@NAME), the run summary as
+// /json/refine_summary and, when self-calibrating, the refined intrinsics per camera (a new
+// /images + /cameras group, so later stages such as export use them, and
 // /json/refined_intrinsics).
 //
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
@@ -9,6 +10,7 @@
 // pipeline, in --set or on the command line always overrides the preset's, whatever its value.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -19,6 +21,7 @@
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "pipelines/stages.h"
+#include "refine/camera_blocks.h"
 #include "refine/refine.h"
 
 namespace fs = std::filesystem;
@@ -42,6 +45,7 @@ struct RefineStageOptions {
     v("prior", prior, "Pose set the solve starts from (e.g. prior, prior@bootstrap)", NonEmpty());
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
+  void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
 
 fs::path PresetDirectory() {
@@ -116,17 +120,19 @@ std::vector<std::vector<int>> MatchedComponents(const ImageSet& images,
   return components;
 }
 
-// The refiner's input for one component: its images (in image-list order), their keypoints and
-// prior poses, and the verified pairs between them; `names` receives the images' names.
+// The refiner's input for one component: its images (in image-list order), their cameras (the
+// image set's camera list, indexed as there), keypoints and prior poses, and the verified pairs
+// between them; `names` receives the images' names.
 RefineInput ComponentInput(const ImageSet& images, const std::vector<ImageFeatures>& features,
                            const std::vector<PairMatches>& matches, const PoseSet& prior,
                            const std::vector<int>& component, std::vector<std::string>* names) {
   RefineInput input;
-  input.intrinsics = images.cameras.at(images.images.front().camera_index);
+  input.cameras = images.cameras;
   std::vector<int> refine_index(images.images.size(), -1);
   for (int i : component) {
     refine_index[i] = static_cast<int>(names->size());
     names->push_back(images.images[i].name);
+    input.camera_index.push_back(images.images[i].camera_index);
     input.prior_world_from_cam.push_back(prior.world_from_cam.at(images.images[i].name));
     input.keypoints.push_back(features[i].keypoints.leftCols<2>().cast<double>());
   }
@@ -137,6 +143,47 @@ RefineInput ComponentInput(const ImageSet& images, const std::vector<ImageFeatur
     input.pairs.push_back({i, j, pair.geometry.inlier_matches});
   }
   return input;
+}
+
+// `images` with the refined cameras (indexed as images.cameras); cameras that became equal (the
+// one shared set written to every camera its images used) are one camera, in the order of their
+// first occurrence, so a COLMAP model has one camera per distinct camera.
+ImageSet WithRefinedCameras(const ImageSet& images, const std::vector<CameraIntrinsics>& refined) {
+  ImageSet out = images;
+  out.cameras.clear();
+  std::vector<int> new_index(refined.size());
+  for (size_t c = 0; c < refined.size(); ++c) {
+    const auto same = std::find(out.cameras.begin(), out.cameras.end(), refined[c]);
+    new_index[c] = static_cast<int>(same - out.cameras.begin());
+    if (same == out.cameras.end()) out.cameras.push_back(refined[c]);
+  }
+  for (ImageInfo& image : out.images) image.camera_index = new_index[image.camera_index];
+  return out;
+}
+
+// Per camera of `images` that a refined image uses: its index, how many refined images use it and
+// its intrinsics (OpenCV pixel convention).
+nlohmann::json RefinedIntrinsicsJson(const ImageSet& images, const PoseSet& refined) {
+  std::vector<int> count(images.cameras.size(), 0);
+  for (const ImageInfo& image : images.images) {
+    if (refined.Has(image.name)) ++count[image.camera_index];
+  }
+  nlohmann::json out = nlohmann::json::array();
+  for (size_t c = 0; c < images.cameras.size(); ++c) {
+    if (count[c] == 0) continue;
+    const auto& p = images.cameras[c].params;
+    out.push_back({{"camera", c},
+                   {"num_images", count[c]},
+                   {"fx", p[kFx]},
+                   {"fy", p[kFy]},
+                   {"cx", p[kCx]},
+                   {"cy", p[kCy]},
+                   {"k1", p[kK1]},
+                   {"k2", p[kK2]},
+                   {"p1", p[kP1]},
+                   {"p2", p[kP2]}});
+  }
+  return out;
 }
 
 // A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
@@ -213,13 +260,6 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
                        std::to_string(features.size()) + " images, but the image list has " +
                        std::to_string(images.images.size()));
     }
-    for (const ImageInfo& image : images.images) {
-      if (image.camera_index != images.images.front().camera_index) {
-        throw InputError("refine: images " + images.images.front().name + " and " + image.name +
-                         " have different cameras; the refiner needs shared intrinsics "
-                         "(SPEC §2)");
-      }
-    }
 
     // The images with a prior pose take part; the others are reported and left out.
     Warnings warnings;
@@ -271,7 +311,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // Images whose "refined" pose is the prior's (a guardrail returned it): the export leaves
     // them out of a refined model rather than hand them to a trainer as refined.
     std::vector<std::string> unrefined;
-    CameraIntrinsics intrinsics = images.cameras.at(images.images.front().camera_index);
+    std::vector<CameraIntrinsics> cameras = images.cameras;
     for (size_t c = 0; c < num_solved; ++c) {
       std::vector<std::string> names;
       const RefineInput input =
@@ -282,12 +322,25 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
         refined.world_from_cam[names[k]] = output.world_from_cam[k];
       }
       AddGuardrailWarnings(summary, names, &warnings);
+      if (summary.cameras.cameras_differ) {
+        warnings.push_back(
+            {"cameras_shared",
+             "intrinsics_sharing 'shared' refined one set of intrinsics for images whose given "
+             "cameras differ from it by up to " +
+                 fmt::format("{:.3g}", summary.cameras.max_start_disagreement_px) +
+                 " px on the image; their per-image intrinsics were replaced",
+             names,
+             {},
+             {{"num_cameras", summary.cameras.num_cameras},
+              {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
+              {"tolerance_px", kSharedCameraTolerancePx}}});
+      }
       fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
       returned_prior = returned_prior || summary.returned_prior;
       if (summary.returned_prior) unrefined.insert(unrefined.end(), names.begin(), names.end());
       if (c == 0) {
         result = summary.ToJson();
-        intrinsics = output.intrinsics;
+        cameras = output.cameras;
       }
       component_summaries.push_back({{"num_images", names.size()},
                                      {"first_image", names.front()},
@@ -312,13 +365,10 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     result["num_refined"] = refined.size();
     result["num_images_without_prior"] = without_prior.size();
     if (options_.refine.SelfCalibrates()) {
-      ImageSet refined_images = images;
-      refined_images.cameras.at(images.images.front().camera_index) = intrinsics;
+      // One solve when self-calibrating: its cameras are refined, the others' as given.
+      const ImageSet refined_images = WithRefinedCameras(images, cameras);
       writer.WriteImages(refined_images);
-      const auto& p = intrinsics.params;
-      result["refined_intrinsics"] = {{"fx", p[kFx]}, {"fy", p[kFy]}, {"cx", p[kCx]},
-                                      {"cy", p[kCy]}, {"k1", p[kK1]}, {"k2", p[kK2]},
-                                      {"p1", p[kP1]}, {"p2", p[kP2]}};
+      result["refined_intrinsics"] = RefinedIntrinsicsJson(refined_images, refined);
       writer.WriteJson("refined_intrinsics", result["refined_intrinsics"]);
     }
     result["warnings"] = WarningsToJson(warnings);

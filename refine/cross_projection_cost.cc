@@ -2,16 +2,26 @@
 
 namespace raytime {
 
-// Chain rule of r = K·proj(R_j^T (X - O_j)) - û_t with X and û_t (and their derivatives) from the
-// cache: the residual's 23 local derivatives are the 2x3 projection derivative times the cached
-// 3x16 ray-point derivative (intrinsics, source pose, ray time), minus the cached 2x8 derivative
-// of the target's undistortion, plus the direct terms of the target pose and of K.
-bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double* residuals,
-                                         double** jacobians) const {
-  const CachedObservation& source = (*cache_)[source_];
-  const CachedObservation& target = (*cache_)[target_];
-  const double* intrinsics = parameters[0];
-  const double* target_pose = parameters[3];
+namespace {
+
+// Chain rule of r = K_t·proj(R_j^T (X - O_j)) - û_t with X and û_t (and their derivatives) from
+// the cache: the residual's local derivatives are the 2x3 projection derivative times the cached
+// 3x16 ray-point derivative (source intrinsics, source pose, ray time), minus the cached 2x8
+// derivative of the target's undistortion (target intrinsics), plus the direct terms of the target
+// pose and of K_t. With one block (kTwoCameras false) the intrinsics terms are summed into one
+// Jacobian; parameters and Jacobians are in the order of the variant's blocks.
+template <bool kTwoCameras>
+bool EvaluateCached(const ObservationCache& cache, int source_index, int target_index,
+                    double const* const* parameters, double* residuals, double** jacobians) {
+  constexpr int kSourceIntrinsics = 0;
+  constexpr int kSourcePose = 1;
+  constexpr int kRayTime = 2;
+  constexpr int kTargetIntrinsics = kTwoCameras ? 3 : 0;
+  constexpr int kTargetPose = kTwoCameras ? 4 : 3;
+  const CachedObservation& source = cache[source_index];
+  const CachedObservation& target = cache[target_index];
+  const double* intrinsics = parameters[kTargetIntrinsics];
+  const double* target_pose = parameters[kTargetPose];
 
   double R[9];
   RotationFromQuaternion(target_pose, R);
@@ -46,30 +56,48 @@ bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double
            du_dX[a][2] * source.d_point[2 * kCacheNumLocal + column];
   };
 
-  if (jacobians[0] != nullptr) {
-    double* J = jacobians[0];
+  // The projection's own derivative in K_t: d(fx xn + cx)/d(fx, cx) = (xn, 1), and in y.
+  const auto add_projection_terms = [xn, yn](double* J) {
+    J[kFx] += xn;
+    J[kNumIntrinsics + kFy] += yn;
+    J[kCx] += 1.0;
+    J[kNumIntrinsics + kCy] += 1.0;
+  };
+  if constexpr (kTwoCameras) {
+    if (jacobians[kSourceIntrinsics] != nullptr) {
+      double* J = jacobians[kSourceIntrinsics];
+      for (int a = 0; a < 2; ++a) {
+        for (int c = 0; c < kNumIntrinsics; ++c) {
+          J[kNumIntrinsics * a + c] = through_point(a, kCacheIntrinsicsOffset + c);
+        }
+      }
+    }
+    if (jacobians[kTargetIntrinsics] != nullptr) {
+      double* J = jacobians[kTargetIntrinsics];
+      for (int k = 0; k < 2 * kNumIntrinsics; ++k) J[k] = -target.d_undistorted[k];
+      add_projection_terms(J);
+    }
+  } else if (jacobians[kSourceIntrinsics] != nullptr) {
+    double* J = jacobians[kSourceIntrinsics];
     for (int a = 0; a < 2; ++a) {
       for (int c = 0; c < kNumIntrinsics; ++c) {
         J[kNumIntrinsics * a + c] = through_point(a, kCacheIntrinsicsOffset + c) -
                                     target.d_undistorted[kNumIntrinsics * a + c];
       }
     }
-    J[kFx] += xn;
-    J[kNumIntrinsics + kFy] += yn;
-    J[kCx] += 1.0;
-    J[kNumIntrinsics + kCy] += 1.0;
+    add_projection_terms(J);
   }
-  if (jacobians[1] != nullptr) {
+  if (jacobians[kSourcePose] != nullptr) {
     for (int a = 0; a < 2; ++a) {
       for (int c = 0; c < kPoseBlockSize; ++c) {
-        jacobians[1][kPoseBlockSize * a + c] = through_point(a, kCachePoseOffset + c);
+        jacobians[kSourcePose][kPoseBlockSize * a + c] = through_point(a, kCachePoseOffset + c);
       }
     }
   }
-  if (jacobians[2] != nullptr) {
-    for (int a = 0; a < 2; ++a) jacobians[2][a] = through_point(a, kCacheRayTimeOffset);
+  if (jacobians[kRayTime] != nullptr) {
+    for (int a = 0; a < 2; ++a) jacobians[kRayTime][a] = through_point(a, kCacheRayTimeOffset);
   }
-  if (jacobians[3] != nullptr) {
+  if (jacobians[kTargetPose] != nullptr) {
     // d(R^T v)/dq for the quaternion formula of RotationFromQuaternion (rows p0..p2, columns
     // x, y, z, w); d(R^T v)/dO = -R^T.
     const double x = target_pose[0], y = target_pose[1], z = target_pose[2], w = target_pose[3];
@@ -80,7 +108,7 @@ bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double
          2 * (-w * v[0] - 2 * z * v[1] + y * v[2]), 2 * (-z * v[0] + x * v[2])},
         {2 * (z * v[0] - w * v[1] - 2 * x * v[2]), 2 * (w * v[0] + z * v[1] - 2 * y * v[2]),
          2 * (x * v[0] + y * v[1]), 2 * (y * v[0] - x * v[1])}};
-    double* J = jacobians[3];
+    double* J = jacobians[kTargetPose];
     for (int a = 0; a < 2; ++a) {
       for (int q = 0; q < 4; ++q) {
         J[kPoseBlockSize * a + q] =
@@ -90,6 +118,18 @@ bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double
     }
   }
   return true;
+}
+
+}  // namespace
+
+bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double* residuals,
+                                         double** jacobians) const {
+  return EvaluateCached<false>(*cache_, source_, target_, parameters, residuals, jacobians);
+}
+
+bool CachedTwoCameraCrossProjectionCost::Evaluate(double const* const* parameters,
+                                                  double* residuals, double** jacobians) const {
+  return EvaluateCached<true>(*cache_, source_, target_, parameters, residuals, jacobians);
 }
 
 }  // namespace raytime

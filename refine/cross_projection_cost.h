@@ -1,12 +1,19 @@
 // The cross-projection residual of paper eqs. (rij)/(rji): r = π_j(X_ik) - û_jl, the ray point of
 // a source observation (camera i, keypoint k) projected with the plain pinhole model into the
-// camera j of a target observation, minus the target's undistorted pixel. Parameter blocks, in
-// order: shared intrinsics (8), source pose (7), source ray time (1), target pose (7).
+// camera j of a target observation, minus the target's undistorted pixel. X_ik is undistorted and
+// unprojected with the source image's intrinsics, π_j and û_jl use the target image's.
 //
-// Two implementations of the same function:
-// - CachedCrossProjectionCost reads û and X with their derivatives from the ObservationCache and
+// Two variants by the intrinsics blocks (refine/camera_blocks.h), because Ceres refuses a residual
+// that holds one parameter block twice:
+// - both images on one block (the paper's shared intrinsics, §3.1): blocks intrinsics (8), source
+//   pose (7), source ray time (1), target pose (7);
+// - on two blocks (per-image intrinsics): source intrinsics (8), source pose (7), source ray time
+//   (1), target intrinsics (8), target pose (7). Its two intrinsics Jacobians sum to the
+//   one-block variant's.
+// Each in two implementations of the same function:
+// - Cached*CrossProjectionCost reads û and X with their derivatives from the ObservationCache and
 //   only projects ("gradient surgery", §3.7);
-// - CrossProjectionAutoDiffCost computes the whole chain (undistort both pixels, unproject,
+// - *CrossProjectionAutoDiffCost computes the whole chain (undistort both pixels, unproject,
 //   project) with automatic differentiation, for use_evaluation_cache = false and as the
 //   reference the cached Jacobians are tested against.
 #pragma once
@@ -22,6 +29,7 @@
 
 namespace raytime {
 
+// Both observations' images on one intrinsics block.
 class CachedCrossProjectionCost
     : public ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize> {
  public:
@@ -42,6 +50,49 @@ class CachedCrossProjectionCost
   int target_;
 };
 
+// The observations' images on two intrinsics blocks.
+class CachedTwoCameraCrossProjectionCost
+    : public ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kNumIntrinsics,
+                                      kPoseBlockSize> {
+ public:
+  CachedTwoCameraCrossProjectionCost(const ObservationCache* cache, int source, int target)
+      : cache_(cache), source_(source), target_(target) {}
+
+  static ceres::CostFunction* Create(const ObservationCache* cache, int source, int target) {
+    return new CachedTwoCameraCrossProjectionCost(cache, source, target);
+  }
+
+  // Thread-safe, as the one-block variant.
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override;
+
+ private:
+  const ObservationCache* cache_;
+  int source_;
+  int target_;
+};
+
+// The residual of either variant: û_s and X with the source intrinsics, π and û_t with the
+// target's (the one-block variant passes its block twice; the operations are the same).
+template <typename T>
+void CrossProjectionResidual(const T* source_intrinsics, const T* source_pose, const T& ray_time,
+                             const T* target_intrinsics, const T* target_pose,
+                             const Eigen::Vector2d& source_pixel_observed,
+                             const Eigen::Vector2d& target_pixel_observed, T* residual) {
+  const T source_pixel[2] = {T(source_pixel_observed[0]), T(source_pixel_observed[1])};
+  const T target_pixel[2] = {T(target_pixel_observed[0]), T(target_pixel_observed[1])};
+  T source_undistorted[2], target_undistorted[2];
+  UndistortPixel(source_intrinsics, source_pixel, source_undistorted);
+  UndistortPixel(target_intrinsics, target_pixel, target_undistorted);
+  T point[3];
+  RayPointInWorld(source_intrinsics, source_pose, ray_time, source_undistorted, point);
+  T projected[2];
+  ProjectWorldPoint(target_intrinsics, target_pose, point, projected);
+  residual[0] = projected[0] - target_undistorted[0];
+  residual[1] = projected[1] - target_undistorted[1];
+}
+
+// Both observations' images on one intrinsics block.
 class CrossProjectionAutoDiffCost {
  public:
   CrossProjectionAutoDiffCost(const Eigen::Vector2d& source_pixel,
@@ -59,17 +110,36 @@ class CrossProjectionAutoDiffCost {
   template <typename T>
   bool operator()(const T* intrinsics, const T* source_pose, const T* ray_time,
                   const T* target_pose, T* residual) const {
-    const T source_pixel[2] = {T(source_pixel_[0]), T(source_pixel_[1])};
-    const T target_pixel[2] = {T(target_pixel_[0]), T(target_pixel_[1])};
-    T source_undistorted[2], target_undistorted[2];
-    UndistortPixel(intrinsics, source_pixel, source_undistorted);
-    UndistortPixel(intrinsics, target_pixel, target_undistorted);
-    T point[3];
-    RayPointInWorld(intrinsics, source_pose, ray_time[0], source_undistorted, point);
-    T projected[2];
-    ProjectWorldPoint(intrinsics, target_pose, point, projected);
-    residual[0] = projected[0] - target_undistorted[0];
-    residual[1] = projected[1] - target_undistorted[1];
+    CrossProjectionResidual(intrinsics, source_pose, ray_time[0], intrinsics, target_pose,
+                            source_pixel_, target_pixel_, residual);
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d source_pixel_;
+  Eigen::Vector2d target_pixel_;
+};
+
+// The observations' images on two intrinsics blocks.
+class TwoCameraCrossProjectionAutoDiffCost {
+ public:
+  TwoCameraCrossProjectionAutoDiffCost(const Eigen::Vector2d& source_pixel,
+                                       const Eigen::Vector2d& target_pixel)
+      : source_pixel_(source_pixel), target_pixel_(target_pixel) {}
+
+  // Pixels are the observed (distorted) keypoints.
+  static ceres::CostFunction* Create(const Eigen::Vector2d& source_pixel,
+                                     const Eigen::Vector2d& target_pixel) {
+    return new ceres::AutoDiffCostFunction<TwoCameraCrossProjectionAutoDiffCost, 2, kNumIntrinsics,
+                                           kPoseBlockSize, 1, kNumIntrinsics, kPoseBlockSize>(
+        new TwoCameraCrossProjectionAutoDiffCost(source_pixel, target_pixel));
+  }
+
+  template <typename T>
+  bool operator()(const T* source_intrinsics, const T* source_pose, const T* ray_time,
+                  const T* target_intrinsics, const T* target_pose, T* residual) const {
+    CrossProjectionResidual(source_intrinsics, source_pose, ray_time[0], target_intrinsics,
+                            target_pose, source_pixel_, target_pixel_, residual);
     return true;
   }
 

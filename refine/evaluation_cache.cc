@@ -57,9 +57,10 @@ void ObservationCache::ComputeValues() {
   ParallelOverObservations(size(), num_threads_, [this](int o) {
     const Source& source = sources_[o];
     CachedObservation& entry = entries_[o];
-    UndistortPixel(intrinsics_, source.pixel, entry.undistorted);
+    const double* intrinsics = intrinsics_ + kNumIntrinsics * source.camera;
+    UndistortPixel(intrinsics, source.pixel, entry.undistorted);
     if (source.ray_time >= 0) {
-      RayPointInWorld(intrinsics_, poses_ + kPoseBlockSize * source.image,
+      RayPointInWorld(intrinsics, poses_ + kPoseBlockSize * source.image,
                       ray_times_[source.ray_time], entry.undistorted, entry.point);
     }
   });
@@ -71,9 +72,10 @@ void ObservationCache::ComputeJets() {
   ParallelOverObservations(size(), num_threads_, [this](int o) {
     const Source& source = sources_[o];
     CachedObservation& entry = entries_[o];
+    const double* intrinsics_values = intrinsics_ + kNumIntrinsics * source.camera;
     Jet16 intrinsics[kNumIntrinsics];
     for (int c = 0; c < kNumIntrinsics; ++c) {
-      intrinsics[c] = Jet16(intrinsics_[c], kCacheIntrinsicsOffset + c);
+      intrinsics[c] = Jet16(intrinsics_values[c], kCacheIntrinsicsOffset + c);
     }
     const Jet16 pixel[2] = {Jet16(source.pixel[0]), Jet16(source.pixel[1])};
     Jet16 undistorted[2];

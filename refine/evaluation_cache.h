@@ -1,7 +1,8 @@
 // Shared evaluation cache (paper §3.7 "Shared evaluation cache"): a Ceres EvaluationCallback
 // that, once per evaluation point, computes every observation's undistorted pixel û and ray
 // point X = O + t·D with forward-mode jets over the observation's 16 local parameters
-// (intrinsics 8, pose 7, ray time 1), TBB-parallel over observations. The residuals
+// (intrinsics 8 of its image's intrinsics block, pose 7, ray time 1), TBB-parallel over
+// observations. The residuals
 // (CachedCrossProjectionCost) then only project and copy the cached derivative blocks into their
 // own Jacobians, so the Newton undistortion and the unprojection run once per observation rather
 // than once per residual.
@@ -31,11 +32,13 @@ class ObservationCache : public ceres::EvaluationCallback {
   struct Source {
     double pixel[2];    // observed (distorted) pixel
     int image = 0;      // pose block index
+    int camera = 0;     // intrinsics block index (its image's camera, refine/camera_blocks.h)
     int ray_time = -1;  // ray-time index, -1 when the observation is only projected into
   };
 
-  // The arrays are the problem's parameter blocks (Ceres writes each evaluation point into
-  // them before calling PrepareForEvaluation); they must outlive the cache.
+  // The arrays are the problem's parameter blocks, consecutive per kind (intrinsics blocks of 8,
+  // pose blocks of 7, ray times; Ceres writes each evaluation point into them before calling
+  // PrepareForEvaluation); they must outlive the cache.
   ObservationCache(const double* intrinsics, const double* poses, const double* ray_times,
                    std::vector<Source> sources, int num_threads);
 

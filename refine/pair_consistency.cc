@@ -7,17 +7,19 @@
 #include "core/statistics.h"
 
 namespace raytime {
-double PositiveRayEpipolarDistance(const IntrinsicsVector& intrinsics,
+double PositiveRayEpipolarDistance(const IntrinsicsVector& source_intrinsics,
                                    const Rigid3& source_world_from_cam,
                                    const Eigen::Vector2d& source_pixel,
+                                   const IntrinsicsVector& target_intrinsics,
                                    const Rigid3& target_world_from_cam,
                                    const Eigen::Vector2d& target_pixel) {
-  const double* k = intrinsics.data();
+  const double* s = source_intrinsics.data();
+  const double* k = target_intrinsics.data();
   Eigen::Vector2d source_undistorted, target_undistorted;
-  UndistortPixel(k, source_pixel.data(), source_undistorted.data());
+  UndistortPixel(s, source_pixel.data(), source_undistorted.data());
   UndistortPixel(k, target_pixel.data(), target_undistorted.data());
   Eigen::Vector3d ray;
-  PixelToUnitRay(k, source_undistorted.data(), ray.data());
+  PixelToUnitRay(s, source_undistorted.data(), ray.data());
   // The ray's points in the target camera's frame are c + t e; with K the pinhole matrix, their
   // homogeneous pixels are a + t b, a = K c (the epipole), b = K e (the vanishing point), and the
   // residual's pixel is (a + t b) dehomogenized, which is what ProjectPinhole computes.
@@ -54,15 +56,15 @@ double PositiveRayEpipolarDistance(const IntrinsicsVector& intrinsics,
   return std::min(distance_to(a), distance_to(b));
 }
 
-std::vector<PairResidual> PairResidualMedians(const IntrinsicsVector& intrinsics,
+std::vector<PairResidual> PairResidualMedians(const std::vector<IntrinsicsVector>& image_intrinsics,
                                               const std::vector<Rigid3>& world_from_cam,
                                               const Eigen::VectorXi& images,
                                               const Keypoints& pixels,
                                               const std::vector<PairObservationMatches>& pairs) {
   const auto distance2 = [&](int from, int to) {
     const double d = PositiveRayEpipolarDistance(
-        intrinsics, world_from_cam[images(from)], pixels.row(from).transpose(),
-        world_from_cam[images(to)], pixels.row(to).transpose());
+        image_intrinsics[images(from)], world_from_cam[images(from)], pixels.row(from).transpose(),
+        image_intrinsics[images(to)], world_from_cam[images(to)], pixels.row(to).transpose());
     return std::isfinite(d) ? d * d : std::numeric_limits<double>::infinity();
   };
 

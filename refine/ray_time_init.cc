@@ -15,7 +15,7 @@ constexpr double kMinSinSquared = 1e-10;
 
 std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
                                     const std::vector<Rigid3>& world_from_cam,
-                                    const CameraIntrinsics& intrinsics, const std::string& mode,
+                                    const CameraBlocks& cameras, const std::string& mode,
                                     double constant, RayTimeInitSummary* summary) {
   summary->mode = mode;
   const size_t num_ray_times = layout.ray_time_observation.size();
@@ -30,9 +30,10 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
     const LayoutObservation& obs = layout.observations[o];
     const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
                              input.keypoints[obs.image](obs.keypoint, 1)};
+    const double* intrinsics = cameras.Of(obs.image).params.data();
     double undistorted[2], ray[3];
-    UndistortPixel(intrinsics.params.data(), pixel, undistorted);
-    PixelToUnitRay(intrinsics.params.data(), undistorted, ray);
+    UndistortPixel(intrinsics, pixel, undistorted);
+    PixelToUnitRay(intrinsics, undistorted, ray);
     directions[o] = world_from_cam[obs.image].rotation * Eigen::Vector3d(ray[0], ray[1], ray[2]);
   }
 

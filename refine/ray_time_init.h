@@ -15,14 +15,16 @@
 #include <string>
 #include <vector>
 
+#include "refine/camera_blocks.h"
 #include "refine/problem_layout.h"
 
 namespace raytime {
 
-// Initial value of every ray time of `layout`; `mode` is "auto" or "constant".
+// Initial value of every ray time of `layout`; `mode` is "auto" or "constant". Each observation's
+// ray is unprojected with its image's intrinsics in `cameras`.
 std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
                                     const std::vector<Rigid3>& world_from_cam,
-                                    const CameraIntrinsics& intrinsics, const std::string& mode,
+                                    const CameraBlocks& cameras, const std::string& mode,
                                     double constant, RayTimeInitSummary* summary);
 
 }  // namespace raytime

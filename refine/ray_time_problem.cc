@@ -2,6 +2,8 @@
 
 #include <ceres/product_manifold.h>
 
+#include <algorithm>
+
 #include "refine/cross_projection_cost.h"
 #include "refine/pose_prior_cost.h"
 
@@ -24,12 +26,16 @@ ceres::LossFunction* ScaledArctan(double scale_px2, double weight) {
 RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& layout,
                                const std::vector<Rigid3>& prior_world_from_cam,
                                const std::vector<Rigid3>& initial_world_from_cam,
-                               const CameraIntrinsics& initial_intrinsics,
+                               const CameraBlocks& cameras,
                                const std::vector<double>& initial_ray_times,
                                const RayTimeProblemSettings& settings)
-    : intrinsics_info_(initial_intrinsics),
-      intrinsics_(initial_intrinsics.params),
-      ray_times_(initial_ray_times) {
+    : intrinsics_info_(cameras.cameras), ray_times_(initial_ray_times) {
+  const int num_blocks = static_cast<int>(cameras.cameras.size());
+  intrinsics_.resize(kNumIntrinsics * num_blocks);
+  for (int b = 0; b < num_blocks; ++b) {
+    std::copy(cameras.cameras[b].params.begin(), cameras.cameras[b].params.end(),
+              intrinsics_block(b));
+  }
   const int num_cameras = static_cast<int>(initial_world_from_cam.size());
   poses_.resize(kPoseBlockSize * num_cameras);
   for (int i = 0; i < num_cameras; ++i) {
@@ -50,6 +56,7 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
       sources[o].pixel[0] = input.keypoints[obs.image](obs.keypoint, 0);
       sources[o].pixel[1] = input.keypoints[obs.image](obs.keypoint, 1);
       sources[o].image = obs.image;
+      sources[o].camera = cameras.camera_of_image[obs.image];
       sources[o].ray_time = obs.ray_time;
     }
     cache_ =
@@ -63,8 +70,17 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   problem_options.evaluation_callback = cache_.get();
   problem_ = std::make_unique<ceres::Problem>(problem_options);
 
+  // Only the intrinsics blocks some residual reaches are in the problem: nothing else constrains
+  // the others (cameras of images without matches keep their values).
+  intrinsics_used_.assign(num_blocks, false);
+  for (const CrossProjection& residual : layout.residuals) {
+    intrinsics_used_[cameras.camera_of_image[layout.observations[residual.source].image]] = true;
+    intrinsics_used_[cameras.camera_of_image[layout.observations[residual.target].image]] = true;
+  }
   pose_manifold_ = std::make_unique<PoseManifold>();
-  problem_->AddParameterBlock(intrinsics_.data(), kNumIntrinsics);
+  for (int b = 0; b < num_blocks; ++b) {
+    if (intrinsics_used_[b]) problem_->AddParameterBlock(intrinsics_block(b), kNumIntrinsics);
+  }
   for (int i = 0; i < num_cameras; ++i) {
     problem_->AddParameterBlock(pose_block(i), kPoseBlockSize, pose_manifold_.get());
   }
@@ -84,17 +100,30 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
     const LayoutObservation& source = layout.observations[residual.source];
     const LayoutObservation& target = layout.observations[residual.target];
     camera_observed_[source.image] = camera_observed_[target.image] = true;
-    ceres::CostFunction* cost = nullptr;
-    if (cache_) {
-      cost = CachedCrossProjectionCost::Create(cache_.get(), residual.source, residual.target);
+    const int source_camera = cameras.camera_of_image[source.image];
+    const int target_camera = cameras.camera_of_image[target.image];
+    const Eigen::Vector2d source_pixel =
+        input.keypoints[source.image].row(source.keypoint).transpose();
+    const Eigen::Vector2d target_pixel =
+        input.keypoints[target.image].row(target.keypoint).transpose();
+    if (source_camera == target_camera) {
+      // One block (Ceres refuses a residual holding a block twice).
+      ceres::CostFunction* cost =
+          cache_ ? CachedCrossProjectionCost::Create(cache_.get(), residual.source, residual.target)
+                 : CrossProjectionAutoDiffCost::Create(source_pixel, target_pixel);
+      match_blocks_.push_back(problem_->AddResidualBlock(
+          cost, match_loss_.get(), intrinsics_block(source_camera), pose_block(source.image),
+          ray_time_block(source.ray_time), pose_block(target.image)));
     } else {
-      cost = CrossProjectionAutoDiffCost::Create(
-          input.keypoints[source.image].row(source.keypoint).transpose(),
-          input.keypoints[target.image].row(target.keypoint).transpose());
+      ceres::CostFunction* cost =
+          cache_ ? CachedTwoCameraCrossProjectionCost::Create(cache_.get(), residual.source,
+                                                              residual.target)
+                 : TwoCameraCrossProjectionAutoDiffCost::Create(source_pixel, target_pixel);
+      match_blocks_.push_back(
+          problem_->AddResidualBlock(cost, match_loss_.get(), intrinsics_block(source_camera),
+                                     pose_block(source.image), ray_time_block(source.ray_time),
+                                     intrinsics_block(target_camera), pose_block(target.image)));
     }
-    match_blocks_.push_back(problem_->AddResidualBlock(
-        cost, match_loss_.get(), intrinsics_.data(), pose_block(source.image),
-        ray_time_block(source.ray_time), pose_block(target.image)));
   }
 
   // Prior terms λp/N, λR/N (§3.3). A camera no match reaches is held at its start: its only
@@ -108,8 +137,8 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
     if (!camera_observed_[i]) problem_->SetParameterBlockConstant(pose_block(i));
   }
 
-  // Self-calibration (§3.1): the shared intrinsics are constant unless some are refined; the
-  // others are held by a subset manifold.
+  // Self-calibration (§3.1): the intrinsics blocks are constant unless some intrinsics are
+  // refined; the others are held by a subset manifold (one, shared by the blocks).
   const bool refined[kNumIntrinsics] = {
       settings.refine_focal,           settings.refine_focal,      settings.refine_principal_point,
       settings.refine_principal_point, settings.refine_distortion, settings.refine_distortion,
@@ -118,16 +147,20 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   for (int c = 0; c < kNumIntrinsics; ++c) {
     if (!refined[c]) held.push_back(c);
   }
-  if (held.size() == kNumIntrinsics) {
-    problem_->SetParameterBlockConstant(intrinsics_.data());
-  } else {
-    if (!held.empty()) {
-      intrinsics_manifold_ = std::make_unique<ceres::SubsetManifold>(kNumIntrinsics, held);
-      problem_->SetManifold(intrinsics_.data(), intrinsics_manifold_.get());
+  if (held.size() < kNumIntrinsics && !held.empty()) {
+    intrinsics_manifold_ = std::make_unique<ceres::SubsetManifold>(kNumIntrinsics, held);
+  }
+  for (int b = 0; b < num_blocks; ++b) {
+    if (!intrinsics_used_[b]) continue;
+    double* block = intrinsics_block(b);
+    if (held.size() == kNumIntrinsics) {
+      problem_->SetParameterBlockConstant(block);
+      continue;
     }
+    if (intrinsics_manifold_) problem_->SetManifold(block, intrinsics_manifold_.get());
     if (settings.refine_focal) {
-      problem_->SetParameterLowerBound(intrinsics_.data(), kFx, kFocalLowerBound);
-      problem_->SetParameterLowerBound(intrinsics_.data(), kFy, kFocalLowerBound);
+      problem_->SetParameterLowerBound(block, kFx, kFocalLowerBound);
+      problem_->SetParameterLowerBound(block, kFy, kFocalLowerBound);
     }
   }
 }
@@ -149,10 +182,13 @@ std::vector<Rigid3> RayTimeProblem::WorldFromCam() const {
   return poses;
 }
 
-CameraIntrinsics RayTimeProblem::Intrinsics() const {
-  CameraIntrinsics intrinsics = intrinsics_info_;
-  intrinsics.params = intrinsics_;
-  return intrinsics;
+std::vector<CameraIntrinsics> RayTimeProblem::Intrinsics() const {
+  std::vector<CameraIntrinsics> cameras = intrinsics_info_;
+  for (size_t b = 0; b < cameras.size(); ++b) {
+    std::copy_n(intrinsics_.begin() + kNumIntrinsics * b, kNumIntrinsics,
+                cameras[b].params.begin());
+  }
+  return cameras;
 }
 
 }  // namespace raytime

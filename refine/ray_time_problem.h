@@ -1,8 +1,10 @@
 // The Ceres problem of paper §3.2–3.4 and §3.7, built once from a layout: parameter blocks
-// (shared intrinsics 8, one 7-vector pose per camera on the quaternion × R³ manifold, one ray
-// time per layout ray time bounded below at 1e-9), the cross-projection residuals under one
-// shared arctan loss whose scale GNC changes between stages without rebuilding, and the pose
-// priors.
+// (intrinsics 8 per intrinsics block some residual reaches: one for shared intrinsics, one per
+// camera for per-image intrinsics, refine/camera_blocks.h; one 7-vector pose per image on the
+// quaternion × R³ manifold; one ray time per layout ray time bounded below at 1e-9), the
+// cross-projection residuals (the one- or two-block variant by the images' blocks,
+// cross_projection_cost.h) under one shared arctan loss whose scale GNC changes between stages
+// without rebuilding, and the pose priors.
 //
 // Loss normalization: Ceres minimizes ½ Σ ρ_b(|f_b|²). The match residuals carry
 // ScaledLoss(ArctanLoss(a), 2/S) with S = 2 × (number of 2-vector residuals) the count of scalar
@@ -16,10 +18,10 @@
 #include <ceres/manifold.h>
 #include <ceres/problem.h>
 
-#include <array>
 #include <memory>
 #include <vector>
 
+#include "refine/camera_blocks.h"
 #include "refine/evaluation_cache.h"
 #include "refine/problem_layout.h"
 #include "refine/ray_geometry.h"
@@ -40,12 +42,12 @@ struct RayTimeProblemSettings {
 class RayTimeProblem {
  public:
   // `prior_world_from_cam` anchors the prior terms; the solve starts at
-  // `initial_world_from_cam`, `initial_intrinsics` and `initial_ray_times` (one per layout ray
-  // time). `input` and `layout` must outlive the problem.
+  // `initial_world_from_cam`, the intrinsics of `cameras` (its blocks, and which image uses
+  // which) and `initial_ray_times` (one per layout ray time). `input` and `layout` must outlive
+  // the problem.
   RayTimeProblem(const RefineInput& input, const ProblemLayout& layout,
                  const std::vector<Rigid3>& prior_world_from_cam,
-                 const std::vector<Rigid3>& initial_world_from_cam,
-                 const CameraIntrinsics& initial_intrinsics,
+                 const std::vector<Rigid3>& initial_world_from_cam, const CameraBlocks& cameras,
                  const std::vector<double>& initial_ray_times,
                  const RayTimeProblemSettings& settings);
   ~RayTimeProblem();
@@ -57,12 +59,14 @@ class RayTimeProblem {
 
   ceres::Problem& problem() { return *problem_; }
   std::vector<Rigid3> WorldFromCam() const;
-  CameraIntrinsics Intrinsics() const;
+  // One per block of the `cameras` given: the solved intrinsics (the initial ones of a block no
+  // residual reaches).
+  std::vector<CameraIntrinsics> Intrinsics() const;
   const std::vector<double>& ray_times() const { return ray_times_; }
   // Null when the cache is off.
   ObservationCache* cache() { return cache_.get(); }
   // Parameter blocks, for tests.
-  double* intrinsics_block() { return intrinsics_.data(); }
+  double* intrinsics_block(int camera) { return intrinsics_.data() + kNumIntrinsics * camera; }
   double* pose_block(int image) { return poses_.data() + kPoseBlockSize * image; }
   double* ray_time_block(int ray_time) { return ray_times_.data() + ray_time; }
   // The cross-projection residual blocks in layout order, and the prior blocks per camera.
@@ -70,15 +74,18 @@ class RayTimeProblem {
   const std::vector<ceres::ResidualBlockId>& prior_blocks() const { return prior_blocks_; }
   // 2/S, the ScaledLoss factor of the match term (see the file comment).
   double match_loss_weight() const { return match_loss_weight_; }
-  // Per camera: whether some residual reaches it (the others are held constant).
+  // Per image: whether some residual reaches it (the others are held constant).
   const std::vector<bool>& camera_observed() const { return camera_observed_; }
+  // Per intrinsics block: whether some residual reaches it (only those are in the problem).
+  const std::vector<bool>& intrinsics_used() const { return intrinsics_used_; }
 
  private:
-  CameraIntrinsics intrinsics_info_;
-  std::array<double, kNumIntrinsics> intrinsics_;
+  std::vector<CameraIntrinsics> intrinsics_info_;
+  std::vector<double> intrinsics_;  // kNumIntrinsics per block
   std::vector<double> poses_;
   std::vector<double> ray_times_;
   std::vector<bool> camera_observed_;
+  std::vector<bool> intrinsics_used_;
   std::unique_ptr<ObservationCache> cache_;
   std::unique_ptr<ceres::Manifold> pose_manifold_;
   std::unique_ptr<ceres::Manifold> intrinsics_manifold_;

@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/options.h"
 #include "core/timing.h"
+#include "refine/camera_blocks.h"
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
@@ -30,10 +31,23 @@ void ValidateInput(const RefineInput& input) {
     throw InputError("refine: " + std::to_string(n) + " prior poses but keypoints for " +
                      std::to_string(input.keypoints.size()) + " images");
   }
-  const auto& p = input.intrinsics.params;
-  if (!(p[kFx] > 0) || !(p[kFy] > 0)) {
-    throw InputError("refine: the shared intrinsics need positive focal lengths, got fx = " +
-                     std::to_string(p[kFx]) + ", fy = " + std::to_string(p[kFy]));
+  if (input.camera_index.size() != n) {
+    throw InputError("refine: " + std::to_string(n) + " prior poses but camera indices for " +
+                     std::to_string(input.camera_index.size()) + " images");
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const int camera = input.camera_index[i];
+    if (camera < 0 || camera >= static_cast<int>(input.cameras.size())) {
+      throw InputError("refine: image " + std::to_string(i) + " has camera index " +
+                       std::to_string(camera) + " but there are " +
+                       std::to_string(input.cameras.size()) + " cameras");
+    }
+    const auto& p = input.cameras[camera].params;
+    if (!(p[kFx] > 0) || !(p[kFy] > 0)) {
+      throw InputError("refine: camera " + std::to_string(camera) +
+                       " needs positive focal lengths, got fx = " + std::to_string(p[kFx]) +
+                       ", fy = " + std::to_string(p[kFy]));
+    }
   }
 }
 
@@ -56,7 +70,7 @@ struct PassSettings {
 // layout (its used matches) for the inconsistent-pairs test.
 struct PassState {
   std::vector<Rigid3> world_from_cam;
-  CameraIntrinsics intrinsics;
+  CameraBlocks cameras;  // the intrinsics blocks, at their current values
   std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
   ProblemLayout layout;
 };
@@ -76,8 +90,8 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
           : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
   const ProblemLayout& layout = state->layout;
   std::vector<double> ray_times =
-      InitialRayTimes(layout, input, state->world_from_cam, state->intrinsics,
-                      options.ray_time_init, options.ray_time_constant_m, &pass.ray_time_init);
+      InitialRayTimes(layout, input, state->world_from_cam, state->cameras, options.ray_time_init,
+                      options.ray_time_constant_m, &pass.ray_time_init);
   // A later pass starts every ray time an earlier pass solved from its solved value.
   for (size_t t = 0; t < ray_times.size(); ++t) {
     const auto it = state->ray_time_by_observation.find(
@@ -94,7 +108,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   problem_settings.refine_distortion = settings.refine_distortion;
   problem_settings.use_evaluation_cache = options.use_evaluation_cache;
   problem_settings.num_threads = options.Threads();
-  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->intrinsics, ray_times,
+  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
                          problem_settings);
   pass.build_seconds = SecondsSince(build_start);
 
@@ -122,7 +136,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.solve_seconds = SecondsSince(solve_start);
 
   state->world_from_cam = problem.WorldFromCam();
-  state->intrinsics = problem.Intrinsics();
+  state->cameras.cameras = problem.Intrinsics();
   std::vector<double> solved_ray_times = problem.ray_times();
   pass.gauge_polish = PolishGauge(anchor, problem.camera_observed(), options.position_weight,
                                   settings.orientation_weight, options.gauge_orientation_weight,
@@ -164,8 +178,27 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
     const int s = slot[match.pair];
     pairs[s].observations.row(filled[s]++) << match.observation1, match.observation2;
   }
-  const IntrinsicsVector intrinsics(state.intrinsics.params.data());
-  return PairResidualMedians(intrinsics, state.world_from_cam, images, pixels, pairs);
+  std::vector<IntrinsicsVector> image_intrinsics;
+  for (size_t i = 0; i < input.prior_world_from_cam.size(); ++i) {
+    image_intrinsics.emplace_back(state.cameras.Of(static_cast<int>(i)).params.data());
+  }
+  return PairResidualMedians(image_intrinsics, state.world_from_cam, images, pixels, pairs);
+}
+
+// The blocks of the last pass's layout and the fewest observations one of them has.
+void CountBlocks(const PassState& state, CameraBlocksSummary* summary) {
+  std::vector<int> observations(state.cameras.cameras.size(), 0);
+  for (const LayoutObservation& obs : state.layout.observations) {
+    ++observations[state.cameras.camera_of_image[obs.image]];
+  }
+  summary->num_blocks = 0;
+  summary->min_block_observations = 0;
+  for (const int count : observations) {
+    if (count == 0) continue;
+    summary->min_block_observations =
+        summary->num_blocks == 0 ? count : std::min(summary->min_block_observations, count);
+    ++summary->num_blocks;
+  }
 }
 
 }  // namespace
@@ -181,7 +214,27 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   for (Rigid3& pose : prior) pose.rotation.normalize();
   PassState state;
   state.world_from_cam = prior;
-  state.intrinsics = input.intrinsics;
+  // The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating
+  // one, else the images' own cameras. Every pass of the run uses the same blocks.
+  summary.cameras.sharing = options.intrinsics_sharing;
+  std::vector<bool> camera_in_use(input.cameras.size(), false);
+  for (const int camera : input.camera_index) camera_in_use[camera] = true;
+  summary.cameras.num_cameras =
+      static_cast<int>(std::count(camera_in_use.begin(), camera_in_use.end(), true));
+  if (options.intrinsics_sharing == "shared") {  // self-calibrating (RefineOptions relations)
+    state.cameras = SharedBlock(input, &summary.cameras.max_start_disagreement_px);
+    summary.cameras.cameras_differ =
+        summary.cameras.max_start_disagreement_px > kSharedCameraTolerancePx;
+    if (summary.cameras.cameras_differ) {
+      spdlog::warn(
+          "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
+          "started at their median (intrinsics_sharing: shared); their per-image values are "
+          "replaced by one refined set",
+          summary.cameras.num_cameras, summary.cameras.max_start_disagreement_px);
+    }
+  } else {
+    state.cameras = PerCameraBlocks(input);
+  }
 
   PassSettings nominal;
   nominal.name = "solve";
@@ -218,6 +271,14 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
       summary.solver_failed = summary.solver_failed || stage.termination == "FAILURE";
     }
   }
+  CountBlocks(state, &summary.cameras);
+  spdlog::info(
+      "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: "
+      "{}",
+      summary.cameras.num_cameras, summary.cameras.num_blocks,
+      options.SelfCalibrates() ? "self-calibrated, " : "fixed",
+      options.SelfCalibrates() ? options.intrinsics_sharing : "",
+      summary.cameras.min_block_observations);
   summary.initial_cost = summary.passes.front().stages.front().initial_cost;
   const RefinePassSummary& last = summary.passes.back();
   summary.final_cost = last.stages.back().final_cost -
@@ -247,9 +308,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   }
 
   output->solved_world_from_cam = state.world_from_cam;
-  output->solved_intrinsics = state.intrinsics;
+  output->solved_cameras = InputCameras(input, state.cameras);
   output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
-  output->intrinsics = summary.returned_prior ? input.intrinsics : state.intrinsics;
+  output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
   summary.total_seconds = SecondsSince(start);
   if (summary.trust_region.enabled) {
     spdlog::info(
@@ -297,6 +358,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
 
 nlohmann::json RefineSummary::ToJson() const {
   return {{"passes", passes},
+          {"cameras", cameras},
           {"total_iterations", total_iterations},
           {"initial_cost", initial_cost},
           {"final_cost", final_cost},

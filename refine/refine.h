@@ -1,8 +1,8 @@
-// The ray-time refiner (SPEC §3; paper §3): refines camera poses (and optionally the shared
+// The ray-time refiner (SPEC §3; paper §3): refines camera poses (and optionally the
 // intrinsics) from a coarse pose prior and feature matches in one sparse solve without
 // triangulation. Entry point: RefinePoses. The solver never sees ground truth.
 //
-//   RefineInput input;             // intrinsics, prior world_from_cam, keypoints, matches
+//   RefineInput input;             // cameras, prior world_from_cam, keypoints, matches
 //   RefineOutput output;
 //   const RefineSummary summary = RefinePoses(input, RefineOptions(), &output);
 //   if (summary.returned_prior) ...  // a guardrail fired: output holds the prior
@@ -32,18 +32,27 @@ struct PairMatchIndices {
 using Keypoints = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
 
 struct RefineInput {
-  CameraIntrinsics intrinsics;               // shared by every image (SPEC §2)
+  // The cameras' intrinsics (SPEC §2) and, per image, the index of its camera: one camera when
+  // the images share intrinsics (the paper's setting, §3.1), several for per-frame intrinsics
+  // (phone captures). refine/camera_blocks.h says how they become the solve's parameter blocks.
+  std::vector<CameraIntrinsics> cameras;
+  std::vector<int> camera_index;             // one per image, into cameras
   std::vector<Rigid3> prior_world_from_cam;  // one per image
   std::vector<Keypoints> keypoints;          // per image: distorted pixels, OpenCV convention
   std::vector<PairMatchIndices> pairs;       // indices into the images above
+
+  const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
 };
 
 struct RefineOutput {
   std::vector<Rigid3> world_from_cam;  // the solution, or the prior when a guardrail fired
-  CameraIntrinsics intrinsics;         // refined when self-calibrating, else the input's
+  // Per camera of the input: refined when self-calibrating (with intrinsics_sharing 'shared',
+  // every camera an image uses holds the one shared set), else the input's; the input's also
+  // when a guardrail fired.
+  std::vector<CameraIntrinsics> cameras;
   // The solve's own result even when the prior was returned (for diagnostics).
   std::vector<Rigid3> solved_world_from_cam;
-  CameraIntrinsics solved_intrinsics;
+  std::vector<CameraIntrinsics> solved_cameras;
 };
 
 // One Ceres solve of the GNC schedule (§3.5).
@@ -155,8 +164,27 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num
                                    num_inconsistent, fraction, median_pair_px, pair_threshold_px,
                                    fraction_threshold, pairs)
 
+// How the images' cameras became the solve's intrinsics blocks (refine/camera_blocks.h).
+struct CameraBlocksSummary {
+  std::string sharing;  // RefineOptions::intrinsics_sharing
+  int num_cameras = 0;  // distinct cameras among the images (RefineInput::cameras in use)
+  // Intrinsics blocks the last pass's residuals reach (held constant unless self-calibrating),
+  // and the fewest observations (undistorted in its camera) one of them has.
+  int num_blocks = 0;
+  int min_block_observations = 0;
+  // 'shared' only: the largest CameraDisagreementPx between an image's given camera and the
+  // shared start, and whether it exceeds kSharedCameraTolerancePx (the given per-image
+  // intrinsics were replaced by one set: the stage's warning cameras_shared).
+  double max_start_disagreement_px = 0.0;
+  bool cameras_differ = false;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(CameraBlocksSummary, sharing, num_cameras, num_blocks,
+                                   min_block_observations, max_start_disagreement_px,
+                                   cameras_differ)
+
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
+  CameraBlocksSummary cameras;
   // Totals over passes and stages.
   int total_iterations = 0;
   double initial_cost = 0.0;  // first stage of the first pass

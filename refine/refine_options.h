@@ -50,11 +50,21 @@ struct RefineOptions {
   int max_matches_per_pair = 0;
   int match_cap_seed = 0;
 
-  // Self-calibration of the shared intrinsics (§3.1, §4.3); all off in headline object runs,
-  // where the intrinsics block is constant.
+  // Self-calibration of the intrinsics (§3.1, §4.3); all off in headline object runs, where the
+  // intrinsics blocks are constant and every image keeps its own camera's intrinsics as given.
   bool refine_focal = false;            // fx, fy (bounded positive)
   bool refine_principal_point = false;  // cx, cy
   bool refine_distortion = false;       // k1, k2, p1, p2
+  // What self-calibration refines when the images come with several cameras (per-frame intrinsics
+  // of phone captures; MobileBrick's focal drifts 0.9–2.9 % per scene, §4.6 "Ablation"):
+  // "per_camera" = one set per camera of the input, each image on its own camera's set (a
+  // single-camera capture has the paper's one shared set, §3.1); "shared" = one set for every
+  // image, started at the per-parameter median over the images of their cameras' values, with the
+  // warning cameras_shared when a given camera differs from that start by more than 1 px on the
+  // image (refine/camera_blocks.h). Per-camera sets need enough observations per camera to be
+  // determined (a principal point is nearly a rotation of its own camera). With fixed intrinsics
+  // the images' cameras are used as given, so "shared" needs a refine_* option.
+  std::string intrinsics_sharing = "per_camera";
 
   // Shared evaluation cache (§3.7): undistortion and ray points once per observation per
   // evaluation point, copied into each residual's Jacobian. Off: every residual recomputes its
@@ -158,6 +168,10 @@ struct RefineOptions {
       "Self-calibrate the principal point cx, cy (§3.1, §4.3)");
     v("refine_distortion", refine_distortion,
       "Self-calibrate the distortion k1, k2, p1, p2 (§3.1, §4.3)");
+    v("intrinsics_sharing", intrinsics_sharing,
+      "Self-calibration of several cameras: one set per camera, or one set for all images started "
+      "at their median (§3.1, §4.6 focal drift)",
+      OneOf({"per_camera", "shared"}));
     v("use_evaluation_cache", use_evaluation_cache,
       "Shared evaluation cache: undistortion and ray points once per observation (§3.7)");
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
@@ -198,6 +212,15 @@ struct RefineOptions {
       "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative());
     v("stage1_max_matches_per_pair", stage1_max_matches_per_pair,
       "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative());
+  }
+
+  // Fixed intrinsics are each image's own: a shared set exists only to be refined.
+  void CheckRelations(const Requirement& require) const {
+    require(intrinsics_sharing != "shared" || SelfCalibrates(),
+            "intrinsics_sharing 'shared' replaces the images' cameras by one set of intrinsics "
+            "to self-calibrate, so it needs refine_focal, refine_principal_point or "
+            "refine_distortion; with fixed intrinsics every image uses its own camera as given "
+            "(intrinsics_sharing: per_camera)");
   }
 
   // True when any intrinsic is refined.

@@ -141,6 +141,20 @@ TEST(PipelineOptionsTest, EveryOptionOfEveryStageIsDocumented) {
   EXPECT_NE(it->HelpText().find("one of: per_observation, anchored"), std::string::npos);
 }
 
+// A shared set of intrinsics exists only to be self-calibrated (refine/refine_options.h): the
+// relation is checked once every key is in place, in whatever order they came.
+TEST(PipelineOptionsTest, SharedIntrinsicsNeedSelfCalibration) {
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  const std::string message =
+      ErrorOf([&] { refine->Configure(YAML::Load("{intrinsics_sharing: shared}"), "p.yaml"); });
+  EXPECT_NE(message.find("intrinsics_sharing 'shared'"), std::string::npos) << message;
+  EXPECT_NE(message.find("refine_focal"), std::string::npos) << message;
+  EXPECT_NO_THROW(refine->Configure(
+      YAML::Load("{intrinsics_sharing: shared, refine_distortion: true}"), "p.yaml"));
+  EXPECT_NO_THROW(
+      refine->Configure(YAML::Load("{preset: room-staged, intrinsics_sharing: shared}"), "p.yaml"));
+}
+
 TEST(PipelineOptionsTest, EnumerationErrorsSuggestTheNearestValue) {
   std::unique_ptr<Stage> matches = CreateStage("matches");
   const std::string message =

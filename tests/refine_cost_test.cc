@@ -1,7 +1,8 @@
 // The refiner's objective (paper §3.2–3.3, §3.7): cross-projection residuals vanish at the ground
 // truth, Ceres' total cost is exactly the energy of eq. (energy), and the shared evaluation
 // cache's "gradient surgery" Jacobians equal both the uncached automatic derivatives and
-// numeric differentiation, with and without distortion and with self-calibration.
+// numeric differentiation, with and without distortion, with self-calibration, and with
+// per-image intrinsics (the two-block cost variant of cross_projection_cost.h).
 #include <ceres/crs_matrix.h>
 #include <ceres/numeric_diff_cost_function.h>
 #include <gtest/gtest.h>
@@ -9,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <string>
 
 #include "core/geometry.h"
 #include "refine/cross_projection_cost.h"
@@ -21,12 +23,18 @@
 namespace raytime {
 namespace {
 
-SyntheticSceneOptions SmallScene(bool distortion) {
+// "pinhole", "distorted", or "per_image": distorted, each image with its own camera (focal 3 %,
+// principal point 8 px apart), so every residual is of the two-block variant.
+SyntheticSceneOptions SmallScene(const std::string& kind) {
   SyntheticSceneOptions options;
   options.num_cameras = 5;
   options.num_points = 120;
-  options.distortion = distortion;
-  options.seed = distortion ? 7 : 3;
+  options.distortion = kind != "pinhole";
+  options.seed = kind == "pinhole" ? 3 : 7;
+  if (kind == "per_image") {
+    options.focal_drift = 0.03;
+    options.principal_point_drift_px = 8.0;
+  }
   return options;
 }
 
@@ -49,7 +57,7 @@ std::vector<double> MatchResiduals(RayTimeProblem* problem) {
   return residuals;
 }
 
-class RefineObjectiveTest : public ::testing::TestWithParam<bool> {};  // param: distortion
+class RefineObjectiveTest : public ::testing::TestWithParam<const char*> {};  // SmallScene kind
 
 TEST_P(RefineObjectiveTest, ResidualsVanishAtGroundTruth) {
   const SyntheticScene scene = MakeSyntheticScene(SmallScene(GetParam()));
@@ -61,7 +69,7 @@ TEST_P(RefineObjectiveTest, ResidualsVanishAtGroundTruth) {
     for (const bool cache : {true, false}) {
       SCOPED_TRACE(cache ? "cached" : "uncached");
       RayTimeProblem problem(scene.input, layout, scene.ground_truth, scene.ground_truth,
-                             scene.input.intrinsics, TrueRayTimes(scene, layout),
+                             PerCameraBlocks(scene.input), TrueRayTimes(scene, layout),
                              Settings(cache, false));
       double worst = 0.0;
       for (double r : MatchResiduals(&problem)) worst = std::max(worst, std::abs(r));
@@ -85,7 +93,7 @@ TEST_P(RefineObjectiveTest, TotalCostEqualsTheEnergyFormula) {
   RayTimeProblemSettings settings = Settings(true, false);
   settings.position_weight = 0.7;  // non-default weights, so each term is checked on its own
   settings.orientation_weight = 250.0;
-  RayTimeProblem problem(scene.input, layout, prior, start, scene.input.intrinsics, ray_times,
+  RayTimeProblem problem(scene.input, layout, prior, start, PerCameraBlocks(scene.input), ray_times,
                          settings);
   const int num_matches = layout.num_matches_used;
   const int num_cameras = static_cast<int>(start.size());
@@ -98,12 +106,13 @@ TEST_P(RefineObjectiveTest, TotalCostEqualsTheEnergyFormula) {
     for (const CrossProjection& residual : layout.residuals) {
       const LayoutObservation& s = layout.observations[residual.source];
       const LayoutObservation& t = layout.observations[residual.target];
-      const CrossProjectionAutoDiffCost functor(
-          scene.input.keypoints[s.image].row(s.keypoint).transpose(),
-          scene.input.keypoints[t.image].row(t.keypoint).transpose());
       double r[2];
-      functor(problem.intrinsics_block(), problem.pose_block(s.image),
-              problem.ray_time_block(s.ray_time), problem.pose_block(t.image), r);
+      CrossProjectionResidual(problem.intrinsics_block(scene.input.camera_index[s.image]),
+                              problem.pose_block(s.image), *problem.ray_time_block(s.ray_time),
+                              problem.intrinsics_block(scene.input.camera_index[t.image]),
+                              problem.pose_block(t.image),
+                              scene.input.keypoints[s.image].row(s.keypoint).transpose(),
+                              scene.input.keypoints[t.image].row(t.keypoint).transpose(), r);
       const double sq = r[0] * r[0] + r[1] * r[1];
       match_sum += a * std::atan(sq / a);
     }
@@ -123,19 +132,18 @@ TEST_P(RefineObjectiveTest, TotalCostEqualsTheEnergyFormula) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Distortion, RefineObjectiveTest, ::testing::Bool(),
-                         [](const auto& info) { return info.param ? "distorted" : "pinhole"; });
+INSTANTIATE_TEST_SUITE_P(Scenes, RefineObjectiveTest,
+                         ::testing::Values("pinhole", "distorted", "per_image"),
+                         [](const auto& info) { return std::string(info.param); });
 
 // Jacobian checks of single residuals at a perturbed state.
 struct JacobianCase {
   const char* name;
-  bool distortion;
+  const char* scene;        // SmallScene kind
   bool perturb_intrinsics;  // self-calibration: intrinsics away from their true values
 };
 
 class RefineJacobianTest : public ::testing::TestWithParam<JacobianCase> {};
-
-constexpr int kBlockSizes[4] = {kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize};
 
 double RelativeDifference(const std::vector<double>& a, const std::vector<double>& b) {
   double diff = 0.0, norm = 0.0;
@@ -146,74 +154,166 @@ double RelativeDifference(const std::vector<double>& a, const std::vector<double
   return std::sqrt(diff) / std::max(std::sqrt(norm), 1e-300);
 }
 
+// The starting intrinsics of a case: the scene's, or every camera moved off its true values.
+CameraBlocks CaseCameras(const SyntheticScene& scene, bool perturb) {
+  CameraBlocks cameras = PerCameraBlocks(scene.input);
+  if (!perturb) return cameras;
+  for (CameraIntrinsics& camera : cameras.cameras) {
+    auto& p = camera.params;
+    p = {p[kFx] * 1.015, p[kFy] * 0.99, p[kCx] - 10.5, p[kCy] + 6.0, -0.05, 0.01, 1e-3, -5e-4};
+  }
+  return cameras;
+}
+
+// Residual and Jacobians of `costs` (same blocks) at `parameters`: one row per cost, one vector
+// per parameter block.
+struct Evaluation {
+  double residual[2];
+  std::vector<std::vector<double>> jacobians;
+};
+
+Evaluation Evaluate(const ceres::CostFunction& cost, const double* const* parameters) {
+  Evaluation out;
+  std::vector<double*> pointers;
+  for (const int32_t size : cost.parameter_block_sizes()) {
+    out.jacobians.emplace_back(2 * size, 0.0);
+    pointers.push_back(out.jacobians.back().data());
+  }
+  EXPECT_TRUE(cost.Evaluate(parameters, out.residual, pointers.data()));
+  return out;
+}
+
+// Ridders' default first step is 1 % of a parameter (an absolute 0.01 for a zero p1), far
+// outside the lens range where 5 Newton iterations converge; start small instead.
+ceres::NumericDiffOptions NumericOptions() {
+  ceres::NumericDiffOptions options;
+  options.ridders_relative_initial_step_size = 1e-4;
+  return options;
+}
+
 TEST_P(RefineJacobianTest, CachedEqualsAutoDiffAndNumeric) {
   const JacobianCase& c = GetParam();
-  const SyntheticScene scene = MakeSyntheticScene(SmallScene(c.distortion));
+  const SyntheticScene scene = MakeSyntheticScene(SmallScene(c.scene));
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
-  CameraIntrinsics intrinsics = scene.input.intrinsics;
-  if (c.perturb_intrinsics) {
-    intrinsics.params = {1420.0, 1380.0, 760.0, 515.0, -0.05, 0.01, 1e-3, -5e-4};
-  }
+  const CameraBlocks cameras = CaseCameras(scene, c.perturb_intrinsics);
   RayTimeProblem problem(scene.input, layout, scene.ground_truth,
-                         JitterPoses(scene.ground_truth, 2.0, 0.3, 21), intrinsics,
+                         JitterPoses(scene.ground_truth, 2.0, 0.3, 21), cameras,
                          JitterValues(TrueRayTimes(scene, layout), 0.2, 22),
                          Settings(true, c.perturb_intrinsics));
   problem.cache()->PrepareForEvaluation(/*evaluate_jacobians=*/true, /*new_point=*/true);
 
   double worst_autodiff = 0.0, worst_numeric = 0.0;
+  int two_block_residuals = 0;
   for (size_t n = 0; n < layout.residuals.size(); n += 7) {
     const CrossProjection& residual = layout.residuals[n];
     const LayoutObservation& s = layout.observations[residual.source];
     const LayoutObservation& t = layout.observations[residual.target];
     const Eigen::Vector2d source_pixel = scene.input.keypoints[s.image].row(s.keypoint);
     const Eigen::Vector2d target_pixel = scene.input.keypoints[t.image].row(t.keypoint);
-    std::unique_ptr<ceres::CostFunction> cached(
-        CachedCrossProjectionCost::Create(problem.cache(), residual.source, residual.target));
-    std::unique_ptr<ceres::CostFunction> autodiff(
-        CrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
-    // Ridders' default first step is 1 % of a parameter (an absolute 0.01 for a zero p1), far
-    // outside the lens range where 5 Newton iterations converge; start small instead.
-    ceres::NumericDiffOptions numeric_options;
-    numeric_options.ridders_relative_initial_step_size = 1e-4;
-    std::unique_ptr<ceres::CostFunction> numeric(
-        new ceres::NumericDiffCostFunction<CrossProjectionAutoDiffCost, ceres::RIDDERS, 2,
-                                           kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize>(
-            new CrossProjectionAutoDiffCost(source_pixel, target_pixel), ceres::TAKE_OWNERSHIP, 2,
-            numeric_options));
-    const double* parameters[4] = {problem.intrinsics_block(), problem.pose_block(s.image),
-                                   problem.ray_time_block(s.ray_time), problem.pose_block(t.image)};
-    std::vector<double> J[3][4];
-    double* jacobians[3][4];
-    double residuals[3][2];
-    for (int f = 0; f < 3; ++f) {
-      for (int b = 0; b < 4; ++b) {
-        J[f][b].assign(2 * kBlockSizes[b], 0.0);
-        jacobians[f][b] = J[f][b].data();
-      }
+    const int source_camera = cameras.camera_of_image[s.image];
+    const int target_camera = cameras.camera_of_image[t.image];
+    std::unique_ptr<ceres::CostFunction> cost[3];  // cached, autodiff, numeric
+    std::vector<const double*> parameters;
+    if (source_camera == target_camera) {
+      cost[0].reset(
+          CachedCrossProjectionCost::Create(problem.cache(), residual.source, residual.target));
+      cost[1].reset(CrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
+      cost[2].reset(
+          new ceres::NumericDiffCostFunction<CrossProjectionAutoDiffCost, ceres::RIDDERS, 2,
+                                             kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize>(
+              new CrossProjectionAutoDiffCost(source_pixel, target_pixel), ceres::TAKE_OWNERSHIP, 2,
+              NumericOptions()));
+      parameters = {problem.intrinsics_block(source_camera), problem.pose_block(s.image),
+                    problem.ray_time_block(s.ray_time), problem.pose_block(t.image)};
+    } else {
+      ++two_block_residuals;
+      cost[0].reset(CachedTwoCameraCrossProjectionCost::Create(problem.cache(), residual.source,
+                                                               residual.target));
+      cost[1].reset(TwoCameraCrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
+      cost[2].reset(
+          new ceres::NumericDiffCostFunction<TwoCameraCrossProjectionAutoDiffCost, ceres::RIDDERS,
+                                             2, kNumIntrinsics, kPoseBlockSize, 1, kNumIntrinsics,
+                                             kPoseBlockSize>(
+              new TwoCameraCrossProjectionAutoDiffCost(source_pixel, target_pixel),
+              ceres::TAKE_OWNERSHIP, 2, NumericOptions()));
+      parameters = {problem.intrinsics_block(source_camera), problem.pose_block(s.image),
+                    problem.ray_time_block(s.ray_time), problem.intrinsics_block(target_camera),
+                    problem.pose_block(t.image)};
     }
-    ASSERT_TRUE(cached->Evaluate(parameters, residuals[0], jacobians[0]));
-    ASSERT_TRUE(autodiff->Evaluate(parameters, residuals[1], jacobians[1]));
-    ASSERT_TRUE(numeric->Evaluate(parameters, residuals[2], jacobians[2]));
-    EXPECT_NEAR(residuals[0][0], residuals[1][0], 1e-9);
-    EXPECT_NEAR(residuals[0][1], residuals[1][1], 1e-9);
-    for (int b = 0; b < 4; ++b) {
-      const double ad = RelativeDifference(J[0][b], J[1][b]);
-      const double nd = RelativeDifference(J[0][b], J[2][b]);
+    const Evaluation cached = Evaluate(*cost[0], parameters.data());
+    const Evaluation autodiff = Evaluate(*cost[1], parameters.data());
+    const Evaluation numeric = Evaluate(*cost[2], parameters.data());
+    EXPECT_NEAR(cached.residual[0], autodiff.residual[0], 1e-9);
+    EXPECT_NEAR(cached.residual[1], autodiff.residual[1], 1e-9);
+    for (size_t b = 0; b < parameters.size(); ++b) {
+      const double ad = RelativeDifference(cached.jacobians[b], autodiff.jacobians[b]);
+      const double nd = RelativeDifference(cached.jacobians[b], numeric.jacobians[b]);
       worst_autodiff = std::max(worst_autodiff, ad);
       worst_numeric = std::max(worst_numeric, nd);
       EXPECT_LT(ad, 1e-10) << "block " << b << " residual " << n;
       EXPECT_LT(nd, 1e-6) << "block " << b << " residual " << n;
     }
   }
+  if (std::string(c.scene) == "per_image") {
+    EXPECT_GT(two_block_residuals, 50) << "every residual joins two cameras";
+  } else {
+    EXPECT_EQ(two_block_residuals, 0);
+  }
   std::printf("%s: worst relative Jacobian difference %.2e vs autodiff, %.2e vs numeric\n", c.name,
               worst_autodiff, worst_numeric);
+}
+
+// The two-block variant on one camera's intrinsics given twice is the one-block variant: the same
+// residual and pose and ray-time Jacobians bit for bit, and intrinsics Jacobians that sum to the
+// one-block one (cached and automatic differentiation alike).
+TEST(RefineTwoCameraCostTest, TwoBlocksOfOneCameraAreTheOneBlockVariant) {
+  const SyntheticScene scene = MakeSyntheticScene(SmallScene("distorted"));
+  const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
+  const CameraBlocks cameras = CaseCameras(scene, true);
+  RayTimeProblem problem(scene.input, layout, scene.ground_truth,
+                         JitterPoses(scene.ground_truth, 2.0, 0.3, 23), cameras,
+                         JitterValues(TrueRayTimes(scene, layout), 0.2, 24), Settings(true, true));
+  problem.cache()->PrepareForEvaluation(true, true);
+  for (size_t n = 0; n < layout.residuals.size(); n += 11) {
+    const CrossProjection& residual = layout.residuals[n];
+    const LayoutObservation& s = layout.observations[residual.source];
+    const LayoutObservation& t = layout.observations[residual.target];
+    const Eigen::Vector2d source_pixel = scene.input.keypoints[s.image].row(s.keypoint);
+    const Eigen::Vector2d target_pixel = scene.input.keypoints[t.image].row(t.keypoint);
+    const double* one[4] = {problem.intrinsics_block(0), problem.pose_block(s.image),
+                            problem.ray_time_block(s.ray_time), problem.pose_block(t.image)};
+    const double* two[5] = {problem.intrinsics_block(0), problem.pose_block(s.image),
+                            problem.ray_time_block(s.ray_time), problem.intrinsics_block(0),
+                            problem.pose_block(t.image)};
+    for (const bool cached : {true, false}) {
+      SCOPED_TRACE(cached ? "cached" : "autodiff");
+      std::unique_ptr<ceres::CostFunction> one_block(
+          cached
+              ? CachedCrossProjectionCost::Create(problem.cache(), residual.source, residual.target)
+              : CrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
+      std::unique_ptr<ceres::CostFunction> two_blocks(
+          cached ? CachedTwoCameraCrossProjectionCost::Create(problem.cache(), residual.source,
+                                                              residual.target)
+                 : TwoCameraCrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
+      const Evaluation a = Evaluate(*one_block, one);
+      const Evaluation b = Evaluate(*two_blocks, two);
+      EXPECT_EQ(a.residual[0], b.residual[0]);
+      EXPECT_EQ(a.residual[1], b.residual[1]);
+      EXPECT_EQ(a.jacobians[1], b.jacobians[1]);  // source pose
+      EXPECT_EQ(a.jacobians[2], b.jacobians[2]);  // ray time
+      EXPECT_EQ(a.jacobians[3], b.jacobians[4]);  // target pose
+      std::vector<double> sum(2 * kNumIntrinsics);
+      for (size_t k = 0; k < sum.size(); ++k) sum[k] = b.jacobians[0][k] + b.jacobians[3][k];
+      EXPECT_LT(RelativeDifference(sum, a.jacobians[0]), 1e-12) << "residual " << n;
+    }
+  }
 }
 
 // The whole problem, through Ceres (manifolds, constant blocks, loss): cached and uncached give
 // the same cost, gradient and Jacobian.
 TEST_P(RefineJacobianTest, CachedAndUncachedProblemsAgree) {
   const JacobianCase& c = GetParam();
-  const SyntheticScene scene = MakeSyntheticScene(SmallScene(c.distortion));
+  const SyntheticScene scene = MakeSyntheticScene(SmallScene(c.scene));
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
   const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 2.0, 0.3, 31);
   const std::vector<double> ray_times = JitterValues(TrueRayTimes(scene, layout), 0.2, 32);
@@ -221,8 +321,9 @@ TEST_P(RefineJacobianTest, CachedAndUncachedProblemsAgree) {
   std::vector<double> gradient[2];
   ceres::CRSMatrix jacobian[2];
   for (int k = 0; k < 2; ++k) {
-    RayTimeProblem problem(scene.input, layout, scene.ground_truth, start, scene.input.intrinsics,
-                           ray_times, Settings(k == 0, c.perturb_intrinsics));
+    RayTimeProblem problem(scene.input, layout, scene.ground_truth, start,
+                           CaseCameras(scene, c.perturb_intrinsics), ray_times,
+                           Settings(k == 0, c.perturb_intrinsics));
     problem.problem().Evaluate(ceres::Problem::EvaluateOptions(), &cost[k], nullptr, &gradient[k],
                                &jacobian[k]);
   }
@@ -235,19 +336,23 @@ TEST_P(RefineJacobianTest, CachedAndUncachedProblemsAgree) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Cases, RefineJacobianTest,
-                         ::testing::Values(JacobianCase{"pinhole", false, false},
-                                           JacobianCase{"distorted", true, false},
-                                           JacobianCase{"self_calibration", true, true}),
+                         ::testing::Values(JacobianCase{"pinhole", "pinhole", false},
+                                           JacobianCase{"distorted", "distorted", false},
+                                           JacobianCase{"self_calibration", "distorted", true},
+                                           JacobianCase{"per_image", "per_image", false},
+                                           JacobianCase{"per_image_self_calibration", "per_image",
+                                                        true}),
                          [](const auto& info) { return std::string(info.param.name); });
 
 // dû/d(intrinsics) from the cache's jets against central differences of the Newton
 // undistortion (paper §3.2: differentiable, ≤ 5 iterations).
 TEST(RefineCacheTest, UndistortionDerivativesMatchNumeric) {
-  const SyntheticScene scene = MakeSyntheticScene(SmallScene(true));
+  const SyntheticScene scene = MakeSyntheticScene(SmallScene("distorted"));
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
-  CameraIntrinsics intrinsics = scene.input.intrinsics;
+  CameraBlocks cameras = PerCameraBlocks(scene.input);
+  CameraIntrinsics& intrinsics = cameras.cameras[0];
   intrinsics.params = {1390.0, 1405.0, 772.0, 505.0, -0.2, 0.06, 6e-4, -4e-4};
-  RayTimeProblem problem(scene.input, layout, scene.ground_truth, scene.ground_truth, intrinsics,
+  RayTimeProblem problem(scene.input, layout, scene.ground_truth, scene.ground_truth, cameras,
                          TrueRayTimes(scene, layout), Settings(true, true));
   ObservationCache& cache = *problem.cache();
   cache.PrepareForEvaluation(true, true);
@@ -283,11 +388,11 @@ TEST(RefineCacheTest, UndistortionDerivativesMatchNumeric) {
 // Recompute on a new point; jets only when Jacobians are asked for and the cache holds values
 // only (PLATFORM.md "EvaluationCallback"); value and jet passes agree.
 TEST(RefineCacheTest, RecomputesOnlyWhenNeeded) {
-  const SyntheticScene scene = MakeSyntheticScene(SmallScene(true));
+  const SyntheticScene scene = MakeSyntheticScene(SmallScene("distorted"));
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
-  RayTimeProblem problem(scene.input, layout, scene.ground_truth,
-                         JitterPoses(scene.ground_truth, 1.0, 0.1, 41), scene.input.intrinsics,
-                         TrueRayTimes(scene, layout), Settings(true, false));
+  RayTimeProblem problem(
+      scene.input, layout, scene.ground_truth, JitterPoses(scene.ground_truth, 1.0, 0.1, 41),
+      PerCameraBlocks(scene.input), TrueRayTimes(scene, layout), Settings(true, false));
   ObservationCache& cache = *problem.cache();
   cache.PrepareForEvaluation(false, true);
   EXPECT_EQ(cache.value_passes(), 1);

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <string>
 #include <utility>
 
 #include "refine/cross_projection_cost.h"
@@ -185,25 +186,36 @@ PoseBlock ToPoseBlock(const Rigid3& pose) {
 }
 
 // |r| of the cost functor at ray time t; +inf where the point lies in the target's focal plane.
-double FunctorNorm(const IntrinsicsVector& intrinsics, const Rigid3& source,
-                   const Eigen::Vector2d& source_pixel, double ray_time, const Rigid3& target,
+// The one-block functor when the two images' intrinsics are equal, the two-block one otherwise.
+double FunctorNorm(const IntrinsicsVector& source_intrinsics, const Rigid3& source,
+                   const Eigen::Vector2d& source_pixel, double ray_time,
+                   const IntrinsicsVector& target_intrinsics, const Rigid3& target,
                    const Eigen::Vector2d& target_pixel) {
-  const CrossProjectionAutoDiffCost functor(source_pixel, target_pixel);
   const PoseBlock source_block = ToPoseBlock(source);
   const PoseBlock target_block = ToPoseBlock(target);
   double residual[2];
-  functor(intrinsics.data(), source_block.data(), &ray_time, target_block.data(), residual);
+  if (source_intrinsics == target_intrinsics) {
+    const CrossProjectionAutoDiffCost functor(source_pixel, target_pixel);
+    functor(source_intrinsics.data(), source_block.data(), &ray_time, target_block.data(),
+            residual);
+  } else {
+    const TwoCameraCrossProjectionAutoDiffCost functor(source_pixel, target_pixel);
+    functor(source_intrinsics.data(), source_block.data(), &ray_time, target_intrinsics.data(),
+            target_block.data(), residual);
+  }
   const double norm = std::hypot(residual[0], residual[1]);
   return std::isfinite(norm) ? norm : std::numeric_limits<double>::infinity();
 }
 
 // min over t > 0 of FunctorNorm by brute force: a log grid over 24 decades of t (the scenes are
 // metres deep), then golden-section search between the best grid point's neighbours.
-double BruteForceMinimum(const IntrinsicsVector& intrinsics, const Rigid3& source,
-                         const Eigen::Vector2d& source_pixel, const Rigid3& target,
+double BruteForceMinimum(const IntrinsicsVector& source_intrinsics, const Rigid3& source,
+                         const Eigen::Vector2d& source_pixel,
+                         const IntrinsicsVector& target_intrinsics, const Rigid3& target,
                          const Eigen::Vector2d& target_pixel) {
   const auto value = [&](double log_t) {
-    return FunctorNorm(intrinsics, source, source_pixel, std::exp(log_t), target, target_pixel);
+    return FunctorNorm(source_intrinsics, source, source_pixel, std::exp(log_t), target_intrinsics,
+                       target, target_pixel);
   };
   constexpr int kSteps = 2400;
   const double lo = std::log(1e-10);
@@ -234,6 +246,7 @@ double BruteForceMinimum(const IntrinsicsVector& intrinsics, const Rigid3& sourc
 
 // PairResidualMedians' arrays from a layout, as RefinePoses builds them.
 struct KernelArrays {
+  std::vector<IntrinsicsVector> image_intrinsics;  // the input's, per image
   Eigen::VectorXi images;
   Keypoints pixels;
   std::vector<PairObservationMatches> pairs;  // every input pair, in input order
@@ -241,6 +254,9 @@ struct KernelArrays {
 
 KernelArrays ArraysOf(const RefineInput& input, const ProblemLayout& layout) {
   KernelArrays arrays;
+  for (size_t i = 0; i < input.camera_index.size(); ++i) {
+    arrays.image_intrinsics.emplace_back(input.CameraOf(static_cast<int>(i)).params.data());
+  }
   const int n = static_cast<int>(layout.observations.size());
   arrays.images.resize(n);
   arrays.pixels.resize(n, 2);
@@ -274,27 +290,34 @@ double MedianOf(std::vector<double> values) {
 }
 
 // The per-direction value is the cost functor's residual minimized over the ray time, at a state
-// away from the optimum (poses 1° / 0.2 m off), with and without lens distortion; the pair
-// medians are the medians of the root mean square of each match's two directions; at the ground
-// truth every pair is explained.
+// away from the optimum (poses 1° / 0.2 m off), with and without lens distortion, and with
+// per-image intrinsics (each direction between two cameras); the pair medians are the medians of
+// the root mean square of each match's two directions; at the ground truth every pair is
+// explained.
 TEST(RefineGuardrailTest, PositiveRayDistanceIsTheCrossProjectionResidualMinimizedOverRayTime) {
-  for (const bool distortion : {false, true}) {
-    SCOPED_TRACE(distortion ? "distorted" : "pinhole");
+  for (const char* name : {"pinhole", "distorted", "per_image"}) {
+    SCOPED_TRACE(name);
     SyntheticSceneOptions scene_options;
     scene_options.num_cameras = 5;
     scene_options.num_points = 80;
-    scene_options.distortion = distortion;
+    scene_options.distortion = std::string(name) != "pinhole";
+    if (std::string(name) == "per_image") {
+      scene_options.focal_drift = 0.03;
+      scene_options.principal_point_drift_px = 8.0;
+    }
     scene_options.seed = 21;
     const SyntheticScene scene = MakeSyntheticScene(scene_options);
     std::vector<Rigid3> poses = JitterPoses(scene.ground_truth, 1.0, 0.2, 22);
     for (Rigid3& pose : poses) pose.rotation.normalize();
-    const IntrinsicsVector intrinsics(scene.input.intrinsics.params.data());
     const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
     const KernelArrays arrays = ArraysOf(scene.input, layout);
+    const auto intrinsics = [&](int observation) -> const IntrinsicsVector& {
+      return arrays.image_intrinsics[arrays.images(observation)];
+    };
     const auto distance = [&](int from, int to, const std::vector<Rigid3>& at) {
-      return PositiveRayEpipolarDistance(intrinsics, at[arrays.images(from)],
-                                         arrays.pixels.row(from).transpose(), at[arrays.images(to)],
-                                         arrays.pixels.row(to).transpose());
+      return PositiveRayEpipolarDistance(intrinsics(from), at[arrays.images(from)],
+                                         arrays.pixels.row(from).transpose(), intrinsics(to),
+                                         at[arrays.images(to)], arrays.pixels.row(to).transpose());
     };
 
     // Brute force on a sample of directions (it costs thousands of functor evaluations each).
@@ -305,16 +328,16 @@ TEST(RefineGuardrailTest, PositiveRayDistanceIsTheCrossProjectionResidualMinimiz
       for (const auto& [from, to] : {std::pair<int, int>(o1, o2), std::pair<int, int>(o2, o1)}) {
         const double kernel = distance(from, to, poses);
         const double brute = BruteForceMinimum(
-            intrinsics, poses[arrays.images(from)], arrays.pixels.row(from).transpose(),
-            poses[arrays.images(to)], arrays.pixels.row(to).transpose());
+            intrinsics(from), poses[arrays.images(from)], arrays.pixels.row(from).transpose(),
+            intrinsics(to), poses[arrays.images(to)], arrays.pixels.row(to).transpose());
         EXPECT_NEAR(kernel, brute, 1e-6) << "match " << m;
         largest = std::max(largest, kernel);
       }
     }
     EXPECT_GT(largest, 5.0) << "the poses are away from the optimum";
 
-    const std::vector<PairResidual> medians =
-        PairResidualMedians(intrinsics, poses, arrays.images, arrays.pixels, arrays.pairs);
+    const std::vector<PairResidual> medians = PairResidualMedians(
+        arrays.image_intrinsics, poses, arrays.images, arrays.pixels, arrays.pairs);
     ASSERT_EQ(medians.size(), arrays.pairs.size());
     for (size_t p = 0; p < arrays.pairs.size(); ++p) {
       const PairObservationMatches& pair = arrays.pairs[p];
@@ -329,8 +352,9 @@ TEST(RefineGuardrailTest, PositiveRayDistanceIsTheCrossProjectionResidualMinimiz
       EXPECT_EQ(medians[p].num_matches, static_cast<int>(pair.observations.rows()));
       EXPECT_NEAR(medians[p].median_px, MedianOf(values), 1e-9);
     }
-    for (const PairResidual& pair : PairResidualMedians(
-             intrinsics, scene.ground_truth, arrays.images, arrays.pixels, arrays.pairs)) {
+    for (const PairResidual& pair :
+         PairResidualMedians(arrays.image_intrinsics, scene.ground_truth, arrays.images,
+                             arrays.pixels, arrays.pairs)) {
       EXPECT_GT(pair.num_matches, 0);
       EXPECT_LT(pair.median_px, 1e-6);
     }
@@ -383,19 +407,20 @@ TEST(RefineGuardrailTest,
     ProjectPinhole(intrinsics.data(), point.data(), target_pixel.data());
     ProjectPinhole(intrinsics.data(), source.translation.data(), epipole.data());
     ProjectPinhole(intrinsics.data(), direction.data(), vanishing_point.data());
-    ASSERT_LT(FunctorNorm(intrinsics, source, placement.source_pixel, placement.ray_time, target,
-                          target_pixel),
+    ASSERT_LT(FunctorNorm(intrinsics, source, placement.source_pixel, placement.ray_time,
+                          intrinsics, target, target_pixel),
               1e-9)
         << "on the epipolar line";
 
     const double kernel = PositiveRayEpipolarDistance(intrinsics, source, placement.source_pixel,
-                                                      target, target_pixel);
+                                                      intrinsics, target, target_pixel);
     const double end =
         std::min((target_pixel - epipole).norm(), (target_pixel - vanishing_point).norm());
     EXPECT_GT(kernel, 10.0);
     EXPECT_NEAR(kernel, end, 1e-9 * end);
     EXPECT_NEAR(kernel,
-                BruteForceMinimum(intrinsics, source, placement.source_pixel, target, target_pixel),
+                BruteForceMinimum(intrinsics, source, placement.source_pixel, intrinsics, target,
+                                  target_pixel),
                 1e-6);
 
     // The point at the opposite (positive) ray time is explained exactly, behind the target
@@ -403,8 +428,8 @@ TEST(RefineGuardrailTest,
     const Eigen::Vector3d reached = source.translation - placement.ray_time * direction;
     Eigen::Vector2d reached_pixel;
     ProjectPinhole(intrinsics.data(), reached.data(), reached_pixel.data());
-    EXPECT_LT(PositiveRayEpipolarDistance(intrinsics, source, placement.source_pixel, target,
-                                          reached_pixel),
+    EXPECT_LT(PositiveRayEpipolarDistance(intrinsics, source, placement.source_pixel, intrinsics,
+                                          target, reached_pixel),
               1e-9);
   }
 }
@@ -441,7 +466,7 @@ TEST(RefineGuardrailTest, InconsistentPairsStaysQuietOnAHealthySolve) {
 // with a wrong relative pose (camera j moved 1.5 m the other way), not with the scene, and are
 // 130 px off it. Returns the corrupted pairs.
 std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
-  const CameraIntrinsics& intrinsics = scene->input.intrinsics;
+  const CameraIntrinsics& intrinsics = scene->input.cameras.at(0);  // one shared camera
   const Eigen::Vector3d storey(0.0, -1.5, 0.0);
   std::set<std::pair<int, int>> corrupted;
   for (size_t p = 1; p < scene->input.pairs.size(); p += 3) {
@@ -554,7 +579,9 @@ TEST(RefineGuardrailTest, InconsistentPairsIgnoresStuckRayTimes) {
   const ProblemLayout layout =
       BuildPerObservationLayout(scene.input, options.max_matches_per_pair, options.match_cap_seed);
   const KernelArrays arrays = ArraysOf(scene.input, layout);
-  const IntrinsicsVector intrinsics(output.solved_intrinsics.params.data());
+  const IntrinsicsVector intrinsics(output.solved_cameras.at(0).params.data());  // one camera
+  const std::vector<IntrinsicsVector> image_intrinsics(output.solved_world_from_cam.size(),
+                                                       intrinsics);
   const std::vector<Rigid3>& solved = output.solved_world_from_cam;
   std::vector<double> stuck = TrueRayTimes(scene, layout);
   for (size_t t = 0; t < stuck.size(); ++t) {
@@ -564,10 +591,11 @@ TEST(RefineGuardrailTest, InconsistentPairsIgnoresStuckRayTimes) {
   // In the per-observation layout ray time o lives on observation o.
   const auto cross_projection = [&](int from, int to) {
     return FunctorNorm(intrinsics, solved[arrays.images(from)], arrays.pixels.row(from).transpose(),
-                       stuck[from], solved[arrays.images(to)], arrays.pixels.row(to).transpose());
+                       stuck[from], intrinsics, solved[arrays.images(to)],
+                       arrays.pixels.row(to).transpose());
   };
   const std::vector<PairResidual> pairs =
-      PairResidualMedians(intrinsics, solved, arrays.images, arrays.pixels, arrays.pairs);
+      PairResidualMedians(image_intrinsics, solved, arrays.images, arrays.pixels, arrays.pairs);
   for (size_t p = 0; p < arrays.pairs.size(); ++p) {
     const PairObservationMatches& pair = arrays.pairs[p];
     std::vector<double> values;

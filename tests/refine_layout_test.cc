@@ -2,9 +2,12 @@
 // layouts, the deterministic per-pair match cap, and the ray-time initialization.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <set>
 
 #include "core/error.h"
+#include "core/statistics.h"
 #include "refine/problem_layout.h"
 #include "refine/ray_time_init.h"
 #include "tests/refine_synthetic.h"
@@ -29,7 +32,8 @@ PairMatchIndices Pair(int i, int j, std::vector<std::pair<uint32_t, uint32_t>> r
 // match inside one image (skipped).
 RefineInput TinyInput() {
   RefineInput input;
-  input.intrinsics = SyntheticIntrinsics(false);
+  input.cameras = {SyntheticIntrinsics(false)};
+  input.camera_index = {0, 0, 0};
   input.prior_world_from_cam.resize(3);
   input.keypoints.assign(3, Keypoints::Zero(4, 2));
   input.pairs = {Pair(0, 1, {{0, 1}}), Pair(1, 2, {{1, 2}}), Pair(0, 2, {{1, 0}}),
@@ -142,7 +146,7 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
     RayTimeInitSummary summary;
     const std::vector<double> init = InitialRayTimes(
         layout, scene.input, JitterPoses(scene.ground_truth, prior_error_deg, 0.0, 5),
-        scene.input.intrinsics, "auto", 1.0, &summary);
+        PerCameraBlocks(scene.input), "auto", 1.0, &summary);
     ASSERT_EQ(init.size(), truth.size());
     EXPECT_GT(summary.num_depth_samples, static_cast<int>(layout.residuals.size() / 2));
     EXPECT_EQ(summary.images_with_fallback, 0);
@@ -153,9 +157,46 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
     EXPECT_NEAR(summary.median_depth, sorted[sorted.size() / 2], 2.0);
   }
   RayTimeInitSummary summary;
-  const std::vector<double> constant = InitialRayTimes(
-      layout, scene.input, scene.ground_truth, scene.input.intrinsics, "constant", 1.0, &summary);
+  const std::vector<double> constant =
+      InitialRayTimes(layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input),
+                      "constant", 1.0, &summary);
   EXPECT_EQ(constant, std::vector<double>(truth.size(), 1.0));
+}
+
+// With per-image intrinsics (focal 3 %, principal point 8 px apart), noise-free keypoints and the
+// exact prior, each observation's ray is unprojected with its own image's camera: matched rays
+// meet, every closest-approach depth is the true depth, and each image's start is the upper
+// median of its residuals' true source depths. One camera for all (camera 0's) misses them.
+TEST(RefineLayoutTest, AutoRayTimesUnprojectEachImageWithItsOwnCamera) {
+  SyntheticSceneOptions options;
+  options.num_cameras = 6;
+  options.num_points = 200;
+  options.focal_drift = 0.03;
+  options.principal_point_drift_px = 8.0;
+  const SyntheticScene scene = MakeSyntheticScene(options);
+  ASSERT_EQ(scene.input.cameras.size(), 6u);
+  const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
+  const std::vector<double> truth = TrueRayTimes(scene, layout);  // ray time o on observation o
+  std::vector<std::vector<double>> depths(scene.input.cameras.size());
+  for (const CrossProjection& residual : layout.residuals) {
+    depths[layout.observations[residual.source].image].push_back(truth[residual.source]);
+  }
+  RayTimeInitSummary summary;
+  const std::vector<double> init = InitialRayTimes(
+      layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input), "auto", 1.0, &summary);
+  EXPECT_EQ(summary.images_with_fallback, 0);
+  CameraBlocks one_camera = PerCameraBlocks(scene.input);
+  one_camera.camera_of_image.assign(scene.input.camera_index.size(), 0);
+  const std::vector<double> forced =
+      InitialRayTimes(layout, scene.input, scene.ground_truth, one_camera, "auto", 1.0, &summary);
+  double worst_forced = 0.0;
+  for (size_t t = 0; t < init.size(); ++t) {
+    const double expected =
+        UpperMedian(depths[layout.observations[layout.ray_time_observation[t]].image], 0.0);
+    EXPECT_NEAR(init[t], expected, 1e-6 * expected) << "ray time " << t;
+    worst_forced = std::max(worst_forced, std::abs(forced[t] - expected) / expected);
+  }
+  EXPECT_GT(worst_forced, 1e-3);
 }
 
 }  // namespace

@@ -310,8 +310,8 @@ TEST(RefineSolveTest, SelfCalibrationRecoversFocalAndDistortion) {
   SyntheticSceneOptions scene_options = NoisyScene();
   scene_options.distortion = true;
   SyntheticScene scene = MakeSyntheticScene(scene_options);
-  const CameraIntrinsics truth = scene.input.intrinsics;
-  scene.input.intrinsics.params = {1421.0, 1417.0, 762.0, 515.0, 0.0, 0.0, 0.0, 0.0};
+  const CameraIntrinsics truth = scene.input.cameras[0];
+  scene.input.cameras[0].params = {1421.0, 1417.0, 762.0, 515.0, 0.0, 0.0, 0.0, 0.0};
   // A shift of the principal point is nearly a common rotation of every camera about its own
   // centre (baselines are short against the depth), so the orientation prior is what separates
   // the two: the prior is exact here and the intrinsics are wrong.
@@ -323,7 +323,8 @@ TEST(RefineSolveTest, SelfCalibrationRecoversFocalAndDistortion) {
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   EXPECT_TRUE(summary.passes[0].self_calibration);
-  const auto& p = output.intrinsics.params;
+  ASSERT_EQ(output.cameras.size(), 1u);
+  const auto& p = output.cameras[0].params;
   std::printf("self-calibration: f %.1f %.1f (true %.1f %.1f), c %.1f %.1f, k1 %.4f k2 %.4f\n",
               p[kFx], p[kFy], truth.params[kFx], truth.params[kFy], p[kCx], p[kCy], p[kK1], p[kK2]);
   EXPECT_NEAR(p[kFx] / truth.params[kFx], 1.0, 0.005);
@@ -340,8 +341,8 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   SyntheticSceneOptions scene_options = NoisyScene();
   scene_options.distortion = true;
   SyntheticScene scene = MakeSyntheticScene(scene_options);
-  const CameraIntrinsics truth = scene.input.intrinsics;
-  scene.input.intrinsics.params = {1414.0, 1410.0, 770.5, 509.0, 0.0, 0.0, 0.0, 0.0};
+  const CameraIntrinsics truth = scene.input.cameras[0];
+  scene.input.cameras[0].params = {1414.0, 1410.0, 770.5, 509.0, 0.0, 0.0, 0.0, 0.0};
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 8.0, 7);
   RefineOptions options;
   options.staged = true;
@@ -361,7 +362,7 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   EXPECT_EQ(summary.passes[1].stages.size(), 1u);
   EXPECT_EQ(summary.passes[1].num_matches_used, summary.passes[1].num_matches_input);
   EXPECT_LT(Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.2);
-  EXPECT_NEAR(output.intrinsics.params[kFx] / truth.params[kFx], 1.0, 0.005);
+  EXPECT_NEAR(output.cameras[0].params[kFx] / truth.params[kFx], 1.0, 0.005);
 }
 
 // Every key path of a JSON value, arrays as "[]" (their elements' keys merged).
@@ -398,6 +399,13 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
   CollectKeyPaths(json, "", &keys);
   const std::set<std::string> expected = {
       "passes",
+      "cameras",
+      "cameras.sharing",
+      "cameras.num_cameras",
+      "cameras.num_blocks",
+      "cameras.min_block_observations",
+      "cameras.max_start_disagreement_px",
+      "cameras.cameras_differ",
       "passes[].name",
       "passes[].num_cameras",
       "passes[].num_observations",

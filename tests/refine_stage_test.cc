@@ -1,8 +1,13 @@
 // The refine stage's honesty on constructed inputs (issue 13): a camera no verified pair touches
 // is not exported as refined (unmatched_cameras), a match graph in pieces is refined piece by
 // piece and said so (disconnected_graph), and no match at all is an error, never a copy of the
-// prior. Inputs are synthetic scenes with known poses written in raytime's HDF5 schema.
+// prior. Images with their own cameras (issue 10, per-frame intrinsics) are refined with them, and
+// self-calibrated cameras are written and exported per camera (one when shared, cameras_shared).
+// Inputs are synthetic scenes with known poses written in raytime's HDF5 schema.
 #include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/formats/colmap_model.h"
@@ -15,9 +20,8 @@
 namespace raytime {
 namespace {
 
-// Two synthetic scenes side by side in one image list (A: images 0-4, B: images 5-7) and, when
-// asked, a ninth image with keypoints but no verified pair.
-struct TwoScenes {
+// The refine stage's inputs.
+struct SceneInputs {
   ImageSet images;
   std::vector<ImageFeatures> features;
   std::vector<PairMatches> matches;
@@ -31,7 +35,9 @@ std::string Name(int i) {
   return name;
 }
 
-TwoScenes MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) {
+// Two synthetic scenes side by side in one image list (A: images 0-4, B: images 5-7) and, when
+// asked, a ninth image with keypoints but no verified pair.
+SceneInputs MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) {
   SyntheticSceneOptions a_options;
   a_options.num_cameras = 5;
   SyntheticSceneOptions b_options;
@@ -39,8 +45,8 @@ TwoScenes MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) 
   b_options.seed = 7;
   const SyntheticScene a = MakeSyntheticScene(a_options);
   const SyntheticScene b = MakeSyntheticScene(b_options);
-  TwoScenes out;
-  const CameraIntrinsics camera = a.input.intrinsics;
+  SceneInputs out;
+  const CameraIntrinsics camera = a.input.cameras.at(0);
   out.images.cameras = {camera};
   const auto add = [&](const SyntheticScene& scene, int k) {
     const int index = static_cast<int>(out.images.images.size());
@@ -81,11 +87,49 @@ TwoScenes MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false) 
   return out;
 }
 
-// Writes the scene's HDF5 inputs and runs the refine stage (preset plain, one thread; no trust
-// region: its thresholds are object-scale, these scenes are 16 m deep).
-nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* refined,
-                         const std::string& options =
-                             "{preset: plain, num_threads: 1, trust_region: false}") {
+// One synthetic scene whose 6 images each have their own camera (focal 3 %, principal point 8 px
+// apart), the prior 1° off; `cameras` receives the true cameras (the inputs' may be changed).
+SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
+  SyntheticSceneOptions options;
+  options.num_cameras = 6;
+  options.num_points = 300;
+  options.max_pair_gap = 3;
+  options.focal_drift = 0.03;
+  options.principal_point_drift_px = 8.0;
+  const SyntheticScene scene = MakeSyntheticScene(options);
+  *cameras = scene.input.cameras;
+  SceneInputs out;
+  out.images.cameras = scene.input.cameras;
+  for (int k = 0; k < options.num_cameras; ++k) {
+    const CameraIntrinsics& camera = scene.input.cameras[k];
+    out.images.images.push_back({Name(k), camera.width, camera.height, k});
+    ImageFeatures features;
+    features.keypoints.resize(scene.input.keypoints[k].rows(), 4);
+    features.keypoints.setZero();
+    features.keypoints.leftCols<2>() = scene.input.keypoints[k].cast<float>();
+    out.features.push_back(features);
+    out.ground_truth.world_from_cam[Name(k)] = scene.ground_truth[k];
+    Rigid3 prior = scene.ground_truth[k];
+    prior.rotation =
+        (Eigen::AngleAxisd(M_PI / 180.0, Eigen::Vector3d::UnitY()) * prior.rotation).normalized();
+    out.prior.world_from_cam[Name(k)] = prior;
+  }
+  for (const PairMatchIndices& p : scene.input.pairs) {
+    PairMatches pair;
+    pair.image1 = p.image1;
+    pair.image2 = p.image2;
+    pair.matches = p.matches;
+    pair.geometry.inlier_matches = p.matches;
+    out.matches.push_back(pair);
+  }
+  return out;
+}
+
+// Writes the scene's HDF5 inputs and runs the refine stage (by default preset plain, one thread;
+// no trust region: its thresholds are object-scale, these scenes are 16 m deep).
+nlohmann::json RunRefine(
+    const SceneInputs& scene, const TempDir& dir, PoseSet* refined,
+    const std::string& options = "{preset: plain, num_threads: 1, trust_region: false}") {
   {
     Hdf5Writer writer(dir / "inputs.h5");
     writer.WriteImages(scene.images);
@@ -108,19 +152,6 @@ nlohmann::json RunRefine(const TwoScenes& scene, const TempDir& dir, PoseSet* re
   return summary;
 }
 
-// Runs the export stage on the refine stage's output (COLMAP text model of "refined").
-nlohmann::json RunExport(const TempDir& dir) {
-  std::unique_ptr<Stage> stage = CreateStage("export");
-  stage->Configure(YAML::Load("{poses: [refined], formats: [colmap_text]}"), "test");
-  StageContext context;
-  context.stage_id = "export";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "export.h5";
-  context.artifacts["images"] = dir / "inputs.h5";
-  context.artifacts["poses/refined"] = dir / "refine.h5";
-  return stage->Run(context);
-}
-
 // A trust region far below the correction of a 1°-off prior: the solve keeps the orientations
 // (the orientation prior holds this common 1° rotation, a gauge) but moves the centres ~0.16 m.
 const char* kTinyTrustRegion =
@@ -136,7 +167,7 @@ const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::stri
 
 TEST(RefineStageTest, UnmatchedCameraIsReportedAndNotExported) {
   TempDir dir("refine_stage");
-  const TwoScenes scene = MakeTwoScenes(/*with_lonely_image=*/true);
+  const SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/true);
   PoseSet refined;
   const nlohmann::json summary = RunRefine(scene, dir, &refined);
   const nlohmann::json* warning = FindWarning(summary, "unmatched_cameras");
@@ -148,7 +179,7 @@ TEST(RefineStageTest, UnmatchedCameraIsReportedAndNotExported) {
 
 TEST(RefineStageTest, DisconnectedGraphIsRefinedPerComponentAndSaidSo) {
   TempDir dir("refine_stage");
-  const TwoScenes scene = MakeTwoScenes(/*with_lonely_image=*/false);
+  const SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/false);
   PoseSet refined;
   const nlohmann::json summary = RunRefine(scene, dir, &refined);
   const nlohmann::json* warning = FindWarning(summary, "disconnected_graph");
@@ -170,7 +201,7 @@ TEST(RefineStageTest, DisconnectedGraphIsRefinedPerComponentAndSaidSo) {
 
 TEST(RefineStageTest, NoVerifiedPairIsAnErrorNotACopyOfThePrior) {
   TempDir dir("refine_stage");
-  TwoScenes scene = MakeTwoScenes(false);
+  SceneInputs scene = MakeTwoScenes(false);
   for (PairMatches& pair : scene.matches) pair.geometry.inlier_matches.resize(0, 2);
   PoseSet refined;
   try {
@@ -182,11 +213,125 @@ TEST(RefineStageTest, NoVerifiedPairIsAnErrorNotACopyOfThePrior) {
   EXPECT_FALSE(std::filesystem::exists(dir / "refine.h5"));
 }
 
+double MeanRotationErrorDeg(const PoseSet& estimate, const PoseSet& truth) {
+  return ComputePoseErrors(estimate, truth, PoseErrorOptions()).mean_rotation_deg;
+}
+
+// Runs the export stage on the refine stage's output (its /images when it wrote one): a COLMAP
+// text model in dir/refined/ and dir/refined_transforms.json.
+nlohmann::json RunExport(const TempDir& dir) {
+  std::unique_ptr<Stage> stage = CreateStage("export");
+  stage->Configure(YAML::Load("{poses: [refined], formats: [colmap_text, transforms_json]}"),
+                   "test");
+  StageContext context;
+  context.stage_id = "export";
+  context.workdir = dir.path().string();
+  context.output_path = dir / "export.h5";
+  const bool refined_images = Hdf5Reader(dir / "refine.h5").HasImages();
+  context.artifacts["images"] = refined_images ? dir / "refine.h5" : dir / "inputs.h5";
+  context.artifacts["poses/refined"] = dir / "refine.h5";
+  return stage->Run(context);
+}
+
+nlohmann::json ReadJsonFile(const std::string& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+// Per-image cameras used to be refused ("the refiner needs shared intrinsics"); with fixed
+// intrinsics each image is refined with its own camera, and the cameras are left as they are (no
+// /images is written; the export keeps one camera per image).
+TEST(RefineStageTest, PerImageCamerasAreRefinedWithTheirOwnIntrinsics) {
+  TempDir dir("refine_stage");
+  std::vector<CameraIntrinsics> truth;
+  const SceneInputs scene = MakePerImageScene(&truth);
+  PoseSet refined;
+  const nlohmann::json summary = RunRefine(scene, dir, &refined);
+  EXPECT_EQ(refined.size(), 6u);
+  EXPECT_EQ(summary["cameras"]["num_cameras"], 6);
+  EXPECT_EQ(summary["cameras"]["num_blocks"], 6);
+  EXPECT_LT(MeanRotationErrorDeg(refined, scene.ground_truth), 0.01);
+  EXPECT_FALSE(Hdf5Reader(dir / "refine.h5").HasImages());
+  EXPECT_FALSE(summary.contains("refined_intrinsics"));
+  RunExport(dir);
+  EXPECT_EQ(ReadColmapModelText(dir / "refined").cameras.size(), 6u);
+}
+
+// Self-calibration from focal lengths 1.5 % off (alternately up and down): per_camera writes
+// each image's camera refined (closer to the truth than the start) to /cameras and
+// /json/refined_intrinsics, and the export writes them (COLMAP: one camera per image;
+// transforms.json: per-frame intrinsics); shared writes one camera for every image, exported as
+// one COLMAP camera and top-level intrinsics, and warns cameras_shared.
+TEST(RefineStageTest, SelfCalibratedCamerasAreWrittenAndExportedPerCamera) {
+  std::vector<CameraIntrinsics> truth;
+  SceneInputs scene = MakePerImageScene(&truth);
+  for (size_t c = 0; c < scene.images.cameras.size(); ++c) {
+    const double scale = c % 2 == 0 ? 1.015 : 0.985;
+    scene.images.cameras[c].params[kFx] *= scale;
+    scene.images.cameras[c].params[kFy] *= scale;
+  }
+  {
+    TempDir dir("refine_stage");
+    PoseSet refined;
+    const nlohmann::json summary =
+        RunRefine(scene, dir, &refined,
+                  "{preset: plain, num_threads: 1, trust_region: false, refine_focal: true}");
+    EXPECT_EQ(FindWarning(summary, "cameras_shared"), nullptr);
+    const ImageSet written = Hdf5Reader(dir / "refine.h5").ReadImages();
+    ASSERT_EQ(written.cameras.size(), 6u);
+    ASSERT_EQ(summary["refined_intrinsics"].size(), 6u);
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_EQ(written.images[c].camera_index, c);
+      const double start = scene.images.cameras[c].params[kFx] / truth[c].params[kFx] - 1.0;
+      const double solved = written.cameras[c].params[kFx] / truth[c].params[kFx] - 1.0;
+      EXPECT_LT(std::abs(solved), 0.2 * std::abs(start)) << "camera " << c;
+      EXPECT_EQ(summary["refined_intrinsics"][c]["camera"], c);
+      EXPECT_EQ(summary["refined_intrinsics"][c]["num_images"], 1);
+      EXPECT_EQ(summary["refined_intrinsics"][c]["fx"], written.cameras[c].params[kFx]);
+    }
+    RunExport(dir);
+    const ColmapModel model = ReadColmapModelText(dir / "refined");
+    ASSERT_EQ(model.cameras.size(), 6u);
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_NEAR(IntrinsicsFromColmap(model.cameras.at(c + 1)).params[kFx],
+                  written.cameras[c].params[kFx], 1e-9);
+    }
+    const nlohmann::json transforms = ReadJsonFile(dir / "refined_transforms.json");
+    EXPECT_FALSE(transforms.contains("fl_x"));
+    ASSERT_EQ(transforms["frames"].size(), 6u);
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_NEAR(transforms["frames"][c]["fl_x"].get<double>(), written.cameras[c].params[kFx],
+                  1e-9);
+    }
+  }
+  {
+    TempDir dir("refine_stage");
+    PoseSet refined;
+    const nlohmann::json summary = RunRefine(scene, dir, &refined,
+                                             "{preset: plain, num_threads: 1, trust_region: "
+                                             "false, refine_focal: true, intrinsics_sharing: "
+                                             "shared}");
+    const nlohmann::json* warning = FindWarning(summary, "cameras_shared");
+    ASSERT_NE(warning, nullptr) << summary["warnings"].dump();
+    EXPECT_EQ((*warning)["images"].size(), 6u);
+    EXPECT_GT((*warning)["details"]["max_start_disagreement_px"].get<double>(), 1.0);
+    const ImageSet written = Hdf5Reader(dir / "refine.h5").ReadImages();
+    ASSERT_EQ(written.cameras.size(), 1u);
+    for (const ImageInfo& image : written.images) EXPECT_EQ(image.camera_index, 0);
+    ASSERT_EQ(summary["refined_intrinsics"].size(), 1u);
+    EXPECT_EQ(summary["refined_intrinsics"][0]["num_images"], 6);
+    RunExport(dir);
+    EXPECT_EQ(ReadColmapModelText(dir / "refined").cameras.size(), 1u);
+    const nlohmann::json transforms = ReadJsonFile(dir / "refined_transforms.json");
+    EXPECT_NEAR(transforms["fl_x"].get<double>(), written.cameras[0].params[kFx], 1e-9);
+  }
+}
+
 TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   TempDir dir("refine_stage");
   // Scene A's prior is 1° off (its solve leaves the tiny trust region and returns the prior);
   // scene B's prior is exact (its solve stays inside and is refined).
-  const TwoScenes scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
+  const SceneInputs scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
   PoseSet refined;
   const nlohmann::json summary = RunRefine(scene, dir, &refined, kTinyTrustRegion);
   const nlohmann::json* returned = FindWarning(summary, "returned_prior");
@@ -205,7 +350,7 @@ TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
 
 TEST(RefineStageTest, ExportOfARefinedSetWithNothingRefinedFails) {
   TempDir dir("refine_stage");
-  const TwoScenes scene = MakeTwoScenes(false);
+  const SceneInputs scene = MakeTwoScenes(false);
   PoseSet refined;
   RunRefine(scene, dir, &refined, kTinyTrustRegion);
   try {

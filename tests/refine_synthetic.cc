@@ -70,7 +70,24 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
   Random random(options.seed);
   SyntheticScene scene;
   RefineInput& input = scene.input;
-  input.intrinsics = SyntheticIntrinsics(options.distortion);
+  const int n = options.num_cameras;
+  const CameraIntrinsics shared = SyntheticIntrinsics(options.distortion);
+  if (options.focal_drift == 0.0 && options.principal_point_drift_px == 0.0) {
+    input.cameras = {shared};
+    input.camera_index.assign(n, 0);
+  } else {
+    Random drift(options.seed ^ 0x5eed1a7e5ull);
+    for (int i = 0; i < n; ++i) {
+      CameraIntrinsics camera = shared;
+      const double focal_scale = 1.0 + options.focal_drift * drift.Uniform(-1, 1);
+      camera.params[kFx] *= focal_scale;
+      camera.params[kFy] *= focal_scale;
+      camera.params[kCx] += options.principal_point_drift_px * drift.Uniform(-1, 1);
+      camera.params[kCy] += options.principal_point_drift_px * drift.Uniform(-1, 1);
+      input.cameras.push_back(camera);
+      input.camera_index.push_back(i);
+    }
+  }
 
   for (int p = 0; p < options.num_points; ++p) {
     Eigen::Vector3d point;
@@ -80,7 +97,6 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
     scene.points.push_back(options.point_radius_m * point);
   }
 
-  const int n = options.num_cameras;
   const double span = options.arc_span_deg * M_PI / 180.0;
   for (int i = 0; i < n; ++i) {
     const double angle = n > 1 ? -0.5 * span + span * i / (n - 1) : 0.0;
@@ -98,7 +114,8 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
     std::vector<std::pair<int, Eigen::Vector2d>> visible;
     for (int p = 0; p < options.num_points; ++p) {
       Eigen::Vector2d keypoint;
-      if (!ProjectToKeypoint(input.intrinsics, scene.ground_truth[i], scene.points[p], &keypoint)) {
+      if (!ProjectToKeypoint(input.CameraOf(i), scene.ground_truth[i], scene.points[p],
+                             &keypoint)) {
         continue;
       }
       keypoint += options.pixel_noise * Eigen::Vector2d(random.Normal(), random.Normal());
@@ -144,7 +161,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
 }
 
 void ReprojectCamera(SyntheticScene* scene, int camera, const Rigid3& world_from_cam) {
-  const CameraIntrinsics& intrinsics = scene->input.intrinsics;
+  const CameraIntrinsics& intrinsics = scene->input.CameraOf(camera);
   for (size_t p = 0; p < scene->points.size(); ++p) {
     const int k = scene->keypoint_of_point[camera][p];
     if (k < 0) continue;

@@ -1,7 +1,7 @@
 // Synthetic scenes for the refiner's tests and benchmark: cameras on an arc looking at points 8–25
-// m away (the depth range of the shared Strecha scenes, SPEC §8), keypoints projected with the
-// shared intrinsics (optionally distorted and noisy), matches between nearby cameras. Everything
-// is deterministic for a seed.
+// m away (the depth range of the shared Strecha scenes, SPEC §8), keypoints projected with shared
+// or per-image intrinsics (optionally distorted and noisy), matches between nearby cameras.
+// Everything is deterministic for a seed.
 #pragma once
 
 #include <Eigen/Core>
@@ -25,11 +25,20 @@ struct SyntheticSceneOptions {
   int max_pair_gap = 2;
   // Fraction of each pair's matches whose second keypoint is replaced by a random one.
   double outlier_fraction = 0.0;
+  // Per-image intrinsics, as phone captures record them (MobileBrick's focal drifts 0.9–2.9 % per
+  // scene, paper §4.6): image i's fx and fy are the shared camera's times (1 + focal_drift · u_i)
+  // and its principal point moves by principal_point_drift_px · (v_i, w_i), u, v, w uniform in
+  // [-1, 1] from a generator of their own (the rest of the scene is the same as without drift).
+  // Both 0: one camera for all images.
+  double focal_drift = 0.0;
+  double principal_point_drift_px = 0.0;
   uint64_t seed = 1;
 };
 
 struct SyntheticScene {
-  RefineInput input;  // prior_world_from_cam = ground truth; tests overwrite it
+  // prior_world_from_cam = ground truth (tests overwrite it); cameras: one, or one per image
+  // (camera_index i for image i) with a drift.
+  RefineInput input;
   std::vector<Rigid3> ground_truth;
   std::vector<Eigen::Vector3d> points;
   // Per camera and point: keypoint index, or -1 when the point is not visible.
