@@ -54,7 +54,8 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   PoseSet poses = reader.ReadPoseSet(name, &role);
   if (role != PoseRole::kRefined || !reader.HasJson(kUnrefinedImagesJson)) return poses;
   std::vector<std::string> left_out;
-  for (const std::string& image : reader.ReadJson(kUnrefinedImagesJson)) {
+  for (const auto& entry : reader.ReadJson(kUnrefinedImagesJson)) {
+    const std::string image = entry.get<std::string>();
     if (poses.world_from_cam.erase(image)) left_out.push_back(image);
   }
   if (left_out.empty()) return poses;
