@@ -12,6 +12,10 @@ workdir=${1:-work/prior-pairs}
 command -v jq > /dev/null || { echo "error: jq is not installed" >&2; exit 2; }
 printf 'run\tarm\tpairs\texhaustive_pairs\tpair_fraction\tverified\tmatch_s\tmatch_fraction\tfrontend_fraction\tprior_rot_deg\trefined_rot_deg\tdelta_vs_exhaustive_deg\n'
 for summary in "$workdir"/runs/*/summary.json; do
+  if ! jq -e '.status | startswith("ok")' "$summary" > /dev/null; then
+    echo "skipped (status $(jq -r .status "$summary")): $summary" >&2
+    continue
+  fi
   jq -r '
     def stage($id): .stages[] | select(.id == $id);
     def secs($s): if $s.status == "ran" then $s.seconds else null end;
