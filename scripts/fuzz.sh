@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets (tests/fuzz/, clang + ASan/UBSan) into build-fuzz/ and runs each
+# for SECONDS (default 600), one after another at the lowest CPU priority, printing seconds,
+# executions, corpus size and result per target. Exits non-zero when any target crashed.
+#
+#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET ...]     (targets: tests/fuzz/*_fuzzer.cc)
+#
+# Each run starts from the committed seeds (tests/fuzz/corpus/TARGET) and keeps what it finds in
+# build-fuzz/fuzz/corpus/TARGET, so a rerun continues where the last one stopped. A crashing input
+# is saved as build-fuzz/fuzz/crashes/TARGET/crash-<sha1> (also leak-, timeout-, oom-), with the
+# fuzzer's log beside it in build-fuzz/fuzz/logs/TARGET.log. To reproduce one:
+#   build-fuzz/tests/fuzz/TARGET_fuzzer build-fuzz/fuzz/crashes/TARGET/crash-...
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seconds="${1:-600}"
+shift || true
+build=build-fuzz
+
+export CCACHE_BASEDIR="${CCACHE_BASEDIR:-$PWD/..}"
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+# -O1 keeps the fuzzers fast; Debug keeps assertions (Eigen's bounds checks) on.
+cmake -S . -B "$build" -G Ninja -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
+  -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-g -O1" -DRAYTIME_FUZZ=ON "${launcher[@]}" \
+  >/dev/null
+nice ninja -C "$build" -j "${RAYTIME_JOBS:-2}" fuzzers
+
+if (($# > 0)); then
+  targets=("$@")
+else
+  targets=()
+  for source in tests/fuzz/*_fuzzer.cc; do
+    name=$(basename "$source" _fuzzer.cc)
+    targets+=("$name")
+  done
+fi
+
+# Parsers that take paths write their input below TMPDIR; a crashed process leaves its files
+# there, so the whole folder goes at the end.
+scratch=$(mktemp -d "$( [ -d /dev/shm ] && echo /dev/shm || echo /tmp)/raytime-fuzz.XXXXXX")
+trap 'rm -rf "$scratch"' EXIT
+export TMPDIR="$scratch"
+# Crash on the first sanitizer report, with symbolized stacks.
+export ASAN_OPTIONS="${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+
+printf '%-16s %8s %12s %8s  %s\n' target seconds executions corpus result
+failed=0
+for name in "${targets[@]}"; do
+  fuzzer="$build/tests/fuzz/${name}_fuzzer"
+  [ -x "$fuzzer" ] || { echo "no fuzz target '$name' ($fuzzer)" >&2; exit 2; }
+  corpus="$build/fuzz/corpus/$name"
+  crashes="$build/fuzz/crashes/$name"
+  log="$build/fuzz/logs/$name.log"
+  mkdir -p "$corpus" "$crashes" "$(dirname "$log")"
+  dict=()
+  [ -f "tests/fuzz/dict/$name.dict" ] && dict=("-dict=tests/fuzz/dict/$name.dict")
+  start=$(date +%s)
+  status=0
+  nice -n 19 "$fuzzer" -max_total_time="$seconds" -timeout=30 -rss_limit_mb=2048 \
+    -print_final_stats=1 -artifact_prefix="$crashes/" "${dict[@]}" \
+    "$corpus" "tests/fuzz/corpus/$name" >"$log" 2>&1 || status=$?
+  elapsed=$(($(date +%s) - start))
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  if [ -z "$execs" ]; then  # a crash ends the run before the final stats
+    execs=$(grep -oE '^#[0-9]+' "$log" | tail -1 | tr -d '#' || true)
+  fi
+  size=$(find "$corpus" -type f | wc -l)
+  if ((status == 0)); then
+    result=ok
+  else
+    result="CRASH (exit $status): $(grep -oE "$crashes/[^ ]+" "$log" | tail -1), log $log"
+    failed=1
+  fi
+  printf '%-16s %8s %12s %8s  %s\n' "$name" "$elapsed" "${execs:-?}" "$size" "$result"
+done
+exit "$failed"
