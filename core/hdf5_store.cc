@@ -431,7 +431,7 @@ int ReadIntAttribute(const Context& c, hid_t loc, const std::string& name) {
 nlohmann::json ParseJson(const Context& c, const std::string& what, const std::string& text) {
   try {
     return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse_error, or out_of_range for 1e999
     c.Fail(what + " is not valid JSON: " + e.what());
   }
 }
