@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <stdexcept>
 #include <utility>
 
@@ -310,6 +311,27 @@ std::vector<hsize_t> Dims(const Context& c, hid_t set, const std::string& what) 
   return dims;
 }
 
+// The number of elements of a dataset, checked before anything is allocated for them. Every
+// raytime writer writes all of a dataset's elements, so data that was never written (storage not
+// or only partly allocated: fill values) means a foreign or damaged file; left unchecked, a small
+// file could declare an extent far beyond memory.
+size_t ElementCount(const Context& c, hid_t set, const std::string& what,
+                    const std::vector<hsize_t>& dims) {
+  hsize_t count = 1;
+  for (hsize_t d : dims) {
+    if (d != 0 && count > std::numeric_limits<size_t>::max() / d) c.Fail(what + " is too large");
+    count *= d;
+  }
+  if (count == 0) return 0;
+  H5D_space_status_t status;
+  c.Check(H5Dget_space_status(set, &status), what);
+  if (status != H5D_SPACE_STATUS_ALLOCATED) {
+    c.Fail(what + " has " + std::to_string(count) +
+           " elements but its data was never written (truncated or corrupt?)");
+  }
+  return static_cast<size_t>(count);
+}
+
 template <typename T>
 Array<T> ReadArray(const Context& c, hid_t loc, const std::string& name,
                    const std::vector<int64_t>& shape) {
@@ -324,8 +346,7 @@ Array<T> ReadArray(const Context& c, hid_t loc, const std::string& name,
   Array<T> out;
   out.dims = Dims(c, set.get(), what);
   CheckShape(c, what, out.dims, shape);
-  size_t count = 1;
-  for (hsize_t d : out.dims) count *= d;
+  const size_t count = ElementCount(c, set.get(), what, out.dims);
   out.data.resize(count);
   if (count > 0) {
     c.Check(
@@ -355,7 +376,7 @@ std::vector<std::string> ReadStrings(const Context& c, hid_t loc, const std::str
   }
   const std::vector<hsize_t> dims = Dims(c, set.get(), what);
   CheckShape(c, what, dims, {size});
-  std::vector<char*> pointers(dims[0], nullptr);
+  std::vector<char*> pointers(ElementCount(c, set.get(), what, dims), nullptr);
   std::vector<std::string> out;
   if (pointers.empty()) return out;
   const Id type = VlenStringType();
