@@ -110,6 +110,9 @@ void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
   if (!map.IsMap()) ThrowInput(path, YamlLine(map), what + " options must be a mapping");
   const std::vector<std::string> keys = OptionKeys(options);
   for (const auto& entry : map) {
+    if (entry.first.IsMap() || entry.first.IsSequence()) {
+      ThrowInput(path, YamlLine(entry.first), what + ": an option key must be a name");
+    }
     const std::string key = entry.first.as<std::string>();
     if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
       ThrowInput(path, YamlLine(entry.first), UnknownKeyMessage(what, key, keys));

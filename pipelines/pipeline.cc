@@ -60,6 +60,16 @@ std::vector<std::string> StageIds(const PipelineSpec& spec) {
   return ids;
 }
 
+// The text of a node where the pipeline wants a name, key or path. YAML allows a list or mapping
+// there too, which as<std::string>() would reject with yaml-cpp's own exception.
+std::string ScalarText(const YAML::Node& node, const std::string& path, const std::string& what) {
+  if (node.IsMap() || node.IsSequence()) {
+    ThrowInput(path, YamlLine(node),
+               what + " must be a single value, not a " + (node.IsMap() ? "mapping" : "list"));
+  }
+  return node.as<std::string>();
+}
+
 // Validates the options of one stage entry by configuring a throwaway stage.
 void ValidateStage(const PipelineStageSpec& stage, const std::string& path) {
   CreateStage(stage.type)->Configure(stage.options, path);
@@ -500,7 +510,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   }
   if (!root.IsMap()) ThrowInput(path, 0, "a pipeline file must be a YAML mapping");
   for (const auto& entry : root) {
-    const std::string key = entry.first.as<std::string>();
+    const std::string key = ScalarText(entry.first, path, "a top-level key");
     if (std::find(kTopLevelKeys.begin(), kTopLevelKeys.end(), key) == kTopLevelKeys.end()) {
       ThrowInput(path, YamlLine(entry.first),
                  UnknownKeyMessage("the pipeline's top level", key, kTopLevelKeys));
@@ -508,8 +518,9 @@ PipelineSpec LoadPipeline(const std::string& path) {
   }
   PipelineSpec spec;
   spec.path = path;
-  spec.name = root["name"] ? root["name"].as<std::string>() : fs::path(path).stem().string();
-  spec.workdir = root["workdir"] ? root["workdir"].as<std::string>() : "";
+  spec.name =
+      root["name"] ? ScalarText(root["name"], path, "'name'") : fs::path(path).stem().string();
+  spec.workdir = root["workdir"] ? ScalarText(root["workdir"], path, "'workdir'") : "";
   if (!root["dataset"]) ThrowInput(path, 0, "the pipeline has no 'dataset' section");
   spec.stages.push_back({"dataset", "dataset", root["dataset"], YamlLine(root["dataset"])});
 
@@ -524,7 +535,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
       stage.id = entry.as<std::string>();
       stage.options = YAML::Node(YAML::NodeType::Map);
     } else if (entry.IsMap() && entry.size() == 1) {
-      stage.id = entry.begin()->first.as<std::string>();
+      stage.id = ScalarText(entry.begin()->first, path, "a stage name");
       stage.options = entry.begin()->second;
     } else {
       ThrowInput(path, stage.line,
@@ -559,7 +570,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   if (const YAML::Node sweep = root["sweep"]) {
     if (!sweep.IsMap()) ThrowInput(path, YamlLine(sweep), "'sweep' must map STAGE.KEY to lists");
     for (const auto& axis : sweep) {
-      const std::string key = axis.first.as<std::string>();
+      const std::string key = ScalarText(axis.first, path, "a sweep key");
       if (!axis.second.IsSequence() || axis.second.size() == 0) {
         ThrowInput(path, YamlLine(axis.second), "sweep." + key + " must be a non-empty list");
       }
