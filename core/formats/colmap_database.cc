@@ -510,7 +510,8 @@ ColmapDatabase ReadColmapDatabase(const std::string& path) {
   // Match rows index keypoints of COLMAP's image_id1 (left) and image_id2 (right).
   const auto check_and_orient = [&](MatchMatrix m, const PairMatches& pair, bool swapped,
                                     const std::string& where) {
-    if (swapped) m.col(0).swap(m.col(1));
+    // Columns of an empty matrix would be offsets from its null data pointer (undefined).
+    if (swapped && m.rows() > 0) m.col(0).swap(m.col(1));
     const Eigen::Index n1 = out.features[pair.image1].keypoints.rows();
     const Eigen::Index n2 = out.features[pair.image2].keypoints.rows();
     for (Eigen::Index r = 0; r < m.rows(); ++r) {
