@@ -416,6 +416,9 @@ std::string ReadStringScalar(const Context& c, hid_t loc, const std::string& nam
   const std::string what = Join(ObjectName(loc), name);
   if (!HasLink(loc, name)) c.Fail("missing dataset " + what);
   Id set(c.Check(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), what), H5Dclose);
+  // H5S_ALL reads every element, and the buffer holds one string.
+  Id space(c.Check(H5Dget_space(set.get()), what), H5Sclose);
+  if (H5Sget_simple_extent_npoints(space.get()) != 1) c.Fail(what + " is not a single string");
   Id type(c.Check(H5Dget_type(set.get()), what), H5Tclose);
   return ReadStringValue(c, what, type.get(), [&](hid_t memory_type, void* buf) {
     return H5Dread(set.get(), memory_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);
