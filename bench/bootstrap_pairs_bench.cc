@@ -17,6 +17,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
+#include "core/statistics.h"
 #include "evaluate/pose_errors.h"
 
 namespace raytime {
@@ -66,9 +67,7 @@ double MedianEpipolarError(const ImageSet& images, const PoseSet& truth,
     errors.push_back(0.5 *
                      (algebraic / line2.head<2>().norm() + algebraic / line1.head<2>().norm()));
   }
-  if (errors.empty()) return 0.0;
-  std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
-  return errors[errors.size() / 2];
+  return UpperMedian(errors, 0.0);
 }
 
 int Run(int argc, char** argv) {

@@ -28,6 +28,7 @@
 #include "core/error.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"
+#include "frontend/image_reading.h"
 
 namespace fs = std::filesystem;
 
@@ -92,8 +93,7 @@ int Main(int argc, char** argv) {
   }
   const auto load = [&](const std::string& name) {
     const std::string path = (fs::path(scene) / "images" / name).string();
-    const cv::Mat gray = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (gray.empty()) ThrowInput(path, 0, "cannot read the image");
+    const cv::Mat gray = ReadImage(path, cv::IMREAD_GRAYSCALE);
     return NormalizeDescriptors(ExtractSift(gray, extraction).descriptors);
   };
   const FloatDescriptors a = load(name1), b = load(name2);

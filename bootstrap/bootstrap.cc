@@ -7,15 +7,12 @@
 #include <limits>
 #include <stdexcept>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph_builder.h"
+#include "core/statistics.h"
+#include "core/timing.h"
 
 namespace raytime {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // Registered images the translation component did not place get the look-at rule around the
 // point nearest the optical axes of the placed cameras, at their median distance from it, so the
@@ -43,7 +40,7 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (placed[i]) distances.push_back(((*centres)[i] - centroid).norm());
   }
-  const double spread = std::max(FiniteMedian(distances), 1e-6);
+  const double spread = std::max(FiniteUpperMedian(distances), 1e-6);
   // Nearly parallel axes have no well-defined meeting point: look at a point in front of the
   // centroid instead.
   const Eigen::Vector3d target = eigen.eigenvalues()(0) > 1e-3 * eigen.eigenvalues()(2)
@@ -53,7 +50,7 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (placed[i]) distances.push_back(((*centres)[i] - target).norm());
   }
-  const double radius = std::max(FiniteMedian(distances), 1e-6);
+  const double radius = std::max(FiniteUpperMedian(distances), 1e-6);
   int filled = 0;
   for (size_t i = 0; i < rotations.size(); ++i) {
     if (registered[i] && !placed[i]) {
@@ -66,27 +63,8 @@ int FillMissingCentres(const std::vector<Eigen::Matrix3d>& rotations,
 
 }  // namespace
 
-void ValidateBootstrapOptions(const BootstrapOptions& options) {
-  if (options.positions != "lud" && options.positions != "look_at") {
-    throw std::invalid_argument("positions must be 'lud' or 'look_at', got '" + options.positions +
-                                "'");
-  }
-  if (!(options.direction_gate_deg > 0)) {
-    throw std::invalid_argument("direction_gate_deg must be > 0");
-  }
-  if (!(options.fragility_threshold_deg > 0)) {
-    throw std::invalid_argument("fragility_threshold_deg must be > 0");
-  }
-  ValidateRelativePoseOptions(options.relative_pose);
-  ValidateRotationAveragingOptions(options.rotation_averaging);
-  ValidateTranslationAveragingOptions(options.translation_averaging);
-  ValidateLookAtSeedOptions(options.look_at);
-  ValidateFocalSearchOptions(options.focal);
-  ValidateWrongPairOptions(options.wrong_pairs);
-}
-
 void SolveGlobalPoses(int num_images, const BootstrapOptions& options, BootstrapResult* result) {
-  ValidateBootstrapOptions(options);
+  ValidateOptions(options, "bootstrap");
   const auto start = std::chrono::steady_clock::now();
   const std::vector<ViewGraphEdge>& edges = result->edges;
 
@@ -128,26 +106,31 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
   }
 
   result->world_from_cam = result->rotations.world_from_cam;
-  result->registered = result->rotations.registered;
-  result->num_registered = result->rotations.num_registered;
+  result->rotation_registered = result->rotations.registered;
+  result->num_rotations_registered = result->rotations.num_registered;
   result->centres.assign(num_images, Eigen::Vector3d::Zero());
-  result->num_centres_filled = 0;
+  result->position_estimated.assign(num_images, false);
+  result->num_positions_estimated = 0;
+  result->num_positions_filled = 0;
   const bool lud = options.positions == "lud" && result->translations.num_registered >= 2;
   if (lud) {
-    std::vector<bool> placed(num_images, false);
+    std::vector<bool>& placed = result->position_estimated;
     for (int i = 0; i < num_images; ++i) {
-      placed[i] = result->registered[i] && result->translations.registered[i];
-      if (placed[i]) result->centres[i] = result->translations.centres[i];
+      placed[i] = result->rotation_registered[i] && result->translations.registered[i];
+      if (placed[i]) {
+        result->centres[i] = result->translations.centres[i];
+        ++result->num_positions_estimated;
+      }
     }
-    result->num_centres_filled =
-        FillMissingCentres(result->world_from_cam, result->registered, placed, &result->centres);
+    result->num_positions_filled = FillMissingCentres(
+        result->world_from_cam, result->rotation_registered, placed, &result->centres);
   } else {
     // The look-at seed; also the fallback when no translation direction survived (a graph of
     // pure rotations), since a seed with every camera at one point is degenerate (paper §4.8).
     std::vector<Eigen::Matrix3d> rotations;
     std::vector<int> index;
     for (int i = 0; i < num_images; ++i) {
-      if (result->registered[i]) {
+      if (result->rotation_registered[i]) {
         rotations.push_back(result->world_from_cam[i]);
         index.push_back(i);
       }
@@ -155,15 +138,20 @@ void SolveGlobalPoses(int num_images, const BootstrapOptions& options, Bootstrap
     result->look_at = LookAtSeed(rotations, options.look_at);
     for (size_t k = 0; k < index.size(); ++k)
       result->centres[index[k]] = result->look_at.centres[k];
-    if (options.positions == "lud") result->num_centres_filled = static_cast<int>(index.size());
+    if (options.positions == "lud") result->num_positions_filled = static_cast<int>(index.size());
   }
+  result->support =
+      AssessGraphSupport(edges,
+                         {num_images, result->num_rotations_registered,
+                          result->num_positions_estimated, result->num_positions_filled},
+                         options.graph_support);
   result->global_seconds = SecondsSince(start);
 }
 
 BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeatures>& features,
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options) {
-  ValidateBootstrapOptions(options);
+  ValidateOptions(options, "bootstrap");
   const auto start = std::chrono::steady_clock::now();
   ViewGraphBuildResult graph = BuildViewGraph(images, features, matches, options.relative_pose,
                                               options.focal_search, options.focal);
@@ -177,10 +165,31 @@ BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeat
   return result;
 }
 
+const char* FragilityVerdict(const BootstrapResult& result) {
+  if (result.fragility.fragile) return result.support.weak ? "fragile and weak" : "fragile";
+  return result.support.weak ? "weak" : "not fragile";
+}
+
+Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result) {
+  if (!result.support.weak) return {};
+  Warning warning;
+  warning.code = "weak_bootstrap";
+  warning.message = "The view graph cannot support the bootstrap's estimate: " +
+                    DescribeWeakness(result.support) + ".";
+  const bool filled = result.num_positions_filled > 0;
+  for (size_t i = 0; i < images.images.size() && i < result.rotation_registered.size(); ++i) {
+    if (!result.rotation_registered[i] || (filled && !result.position_estimated[i])) {
+      warning.images.push_back(images.images[i].name);
+    }
+  }
+  warning.details = GraphSupportJson(result.support);
+  return {warning};
+}
+
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result) {
   PoseSet poses;
-  for (size_t i = 0; i < images.images.size() && i < result.registered.size(); ++i) {
-    if (!result.registered[i]) continue;
+  for (size_t i = 0; i < images.images.size() && i < result.rotation_registered.size(); ++i) {
+    if (!result.rotation_registered[i]) continue;
     poses.world_from_cam[images.images[i].name] =
         Rigid3(Eigen::Quaterniond(result.world_from_cam[i]).normalized(), result.centres[i]);
   }

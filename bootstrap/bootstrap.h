@@ -1,6 +1,7 @@
 // Prior-free poses from the match graph (SPEC §4; paper §4.8 "Refinement without an external
 // prior"): relative poses per verified pair, the pre-solve fragility flag, wrong-pair detection,
-// rotation averaging, then centres by LUD translation averaging or the look-at seed.
+// rotation averaging, then centres by LUD translation averaging or the look-at seed, and whether
+// the graph can support that estimate at all (graph_support.h).
 //
 // The bootstrap never reads a pose prior or ground truth; gauge fits onto a prior live in
 // prior_repair.h and take the prior as an explicit argument.
@@ -8,16 +9,19 @@
 
 #include <string>
 #include <vector>
+#include "core/options.h"
 
 #include "bootstrap/focal_search.h"
+#include "bootstrap/graph_support.h"
 #include "bootstrap/look_at_seed.h"
 #include "bootstrap/relative_pose.h"
 #include "bootstrap/rotation_averaging.h"
 #include "bootstrap/translation_averaging.h"
 #include "bootstrap/view_graph.h"
 #include "bootstrap/wrong_pairs.h"
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/types.h"
+#include "core/warnings.h"
 
 namespace raytime {
 
@@ -44,26 +48,32 @@ struct BootstrapOptions {
   LookAtSeedOptions look_at;
   FocalSearchOptions focal;
   WrongPairOptions wrong_pairs;
+  GraphSupportOptions graph_support;
 
   // Flat keys (YAML key = field name; the sub-structs' names are unique).
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("positions", positions);
-    v("direction_gate_deg", direction_gate_deg);
-    v("filter_pairs", filter_pairs);
-    v("fragility_threshold_deg", fragility_threshold_deg);
-    v("focal_search", focal_search);
+    v("positions", positions, "Centres by LUD translation averaging or the look-at seed (§4.8)",
+      OneOf({"lud", "look_at"}));
+    v("direction_gate_deg", direction_gate_deg,
+      "Pairs above this rotation-averaging residual give no direction, degrees (§4.8: 5°)",
+      Positive());
+    v("filter_pairs", filter_pairs,
+      "Solve the final poses on the pairs the wrong-pair detector keeps");
+    v("fragility_threshold_deg", fragility_threshold_deg,
+      "Fragile above this mean pairwise rotation-averaging residual, degrees (§4.8: ~10°)",
+      Positive());
+    v("focal_search", focal_search, "Unknown intrinsics: search a shared focal per camera (§4.8)");
     relative_pose.VisitFields(v);
     rotation_averaging.VisitFields(v);
     translation_averaging.VisitFields(v);
     look_at.VisitFields(v);
     focal.VisitFields(v);
     wrong_pairs.VisitFields(v);
+    graph_support.VisitFields(v);
   }
+  void CheckRelations(const Requirement& require) const { focal.CheckRelations(require); }
 };
-
-// Throws std::invalid_argument naming the bad option.
-void ValidateBootstrapOptions(const BootstrapOptions& options);
 
 struct FragilityReport {
   double mean_residual_deg = 0.0;  // the statistic (paper §4.8)
@@ -89,14 +99,20 @@ struct BootstrapResult {
   RotationAveragingResult rotations;
   TranslationAveragingResult translations;  // positions "lud"
   LookAtSeedResult look_at;                 // positions "look_at"
-  // Per image: camera-to-world rotation and centre; registered = in the rotation component.
+  // Per image: camera-to-world rotation and centre. An image in the rotation component has a
+  // rotation and so a pose; its centre is estimated by translation averaging, or filled by the
+  // look-at rule (positions "lud": outside the translation component, placed around the point
+  // nearest the optical axes of the estimated ones; all of them when no direction survived), or
+  // is the requested look-at seed (positions "look_at").
   std::vector<Eigen::Matrix3d> world_from_cam;
   std::vector<Eigen::Vector3d> centres;
-  std::vector<bool> registered;
-  int num_registered = 0;
-  // "lud": registered images outside the translation component, placed by the look-at rule
-  // around the point nearest the optical axes of the placed ones.
-  int num_centres_filled = 0;
+  std::vector<bool> rotation_registered;  // in the rotation component: has a pose
+  std::vector<bool> position_estimated;   // centre from translation averaging
+  int num_rotations_registered = 0;
+  int num_positions_estimated = 0;
+  int num_positions_filled = 0;
+  // Whether the graph supports the estimate (too little parallax, too many filled centres).
+  GraphSupport support;
 
   double relative_pose_seconds = 0.0;
   double global_seconds = 0.0;
@@ -111,7 +127,16 @@ BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeat
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options);
 
-// The registered images' poses, keyed by image name.
+// "weak" when the graph cannot support the estimate, "fragile" when the fragility flag fires,
+// "fragile and weak" for both, else "not fragile".
+const char* FragilityVerdict(const BootstrapResult& result);
+
+// "weak_bootstrap" when the graph cannot support the estimate (issue 13): the reasons in words,
+// the images whose pose is not estimated from the graph (no rotation, or a centre filled by the
+// look-at fallback) and GraphSupportJson as details. Empty otherwise.
+Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result);
+
+// The poses of the images with a rotation, keyed by image name.
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result);
 
 }  // namespace raytime

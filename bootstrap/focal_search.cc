@@ -50,25 +50,11 @@ std::vector<double> LogSpaced(double lo, double hi, int count) {
 
 }  // namespace
 
-void ValidateFocalSearchOptions(const FocalSearchOptions& options) {
-  if (!(options.focal_min_ratio > 0) || !(options.focal_max_ratio > options.focal_min_ratio)) {
-    throw std::invalid_argument("focal search: need 0 < focal_min_ratio < focal_max_ratio");
-  }
-  if (options.focal_candidates < 2) {
-    throw std::invalid_argument("focal search: focal_candidates must be >= 2");
-  }
-  if (options.focal_refinements < 0) {
-    throw std::invalid_argument("focal search: focal_refinements must be >= 0");
-  }
-  if (options.focal_pairs < 1)
-    throw std::invalid_argument("focal search: focal_pairs must be >= 1");
-}
-
 FocalSearchResult SearchFocal(const std::vector<PixelCorrespondences>& pairs, int width, int height,
                               const FocalSearchOptions& options,
                               const RelativePoseOptions& relative_pose) {
-  ValidateFocalSearchOptions(options);
-  ValidateRelativePoseOptions(relative_pose);
+  ValidateOptions(options, "focal search");
+  ValidateOptions(relative_pose, "relative pose");
   if (width <= 0 || height <= 0) throw std::invalid_argument("focal search: bad image size");
   std::vector<int> order;
   for (size_t k = 0; k < pairs.size(); ++k) {

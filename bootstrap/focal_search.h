@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <vector>
+#include "core/options.h"
 
 #include "bootstrap/relative_pose.h"
 
@@ -22,15 +23,21 @@ struct FocalSearchOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("focal_min_ratio", focal_min_ratio);
-    v("focal_max_ratio", focal_max_ratio);
-    v("focal_candidates", focal_candidates);
-    v("focal_refinements", focal_refinements);
-    v("focal_pairs", focal_pairs);
+    v("focal_min_ratio", focal_min_ratio,
+      "Focal search: smallest candidate, multiple of max(width, height)", Positive());
+    v("focal_max_ratio", focal_max_ratio,
+      "Focal search: largest candidate, multiple of max(width, height)", Positive());
+    v("focal_candidates", focal_candidates, "Focal search: log-spaced coarse candidates",
+      AtLeast(2));
+    v("focal_refinements", focal_refinements,
+      "Focal search: candidates between the best coarse one's neighbours", NonNegative());
+    v("focal_pairs", focal_pairs, "Focal search: pairs with the most correspondences scored",
+      Positive());
+  }
+  void CheckRelations(const Requirement& require) const {
+    require(focal_max_ratio > focal_min_ratio, "focal_max_ratio must be above focal_min_ratio");
   }
 };
-
-void ValidateFocalSearchOptions(const FocalSearchOptions& options);
 
 // Pixel correspondences of one pair (columns match), OpenCV pixel convention.
 struct PixelCorrespondences {

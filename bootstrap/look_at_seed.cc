@@ -19,18 +19,9 @@ double RmsSpread(const std::vector<Eigen::Vector3d>& points) {
 
 }  // namespace
 
-void ValidateLookAtSeedOptions(const LookAtSeedOptions& options) {
-  if (!(options.look_at_distance > 0)) {
-    throw std::invalid_argument("look_at_distance must be > 0");
-  }
-  if (!(options.look_at_min_spread > 0)) {
-    throw std::invalid_argument("look_at_min_spread must be > 0");
-  }
-}
-
 LookAtSeedResult LookAtSeed(const std::vector<Eigen::Matrix3d>& world_from_cam,
                             const LookAtSeedOptions& options) {
-  ValidateLookAtSeedOptions(options);
+  ValidateOptions(options, "look-at seed");
   LookAtSeedResult result;
   Eigen::Vector3d mean_axis = Eigen::Vector3d::Zero();
   for (const auto& rotation : world_from_cam) {

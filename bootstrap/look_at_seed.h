@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <vector>
+#include "core/options.h"
 
 namespace raytime {
 
@@ -19,12 +20,13 @@ struct LookAtSeedOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("look_at_distance", look_at_distance);
-    v("look_at_min_spread", look_at_min_spread);
+    v("look_at_distance", look_at_distance,
+      "Look-at seed: distance of every camera from the look-at point, scene units", Positive());
+    v("look_at_min_spread", look_at_min_spread,
+      "Look-at seed: smallest RMS centre spread, fraction of look_at_distance (else a ring)",
+      Positive());
   }
 };
-
-void ValidateLookAtSeedOptions(const LookAtSeedOptions& options);
 
 struct LookAtSeedResult {
   std::vector<Eigen::Vector3d> centres;  // one per rotation

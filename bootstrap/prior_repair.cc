@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "bootstrap/stats.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -69,7 +69,7 @@ PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
     pose.rotation = rotation;
     ++s.num_repaired;
   }
-  s.median_rotation_change_deg = FiniteMedian(change);
+  s.median_rotation_change_deg = FiniteUpperMedian(change);
   if (summary) *summary = s;
   return repaired;
 }
@@ -135,7 +135,7 @@ PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
     pose = mapped;
     ++s.num_repaired;
   }
-  s.median_rotation_change_deg = FiniteMedian(change);
+  s.median_rotation_change_deg = FiniteUpperMedian(change);
   if (summary) *summary = s;
   return replaced;
 }

@@ -11,8 +11,8 @@
 #include <memory>
 #include <stdexcept>
 
-#include "bootstrap/stats.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -29,32 +29,10 @@ SacProblem::algorithm_t AlgorithmFromName(const std::string& name) {
 
 }  // namespace
 
-void ValidateRelativePoseOptions(const RelativePoseOptions& options) {
-  AlgorithmFromName(options.algorithm);
-  if (!(options.max_error_px > 0)) {
-    throw std::invalid_argument("relative_pose.max_error_px must be > 0");
-  }
-  if (options.max_iterations < 1) {
-    throw std::invalid_argument("relative_pose.max_iterations must be >= 1");
-  }
-  if (!(options.confidence > 0 && options.confidence < 1)) {
-    throw std::invalid_argument("relative_pose.confidence must be in (0, 1)");
-  }
-  // Eight correspondences is OpenGV's five-point sample (5 + 3 for disambiguation).
-  if (options.min_inliers < 8)
-    throw std::invalid_argument("relative_pose.min_inliers must be >= 8");
-  if (!(options.pure_rotation_ratio > 0)) {
-    throw std::invalid_argument("relative_pose.pure_rotation_ratio must be > 0");
-  }
-  if (!(options.min_parallax_deg >= 0)) {
-    throw std::invalid_argument("relative_pose.min_parallax_deg must be >= 0");
-  }
-}
-
 RelativePoseResult EstimateRelativePose(const Eigen::Matrix3Xd& bearings1,
                                         const Eigen::Matrix3Xd& bearings2, double focal_px,
                                         const RelativePoseOptions& options) {
-  ValidateRelativePoseOptions(options);
+  ValidateOptions(options, "relative pose");
   if (bearings1.cols() != bearings2.cols()) {
     throw std::invalid_argument("EstimateRelativePose: bearing sets differ in size");
   }
@@ -152,7 +130,7 @@ RelativePoseResult EstimateRelativePose(const Eigen::Matrix3Xd& bearings1,
     const Eigen::Vector3d r2 = cam1_from_cam2 * rays2[k];
     parallax.push_back(std::atan2(rays1[k].cross(r2).norm(), rays1[k].dot(r2)));
   }
-  result.median_parallax_deg = DegreesFromRadians(FiniteMedian(std::move(parallax)));
+  result.median_parallax_deg = DegreesFromRadians(FiniteUpperMedian(std::move(parallax)));
 
   if (static_cast<int>(inliers.size()) < options.min_inliers) {
     result.status = PairStatus::kTooFewInliers;

@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <string>
 #include <vector>
+#include "core/options.h"
 
 #include "bootstrap/view_graph.h"
 
@@ -31,18 +32,24 @@ struct RelativePoseOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("algorithm", algorithm);
-    v("max_error_px", max_error_px);
-    v("max_iterations", max_iterations);
-    v("confidence", confidence);
-    v("min_inliers", min_inliers);
-    v("pure_rotation_ratio", pure_rotation_ratio);
-    v("min_parallax_deg", min_parallax_deg);
+    v("algorithm", algorithm, "Five-point minimal solver inside RANSAC (OpenGV)",
+      OneOf({"stewenius", "nister"}));
+    v("max_error_px", max_error_px, "Five-point RANSAC inlier threshold, pixels at the focal",
+      Positive());
+    v("max_iterations", max_iterations, "Five-point RANSAC iterations at most", Positive());
+    v("confidence", confidence, "Five-point RANSAC success probability for the adaptive stop",
+      Positive(), Below(1));
+    v("min_inliers", min_inliers,
+      "Pairs with fewer five-point inliers are unusable (8 = OpenGV's sample)", AtLeast(8));
+    v("pure_rotation_ratio", pure_rotation_ratio,
+      "Near-pure rotation when a rotation-only model explains this share of the essential "
+      "inliers",
+      Positive());
+    v("min_parallax_deg", min_parallax_deg,
+      "Near-pure rotation below this median parallax of the essential inliers, degrees",
+      NonNegative());
   }
 };
-
-// Throws std::invalid_argument naming the bad field.
-void ValidateRelativePoseOptions(const RelativePoseOptions& options);
 
 struct RelativePoseResult {
   PairStatus status = PairStatus::kFailed;

@@ -8,9 +8,9 @@
 #include <stdexcept>
 #include <string>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -107,21 +107,9 @@ class Linearization {
 
 }  // namespace
 
-void ValidateRotationAveragingOptions(const RotationAveragingOptions& options) {
-  if (options.l1_iterations < 0 || options.irls_iterations < 0) {
-    throw std::invalid_argument("rotation averaging: iteration counts must be >= 0");
-  }
-  if (!(options.robust_scale_deg > 0)) {
-    throw std::invalid_argument("rotation averaging: robust_scale_deg must be > 0");
-  }
-  if (!(options.rotation_tolerance_deg > 0)) {
-    throw std::invalid_argument("rotation averaging: rotation_tolerance_deg must be > 0");
-  }
-}
-
 RotationAveragingResult AverageRotations(int num_nodes, const std::vector<RelativeRotation>& edges,
                                          const RotationAveragingOptions& options) {
-  ValidateRotationAveragingOptions(options);
+  ValidateOptions(options, "rotation averaging");
   if (num_nodes < 0) throw std::invalid_argument("AverageRotations: negative node count");
   std::vector<std::pair<int, int>> pairs;
   for (const auto& e : edges) {
@@ -261,7 +249,7 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
     residuals.push_back(r);
   }
   result.mean_residual_deg = FiniteMean(residuals);
-  result.median_residual_deg = FiniteMedian(residuals);
+  result.median_residual_deg = FiniteUpperMedian(residuals);
   return result;
 }
 

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <vector>
+#include "core/options.h"
 
 namespace raytime {
 
@@ -31,14 +32,16 @@ struct RotationAveragingOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("l1_iterations", l1_iterations);
-    v("irls_iterations", irls_iterations);
-    v("robust_scale_deg", robust_scale_deg);
-    v("rotation_tolerance_deg", rotation_tolerance_deg);
+    v("l1_iterations", l1_iterations, "Rotation averaging: L1 linearizations (Chatterjee-Govindu)",
+      NonNegative());
+    v("irls_iterations", irls_iterations, "Rotation averaging: Geman-McClure IRLS iterations",
+      NonNegative());
+    v("robust_scale_deg", robust_scale_deg, "Rotation averaging: Geman-McClure scale σ, degrees",
+      Positive());
+    v("rotation_tolerance_deg", rotation_tolerance_deg,
+      "Rotation averaging: stop below this largest update, degrees", Positive());
   }
 };
-
-void ValidateRotationAveragingOptions(const RotationAveragingOptions& options);
 
 struct RotationAveragingResult {
   // Per node: camera-to-world rotation R_i. Only nodes of the largest connected component are

@@ -7,9 +7,9 @@
 #include <stdexcept>
 #include <string>
 
-#include "bootstrap/stats.h"
 #include "bootstrap/view_graph.h"
 #include "core/geometry.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -129,25 +129,10 @@ class LudSubproblem {
 
 }  // namespace
 
-void ValidateTranslationAveragingOptions(const TranslationAveragingOptions& options) {
-  if (options.lud_iterations < 1) {
-    throw std::invalid_argument("translation averaging: lud_iterations must be >= 1");
-  }
-  if (!(options.lud_delta > 0)) {
-    throw std::invalid_argument("translation averaging: lud_delta must be > 0");
-  }
-  if (!(options.lud_tolerance > 0)) {
-    throw std::invalid_argument("translation averaging: lud_tolerance must be > 0");
-  }
-  if (options.lud_newton_iterations < 1) {
-    throw std::invalid_argument("translation averaging: lud_newton_iterations must be >= 1");
-  }
-}
-
 TranslationAveragingResult AverageTranslations(int num_nodes,
                                                const std::vector<RelativeDirection>& edges,
                                                const TranslationAveragingOptions& options) {
-  ValidateTranslationAveragingOptions(options);
+  ValidateOptions(options, "translation averaging");
   if (num_nodes < 0) throw std::invalid_argument("AverageTranslations: negative node count");
   std::vector<std::pair<int, int>> pairs;
   for (const auto& e : edges) {
@@ -224,7 +209,7 @@ TranslationAveragingResult AverageTranslations(int num_nodes,
     residuals.push_back(result.edge_residual_deg[used[k]]);
   }
   result.mean_residual_deg = FiniteMean(residuals);
-  result.median_residual_deg = FiniteMedian(residuals);
+  result.median_residual_deg = FiniteUpperMedian(residuals);
   return result;
 }
 

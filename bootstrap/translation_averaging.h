@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <vector>
+#include "core/options.h"
 
 namespace raytime {
 
@@ -29,14 +30,15 @@ struct TranslationAveragingOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("lud_iterations", lud_iterations);
-    v("lud_delta", lud_delta);
-    v("lud_tolerance", lud_tolerance);
-    v("lud_newton_iterations", lud_newton_iterations);
+    v("lud_iterations", lud_iterations, "LUD translation averaging: reweighting rounds",
+      Positive());
+    v("lud_delta", lud_delta, "LUD: weight floor, solution units (edges have length >= 1)",
+      Positive());
+    v("lud_tolerance", lud_tolerance, "LUD: stop when no centre moves more than this", Positive());
+    v("lud_newton_iterations", lud_newton_iterations,
+      "LUD: semi-smooth Newton iterations per round", Positive());
   }
 };
-
-void ValidateTranslationAveragingOptions(const TranslationAveragingOptions& options);
 
 struct TranslationAveragingResult {
   // Per node: camera centre. Only the largest connected component of the direction graph is

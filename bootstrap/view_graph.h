@@ -1,11 +1,13 @@
 // The match graph as the bootstrap sees it (SPEC §4; paper §4.8 "Refinement without an external
-// prior"): one edge per verified image pair carrying its two-view relative pose, plus the graph
-// utilities every averaging step needs (connected components, spanning trees).
+// prior"): one edge per verified image pair carrying its two-view relative pose. The graph
+// utilities every averaging step needs (connected components, spanning trees): core/graph.h.
 #pragma once
 
 #include <Eigen/Core>
 #include <utility>
 #include <vector>
+
+#include "core/graph.h"
 
 namespace raytime {
 
@@ -33,14 +35,5 @@ struct ViewGraphEdge {
   }
   bool UsableForTranslation() const { return status == PairStatus::kValid; }
 };
-
-// Component label per node; labels are numbered by decreasing component size (0 = largest; ties
-// go to the component holding the smaller node index), so results do not depend on edge order.
-std::vector<int> ConnectedComponents(int num_nodes, const std::vector<std::pair<int, int>>& edges);
-
-// Maximum spanning forest (Kruskal): indices into `edges` of the chosen edges. Ties between equal
-// weights are broken by edge index, so the tree is deterministic.
-std::vector<int> MaximumSpanningForest(int num_nodes, const std::vector<std::pair<int, int>>& edges,
-                                       const std::vector<double>& weights);
 
 }  // namespace raytime

@@ -67,7 +67,7 @@ ViewGraphBuildResult BuildViewGraph(const ImageSet& images,
                                     const std::vector<PairMatches>& matches,
                                     const RelativePoseOptions& relative_pose, bool focal_search,
                                     const FocalSearchOptions& focal_options) {
-  ValidateRelativePoseOptions(relative_pose);
+  ValidateOptions(relative_pose, "relative pose");
   CheckInput(images, features, matches);
   ViewGraphBuildResult result;
   result.cameras = images.cameras;

@@ -7,7 +7,7 @@
 #include "bootstrap/focal_search.h"
 #include "bootstrap/relative_pose.h"
 #include "bootstrap/view_graph.h"
-#include "core/hdf5_store.h"
+#include "core/features.h"
 #include "core/types.h"
 
 namespace raytime {

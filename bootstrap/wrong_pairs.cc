@@ -53,18 +53,6 @@ void CountCycles(int num_nodes, const std::vector<ViewGraphEdge>& edges, double 
 
 }  // namespace
 
-void ValidateWrongPairOptions(const WrongPairOptions& options) {
-  if (!(options.wrong_rotation_deg > 0) || !(options.wrong_direction_deg > 0) ||
-      !(options.cycle_tolerance_deg > 0)) {
-    throw std::invalid_argument(
-        "wrong-pair thresholds (wrong_rotation_deg, wrong_direction_deg, cycle_tolerance_deg) "
-        "must be > 0");
-  }
-  if (options.wrong_pair_rounds < 1) {
-    throw std::invalid_argument("wrong_pair_rounds must be >= 1");
-  }
-}
-
 const char* PairVerdictName(PairVerdict verdict) {
   switch (verdict) {
     case PairVerdict::kKept:
@@ -114,7 +102,7 @@ PairClassification ClassifyPairs(int num_nodes, const std::vector<ViewGraphEdge>
                                  const RotationAveragingOptions& rotation_options,
                                  const TranslationAveragingOptions& translation_options,
                                  double direction_gate_deg) {
-  ValidateWrongPairOptions(options);
+  ValidateOptions(options, "wrong pairs");
   if (!(direction_gate_deg > 0)) throw std::invalid_argument("direction_gate_deg must be > 0");
   PairClassification result;
   result.scores.resize(edges.size());

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <vector>
+#include "core/options.h"
 
 #include "bootstrap/rotation_averaging.h"
 #include "bootstrap/translation_averaging.h"
@@ -32,14 +33,16 @@ struct WrongPairOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("wrong_rotation_deg", wrong_rotation_deg);
-    v("wrong_direction_deg", wrong_direction_deg);
-    v("cycle_tolerance_deg", cycle_tolerance_deg);
-    v("wrong_pair_rounds", wrong_pair_rounds);
+    v("wrong_rotation_deg", wrong_rotation_deg,
+      "Wrong pair above this rotation-averaging residual, degrees (§4.8: 5°)", Positive());
+    v("wrong_direction_deg", wrong_direction_deg,
+      "Wrong pair above this translation-direction residual, degrees", Positive());
+    v("cycle_tolerance_deg", cycle_tolerance_deg,
+      "Triplet cycle consistency tolerance, degrees (reported evidence)", Positive());
+    v("wrong_pair_rounds", wrong_pair_rounds, "Rounds of solve-on-kept-pairs / re-score-all-pairs",
+      Positive());
   }
 };
-
-void ValidateWrongPairOptions(const WrongPairOptions& options);
 
 enum class PairVerdict { kKept, kWrong, kUnusable };
 const char* PairVerdictName(PairVerdict verdict);

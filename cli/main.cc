@@ -1,9 +1,8 @@
 // The `raytime` command line: `run` for YAML pipelines, one subcommand per stage, `evaluate` on
 // any two pose files, `report` on a finished sweep, and `resize-scene` for making small sample
 // scenes.
-#include <spawn.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
-#include <sys/wait.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -14,14 +13,15 @@
 #include "core/error.h"
 #include "core/formats/dataset.h"
 #include "core/hdf5_store.h"
+#include "core/interrupt.h"
+#include "core/sweep_row.h"
+#include "core/process.h"
 #include "core/version.h"
 #include "evaluate/campaign_report.h"
 #include "evaluate/pose_errors.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
 #include "pipelines/stage.h"
-
-extern char** environ;
 
 namespace fs = std::filesystem;
 
@@ -89,19 +89,6 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   return 0;
 }
 
-// Runs `args` with this process's output streams and returns its exit status (-1 when it could
-// not be started or did not exit normally).
-int RunProgram(const std::vector<std::string>& args) {
-  std::vector<char*> argv;
-  for (const auto& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  if (posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), environ) != 0) return -1;
-  int status = 0;
-  if (waitpid(pid, &status, 0) < 0 || !WIFEXITED(status)) return -1;
-  return WEXITSTATUS(status);
-}
-
 // `raytime report --sweep W`: W/sweep.json -> OUT/report.md, OUT/report_cells.csv and the plots
 // (SPEC §6 campaigns; paper §4.8, §4.9).
 int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
@@ -112,7 +99,7 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
                "no such file; `raytime run PIPELINE.yaml --workdir DIR` writes it for a pipeline "
                "with a sweep section");
   }
-  const std::vector<nlohmann::json> rows = ReadSweepRows(sweep_path);
+  const std::vector<SweepRow> rows = ReadSweepRows(sweep_path);
   CampaignReport report;
   try {
     report = AggregateCampaign(rows, options);
@@ -139,15 +126,14 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
                  script);
     return 0;
   }
-  const int status = RunProgram({kPython, script, cells_path, out_dir});
-  if (status == kPlotExitNoMatplotlib) {
+  const ProcessStatus status = RunProcess({kPython, script, cells_path, out_dir});
+  if (status.exit_code == kPlotExitNoMatplotlib) {
     spdlog::warn(
         "report: matplotlib is missing, no plots written (report.md and "
         "report_cells.csv are complete)");
-  } else if (status != 0) {
-    throw std::runtime_error("report: " + script + " failed (exit status " +
-                             std::to_string(status) + "); " + markdown_path + " and " + cells_path +
-                             " were written");
+  } else if (!status.Succeeded()) {
+    throw std::runtime_error("report: " + script + " failed (" + status.Describe() + "); " +
+                             markdown_path + " and " + cells_path + " were written");
   } else {
     spdlog::info("report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}",
                  out_dir);
@@ -156,17 +142,22 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
 }
 
 // `raytime <stage> --in A.h5 --in B.h5 --out OUT.h5 [--option value ...]`.
-void AddStageCommand(CLI::App& app, const std::string& type, std::vector<std::string>* inputs,
-                     std::string* output, std::unique_ptr<Stage>* holder) {
+CLI::App* AddStageCommand(CLI::App& app, const std::string& type, std::vector<std::string>* inputs,
+                          std::string* output, std::unique_ptr<Stage>* holder) {
   *holder = CreateStage(type);
-  CLI::App* command = app.add_subcommand(type, (*holder)->description() + " (one stage alone)");
+  CLI::App* command = app.add_subcommand(
+      type, (*holder)->description() +
+                " (one stage alone: reads --in HDF5 files, writes --out, prints its summary JSON "
+                "on stdout; logs go to stderr)");
   command->add_option("--in", *inputs,
                       "HDF5 files from earlier stages (artifacts are looked up "
                       "in them, later files win)");
   command->add_option("--out", *output, "HDF5 file to write (default: ./<stage>.h5)");
-  (*holder)->BindCli(command);
+  (*holder)->BindCli(command->add_option_group("options", "The stage's options"));
+  return command;
 }
 
+// Only the summary JSON goes to stdout, so `raytime STAGE ... | jq` works.
 int RunStageAlone(Stage& stage, const std::vector<std::string>& inputs, std::string output) {
   if (output.empty()) output = stage.type() + ".h5";
   StageContext context;
@@ -180,7 +171,10 @@ int RunStageAlone(Stage& stage, const std::vector<std::string>& inputs, std::str
     if (reader.HasFeatures()) context.artifacts["features"] = input;
     if (reader.HasMatches()) context.artifacts["matches"] = input;
   }
-  std::cout << stage.Run(context).dump(2) << "\n";
+  RemoveStaleTemporaryFiles(context.workdir);
+  const nlohmann::json summary = stage.Run(context);
+  LogWarnings(stage.type(), summary);
+  std::cout << summary.dump(2) << "\n";
   return 0;
 }
 
@@ -210,28 +204,39 @@ int Main(int argc, char** argv) {
   run->add_flag("--no-report", no_report,
                 "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
 
+  std::map<std::string, std::unique_ptr<Stage>> stages;
+  std::map<std::string, CLI::App*> stage_commands;
+  std::vector<std::string> stage_inputs;
+  std::string stage_output;
+  for (const auto& type : StageTypes()) {
+    stage_commands[type] = AddStageCommand(app, type, &stage_inputs, &stage_output, &stages[type]);
+  }
+
+  // `raytime evaluate` also scores any two pose files (HDF5 included) when given --est/--gt.
   std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
                    align = "sim3";
   double success_deg = 1.0;
   bool as_json = false;
-  CLI::App* evaluate = app.add_subcommand("evaluate",
-                                          "Score a pose set against ground truth, "
-                                          "joined by image name");
-  evaluate->add_option("--est", est, "Estimated poses (file or folder)")->required();
-  evaluate->add_option("--est-format", est_format, "colmap, nerfstudio, tum, strecha or hdf5")
+  CLI::App* evaluate = stage_commands.at("evaluate");
+  evaluate->description(
+      "Score pose sets against ground truth: the stage (--in/--out and the stage's options), or "
+      "any two pose files joined by image name (--est/--gt)");
+  CLI::Option_group* files = evaluate->add_option_group(
+      "pose files", "Score two pose files instead of running the stage (needs --est and --gt)");
+  CLI::Option* est_option = files->add_option("--est", est, "Estimated poses (file or folder)");
+  files->add_option("--est-format", est_format, "colmap, nerfstudio, tum, strecha or hdf5")
       ->capture_default_str();
-  evaluate->add_option("--est-set", est_set, "Pose set name in an HDF5 file");
-  evaluate->add_option("--gt", gt, "Ground-truth poses (file or folder)")->required();
-  evaluate->add_option("--gt-format", gt_format, "colmap, nerfstudio, tum, strecha or hdf5")
+  files->add_option("--est-set", est_set, "Pose set name in an HDF5 file");
+  CLI::Option* gt_option = files->add_option("--gt", gt, "Ground-truth poses (file or folder)");
+  files->add_option("--gt-format", gt_format, "colmap, nerfstudio, tum, strecha or hdf5")
       ->capture_default_str();
-  evaluate->add_option("--gt-set", gt_set, "Pose set name in an HDF5 file");
-  evaluate->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
-  evaluate
+  files->add_option("--gt-set", gt_set, "Pose set name in an HDF5 file");
+  files->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
+  files
       ->add_option("--success-deg", success_deg,
-                   "Success threshold on the mean rotation "
-                   "error, degrees")
+                   "Success threshold on the mean rotation error, degrees")
       ->capture_default_str();
-  evaluate->add_flag("--json", as_json, "Print JSON instead of a table");
+  files->add_flag("--json", as_json, "Print JSON instead of a table");
 
   std::string sweep_dir, report_dir;
   CampaignReportOptions report_options;
@@ -271,16 +276,9 @@ int Main(int argc, char** argv) {
       ->capture_default_str();
   resize->add_option("--jpeg-quality", resize_options.jpeg_quality)->capture_default_str();
 
-  std::map<std::string, std::unique_ptr<Stage>> stages;
-  std::vector<std::string> stage_inputs;
-  std::string stage_output;
-  for (const auto& type : StageTypes()) {
-    // `raytime evaluate` takes pose files in any format (HDF5 included) instead of --in/--out.
-    if (type == "evaluate") continue;
-    AddStageCommand(app, type, &stage_inputs, &stage_output, &stages[type]);
-  }
-
   CLI11_PARSE(app, argc, argv);
+  // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
+  spdlog::set_default_logger(spdlog::stderr_color_mt("raytime"));
   spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
   if (quiet) spdlog::set_level(spdlog::level::warn);
 
@@ -304,7 +302,10 @@ int Main(int argc, char** argv) {
     if (report_after) return RunReportCommand(effective_workdir, "", CampaignReportOptions());
     return 0;
   }
-  if (evaluate->parsed()) {
+  if (evaluate->parsed() && (est_option->count() > 0 || gt_option->count() > 0)) {
+    if (est.empty() || gt.empty()) {
+      throw InputError("raytime evaluate: scoring pose files needs both --est and --gt");
+    }
     return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align, success_deg,
                               as_json);
   }
@@ -316,9 +317,8 @@ int Main(int argc, char** argv) {
   }
   for (auto& [type, stage] : stages) {
     if (app.got_subcommand(type)) {
-      auto* typed = stage.get();
-      typed->Configure(YAML::Node(YAML::NodeType::Map), "command line");
-      return RunStageAlone(*typed, stage_inputs, stage_output);
+      stage->Configure(stage->CliOptions(), "raytime " + type);
+      return RunStageAlone(*stage, stage_inputs, stage_output);
     }
   }
   return 0;
@@ -328,6 +328,7 @@ int Main(int argc, char** argv) {
 }  // namespace raytime
 
 int main(int argc, char** argv) {
+  raytime::InstallInterruptHandler();
   try {
     return raytime::Main(argc, argv);
   } catch (const raytime::InputError& e) {

@@ -1,9 +1,16 @@
 #include "core/atomic_file.h"
 
+#include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
+#include <regex>
+#include <set>
 #include <sstream>
 
 #include "core/error.h"
@@ -13,18 +20,101 @@ namespace fs = std::filesystem;
 namespace raytime {
 
 namespace {
+
+std::mutex& PendingMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+std::set<std::string>& Pending() {
+  static std::set<std::string> pending;
+  return pending;
+}
+
+// The process id in a temporary's name ".NAME.tmp.PID.N[.old]", or 0 when it is not one.
+pid_t TemporaryOwner(const std::string& filename) {
+  static const std::regex pattern(R"(^\..+\.tmp\.([0-9]+)\.[0-9]+(\.old)?$)");
+  std::smatch match;
+  if (!std::regex_match(filename, match, pattern)) return 0;
+  try {
+    return static_cast<pid_t>(std::stol(match[1].str()));
+  } catch (const std::exception&) {
+    return 0;
+  }
+}
+
+bool ProcessRuns(pid_t pid) { return ::kill(pid, 0) == 0 || errno == EPERM; }
+
+// Registers a temporary for the scope of one write.
+class PendingTemporary {
+ public:
+  explicit PendingTemporary(std::string path) : path_(std::move(path)) { RegisterTemporary(path_); }
+  ~PendingTemporary() { ForgetTemporary(path_); }
+  PendingTemporary(const PendingTemporary&) = delete;
+  PendingTemporary& operator=(const PendingTemporary&) = delete;
+
+ private:
+  std::string path_;
+};
+
+}  // namespace
+
 std::string TemporarySibling(const std::string& path) {
+  // The counter keeps two writers of one process (parallel stages, the interrupt watcher) from
+  // sharing a name.
+  static std::atomic<int> counter{0};
   const fs::path p(path);
-  return (p.parent_path() / ("." + p.filename().string() + ".tmp." + std::to_string(getpid())))
+  return (p.parent_path() / ("." + p.filename().string() + ".tmp." + std::to_string(getpid()) +
+                             "." + std::to_string(counter++)))
       .string();
 }
-}  // namespace
+
+void RegisterTemporary(const std::string& path) {
+  std::lock_guard<std::mutex> lock(PendingMutex());
+  Pending().insert(path);
+}
+
+void ForgetTemporary(const std::string& path) {
+  std::lock_guard<std::mutex> lock(PendingMutex());
+  Pending().erase(path);
+}
+
+void RemovePendingTemporaryFiles() {
+  std::lock_guard<std::mutex> lock(PendingMutex());
+  for (const auto& path : Pending()) {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+    fs::remove_all(path + ".old", ignored);
+  }
+  Pending().clear();
+}
+
+std::vector<std::string> RemoveStaleTemporaryFiles(const std::string& dir) {
+  std::vector<std::string> removed;
+  std::error_code error;
+  if (!fs::is_directory(dir, error)) return removed;
+  std::vector<fs::path> stale;
+  for (fs::recursive_directory_iterator it(dir, error), end; !error && it != end;
+       it.increment(error)) {
+    const pid_t owner = TemporaryOwner(it->path().filename().string());
+    if (owner == 0) continue;
+    if (it->is_directory()) it.disable_recursion_pending();
+    if (owner != getpid() && !ProcessRuns(owner)) stale.push_back(it->path());
+  }
+  for (const auto& path : stale) {
+    std::error_code ignored;
+    if (fs::remove_all(path, ignored) > 0) removed.push_back(path.string());
+  }
+  std::sort(removed.begin(), removed.end());
+  return removed;
+}
 
 void WriteAtomically(const std::string& path,
                      const std::function<void(const std::string&)>& write) {
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty()) fs::create_directories(parent);
   const std::string tmp = TemporarySibling(path);
+  const PendingTemporary pending(tmp);
   try {
     write(tmp);
     fs::rename(tmp, path);
@@ -40,6 +130,7 @@ void WriteDirectoryAtomically(const std::string& path,
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty()) fs::create_directories(parent);
   const std::string tmp = TemporarySibling(path);
+  const PendingTemporary pending(tmp);
   std::error_code ignored;
   fs::remove_all(tmp, ignored);
   try {

@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace raytime {
 
@@ -20,5 +21,18 @@ void WriteTextFileAtomically(const std::string& path, const std::string& content
 
 // Whole file as a string; throws InputError naming the path when it cannot be read.
 std::string ReadTextFile(const std::string& path);
+
+// Temporary files. Every writer names its temporary sibling ".NAME.tmp.PID.N" (N counts within
+// the process) and registers it while it exists, so that an interrupted run removes its own
+// (RemovePendingTemporaryFiles, called by core/interrupt.h) and the next run in a work directory
+// removes those a killed run left (RemoveStaleTemporaryFiles).
+std::string TemporarySibling(const std::string& path);
+// Registers / forgets a temporary path of this process (file or folder).
+void RegisterTemporary(const std::string& path);
+void ForgetTemporary(const std::string& path);
+// Removes every registered temporary of this process.
+void RemovePendingTemporaryFiles();
+// Removes, below `dir`, temporaries whose process no longer runs; returns the paths removed.
+std::vector<std::string> RemoveStaleTemporaryFiles(const std::string& dir);
 
 }  // namespace raytime

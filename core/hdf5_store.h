@@ -4,71 +4,23 @@
 // file; writers are atomic (temporary file + rename on Commit), so a failed stage leaves nothing
 // under the final name. Readers check the schema name and version and turn HDF5's failures on a
 // truncated or foreign file into an InputError that names the file.
+//
+// This is raytime's schema (groups, datasets, versions); hdf5_io.h holds the generic HDF5 calls
+// it is written with.
 #pragma once
 
-#include <Eigen/Core>
-#include <cstdint>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <string>
 #include <vector>
 
+#include "core/features.h"
+#include "core/provenance.h"
 #include "core/types.h"
 
 namespace raytime {
 
 constexpr int kHdf5SchemaVersion = 1;
-
-// Who wrote a group, with which options, when (SPEC: provenance attributes).
-struct Provenance {
-  std::string stage;           // e.g. "prior", "refine"
-  nlohmann::json options;      // the stage's options as written by OptionsToJson
-  std::string created_utc;     // ISO 8601, filled by the writer when empty
-  std::string raytime_version; // filled by the writer when empty
-};
-
-// Keypoints of one image, OpenCV pixel convention (SPEC §2).
-struct ImageFeatures {
-  // Rows: x, y (pixels), scale (pixels), orientation (radians).
-  Eigen::Matrix<float, Eigen::Dynamic, 4, Eigen::RowMajor> keypoints;
-  // Rows: one descriptor per keypoint (SIFT: 128 columns, uint8 after RootSIFT quantization).
-  Eigen::Matrix<uint8_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> descriptors;
-};
-
-// Configuration of a verified two-view geometry, numbered as COLMAP's TwoViewGeometry so that the
-// database export is a plain copy.
-enum class TwoViewConfig : int {
-  kUndefined = 0,
-  kDegenerate = 1,
-  kCalibrated = 2,
-  kUncalibrated = 3,
-  kPlanar = 4,
-  kPanoramic = 5,
-  kPlanarOrPanoramic = 6,
-  kWatermark = 7,
-  kMultiple = 8,
-};
-
-struct TwoViewGeometry {
-  TwoViewConfig config = TwoViewConfig::kUndefined;
-  Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  // Relative pose cam2_from_cam1 when known (identity otherwise).
-  Rigid3 cam2_from_cam1;
-  // Rows: keypoint index in image 1, keypoint index in image 2.
-  Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> inlier_matches;
-};
-
-// Putative matches and the verified geometry of one image pair (image1 < image2, indices into
-// the file's image list).
-struct PairMatches {
-  int image1 = 0;
-  int image2 = 0;
-  Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
-  TwoViewGeometry geometry;
-};
 
 class Hdf5Writer {
  public:

@@ -1,7 +1,9 @@
 #include "core/options.h"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
+#include <sstream>
 
 namespace raytime {
 
@@ -34,8 +36,7 @@ std::string NearestKey(const std::string& key, const std::vector<std::string>& c
 }
 
 std::string UnknownKeyMessage(const std::string& what, const std::string& key,
-                              const std::vector<std::string>& candidates,
-                              const std::string& noun) {
+                              const std::vector<std::string>& candidates, const std::string& noun) {
   std::string message = "unknown " + noun + " '" + key + "' in " + what;
   const std::string nearest = NearestKey(key, candidates);
   if (!nearest.empty()) message += " (did you mean '" + nearest + "'?)";
@@ -48,5 +49,107 @@ int YamlLine(const YAML::Node& node) {
   const YAML::Mark mark = node.Mark();
   return mark.line >= 0 ? mark.line + 1 : 0;
 }
+
+namespace {
+
+std::string NumberText(double value) {
+  std::ostringstream out;
+  out << value;
+  return out.str();
+}
+
+std::string JoinValues(const std::vector<std::string>& values) {
+  std::string text;
+  for (const auto& value : values) text += (text.empty() ? "" : ", ") + value;
+  return text;
+}
+
+}  // namespace
+
+OptionRule Positive() {
+  return {"positive", [](double x) { return std::isfinite(x) && x > 0; }, nullptr, nullptr, {}};
+}
+
+OptionRule NonNegative() {
+  return {
+      "non-negative", [](double x) { return std::isfinite(x) && x >= 0; }, nullptr, nullptr, {}};
+}
+
+OptionRule AtLeast(double min) {
+  return {"at least " + NumberText(min),
+          [min](double x) { return std::isfinite(x) && x >= min; },
+          nullptr,
+          nullptr,
+          {}};
+}
+
+OptionRule Above(double min) {
+  return {"above " + NumberText(min),
+          [min](double x) { return std::isfinite(x) && x > min; },
+          nullptr,
+          nullptr,
+          {}};
+}
+
+OptionRule AtMost(double max) {
+  return {"at most " + NumberText(max),
+          [max](double x) { return std::isfinite(x) && x <= max; },
+          nullptr,
+          nullptr,
+          {}};
+}
+
+OptionRule Below(double max) {
+  return {"below " + NumberText(max),
+          [max](double x) { return std::isfinite(x) && x < max; },
+          nullptr,
+          nullptr,
+          {}};
+}
+
+OptionRule OneOf(std::vector<std::string> values) {
+  OptionRule rule;
+  rule.expected = "one of: " + JoinValues(values);
+  rule.text = [values](const std::string& x) {
+    return std::find(values.begin(), values.end(), x) != values.end();
+  };
+  rule.values = std::move(values);
+  return rule;
+}
+
+OptionRule NonEmpty() {
+  return {"not empty",
+          nullptr,
+          [](const std::string& x) { return !x.empty(); },
+          [](size_t size) { return size > 0; },
+          {}};
+}
+
+std::string OptionDoc::HelpText() const {
+  std::string text = description;
+  for (const auto& rule : expected) text += "; " + rule;
+  return text;
+}
+
+namespace options_detail {
+
+std::string RuleFailure(const std::string& key, const std::string& description,
+                        const OptionRule& rule, const nlohmann::json& got) {
+  std::string message = "option '" + key + "' must be " + rule.expected + ", got " + got.dump();
+  if (!rule.values.empty()) {
+    // The first element that is not a valid value, for a did-you-mean suggestion.
+    for (const auto& value : got.is_array() ? got : nlohmann::json::array({got})) {
+      if (!value.is_string()) continue;
+      const std::string text = value.get<std::string>();
+      if (std::find(rule.values.begin(), rule.values.end(), text) != rule.values.end()) continue;
+      const std::string nearest = NearestKey(text, rule.values);
+      if (!nearest.empty()) message += " (did you mean '" + nearest + "'?)";
+      break;
+    }
+  }
+  return message + " (" + key + ": " + description + ")";
+}
+
+}  // namespace options_detail
 
 }  // namespace raytime

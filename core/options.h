@@ -1,20 +1,33 @@
-// One list of fields per options struct, used for YAML parsing, JSON provenance and `--set`.
+// One declaration per option: key, field, one-line description and the rules its value obeys.
 //
 // An options struct names its fields once, with the YAML key equal to the field name:
 //
 //   struct FooOptions {
-//     double max_error_px = 4.0;  // pixels (paper §4.1)
-//     template <class Visitor> void VisitFields(Visitor&& v) { v("max_error_px", max_error_px); }
+//     double max_error_px = 4.0;
+//     std::string mode = "fast";
+//     template <class Visitor>
+//     void VisitFields(Visitor&& v) {
+//       v("max_error_px", max_error_px, "Inlier threshold, pixels (paper §4.1)", Positive());
+//       v("mode", mode, "How to do it", OneOf({"fast", "exact"}));
+//     }
+//     // Optional: constraints between fields.
+//     void CheckRelations(const Requirement& require) const {
+//       require(mode != "exact" || max_error_px < 8, "mode 'exact' needs max_error_px < 8");
+//     }
 //   };
 //
-// Supported field types: bool, int, int64_t, double, std::string and std::vector of int, double
-// or std::string. Unknown keys are errors that name the file, the line and the nearest valid key.
+// From that list come YAML parsing (unknown keys: file, line and the nearest valid key), JSON
+// provenance, the stage command lines with their --help text, content hashes and validation
+// (ValidateOptions: every rule and relation, one InputError naming the option, its description
+// and what was expected). Supported field types: bool, int, int64_t, double, std::string and
+// std::vector of int, double or std::string. Rules on a list apply to each element.
 #pragma once
 
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <type_traits>
@@ -33,8 +46,31 @@ std::string UnknownKeyMessage(const std::string& what, const std::string& key,
                               const std::vector<std::string>& candidates,
                               const std::string& noun = "key");
 
-// "name (line N)" context for YAML nodes; line is 1-based, 0 when the node has no mark.
+// 1-based line of a YAML node, 0 when the node has no mark.
 int YamlLine(const YAML::Node& node);
+
+// A rule on an option's value: what it expects, in words ("positive", "one of a, b"), and the
+// test for numbers, for strings and for a list's length (those a rule does not test pass).
+// Numeric rules also refuse NaN and infinities: no option means anything at either.
+struct OptionRule {
+  std::string expected;
+  std::function<bool(double)> number;
+  std::function<bool(const std::string&)> text;
+  std::function<bool(size_t)> list_size;
+  std::vector<std::string> values;  // the valid values of an enumeration (OneOf)
+};
+
+OptionRule Positive();           // > 0
+OptionRule NonNegative();        // >= 0
+OptionRule AtLeast(double min);  // >= min
+OptionRule Above(double min);    // > min
+OptionRule AtMost(double max);   // <= max
+OptionRule Below(double max);    // < max
+OptionRule OneOf(std::vector<std::string> values);
+OptionRule NonEmpty();  // a string that is not "", a list with elements
+
+// Constraints between fields: `require(condition, message)` fails validation with `message`.
+using Requirement = std::function<void(bool, const std::string&)>;
 
 template <typename T>
 const char* TypeName() {
@@ -48,50 +84,148 @@ const char* TypeName() {
   return "a value";
 }
 
-// Converts one YAML node into a field, with a located error on a type mismatch.
+// Short type tag for command-line help: BOOL, INT, NUMBER, TEXT (lists: of their elements).
+template <typename T>
+const char* TypeTag() {
+  if constexpr (std::is_same_v<T, bool>) return "BOOL";
+  if constexpr (std::is_same_v<T, int> || std::is_same_v<T, int64_t>) return "INT";
+  if constexpr (std::is_same_v<T, double>) return "NUMBER";
+  if constexpr (std::is_same_v<T, std::string>) return "TEXT";
+  if constexpr (std::is_same_v<T, std::vector<int>>) return "INT";
+  if constexpr (std::is_same_v<T, std::vector<double>>) return "NUMBER";
+  if constexpr (std::is_same_v<T, std::vector<std::string>>) return "TEXT";
+  return "VALUE";
+}
+
+template <typename T>
+struct IsVector : std::false_type {};
+template <typename T>
+struct IsVector<std::vector<T>> : std::true_type {};
+
+// Converts one YAML node into a field, with a located error on a type mismatch. Booleans also
+// accept 1 and 0, as command lines write them.
 template <typename T>
 void ReadYamlField(const YAML::Node& node, T& field, const std::string& path,
                    const std::string& key) {
   try {
+    if constexpr (std::is_same_v<T, bool>) {
+      if (node.IsScalar() && (node.Scalar() == "1" || node.Scalar() == "0")) {
+        field = node.Scalar() == "1";
+        return;
+      }
+    }
     field = node.as<T>();
   } catch (const YAML::Exception&) {
-    ThrowInput(path, YamlLine(node),
-               "option '" + key + "' must be " + TypeName<T>() + ", got '" + YAML::Dump(node) +
-                   "'");
+    ThrowInput(
+        path, YamlLine(node),
+        "option '" + key + "' must be " + TypeName<T>() + ", got '" + YAML::Dump(node) + "'");
   }
 }
 
+// Everything declared about one option, for help text, documentation tests and error messages.
+struct OptionDoc {
+  std::string key;
+  std::string type;           // TypeTag
+  std::string default_value;  // as JSON text
+  std::string description;
+  std::vector<std::string> expected;  // the rules' words
+  std::vector<std::string> values;    // of an enumeration
+  bool is_list = false;
+  bool is_bool = false;
+
+  // "description; positive; one of: a, b" for --help.
+  std::string HelpText() const;
+};
+
 namespace options_detail {
+
+// "option 'key' must be <expected>, got <value> [(did you mean 'x'?)] (key: description)".
+std::string RuleFailure(const std::string& key, const std::string& description,
+                        const OptionRule& rule, const nlohmann::json& got);
+
+// The first rule `value` breaks, or nullptr.
+template <typename T>
+const OptionRule* BrokenRule(const T& value, const std::vector<const OptionRule*>& rules) {
+  for (const OptionRule* rule : rules) {
+    if constexpr (IsVector<T>::value) {
+      if (rule->list_size && !rule->list_size(value.size())) return rule;
+      for (const auto& element : value) {
+        if (BrokenRule(element, {rule}) != nullptr) return rule;
+      }
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (rule->text && !rule->text(value)) return rule;
+    } else if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+      if (rule->number && !rule->number(static_cast<double>(value))) return rule;
+    }
+  }
+  return nullptr;
+}
+
 struct KeyCollector {
   std::vector<std::string> keys;
-  template <typename T>
-  void operator()(const char* key, T&) {
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T&, const char*, const Rules&...) {
     keys.emplace_back(key);
   }
 };
 struct YamlReader {
   const YAML::Node& map;
   const std::string& path;
-  template <typename T>
-  void operator()(const char* key, T& field) {
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char*, const Rules&...) {
     const YAML::Node child = map[key];
     if (child) ReadYamlField(child, field, path, key);
   }
 };
 struct JsonWriter {
   nlohmann::json& out;
-  template <typename T>
-  void operator()(const char* key, T& field) {
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char*, const Rules&...) {
     out[key] = field;
   }
 };
 struct JsonReader {
   const nlohmann::json& in;
-  template <typename T>
-  void operator()(const char* key, T& field) {
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char*, const Rules&...) {
     if (in.contains(key)) field = in.at(key).get<T>();
   }
 };
+struct Validator {
+  std::vector<std::string>& errors;
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char* description, const Rules&... rules) {
+    const OptionRule* broken = BrokenRule(field, {&rules...});
+    if (broken != nullptr) {
+      errors.push_back(RuleFailure(key, description, *broken, nlohmann::json(field)));
+    }
+  }
+};
+struct DocCollector {
+  std::vector<OptionDoc>& docs;
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char* description, const Rules&... rules) {
+    OptionDoc doc;
+    doc.key = key;
+    doc.type = TypeTag<T>();
+    doc.default_value = nlohmann::json(field).dump();
+    doc.description = description;
+    doc.is_list = IsVector<T>::value;
+    doc.is_bool = std::is_same_v<T, bool>;
+    for (const OptionRule* rule : std::initializer_list<const OptionRule*>{&rules...}) {
+      doc.expected.push_back(rule->expected);
+      doc.values.insert(doc.values.end(), rule->values.begin(), rule->values.end());
+    }
+    docs.push_back(std::move(doc));
+  }
+};
+
+template <typename Options, typename = void>
+struct HasRelations : std::false_type {};
+template <typename Options>
+struct HasRelations<Options, std::void_t<decltype(std::declval<const Options&>().CheckRelations(
+                                 std::declval<const Requirement&>()))>> : std::true_type {};
+
 }  // namespace options_detail
 
 template <typename Options>
@@ -101,7 +235,17 @@ std::vector<std::string> OptionKeys(Options& options) {
   return collector.keys;
 }
 
-// Applies a YAML mapping onto `options`; keys absent from the mapping keep their defaults.
+// Every option's declaration, in VisitFields order, with defaults taken from `options`.
+template <typename Options>
+std::vector<OptionDoc> OptionDocs(Options& options) {
+  std::vector<OptionDoc> docs;
+  options_detail::DocCollector collector{docs};
+  options.VisitFields(collector);
+  return docs;
+}
+
+// Applies a YAML mapping onto `options`; keys absent from the mapping keep their values. Checks
+// keys and value types only: ValidateOptions checks the values once all of them are in place.
 // `path` names the file for error messages; `what` names the section ("stage 'prior'").
 template <typename Options>
 void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
@@ -120,6 +264,25 @@ void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
   }
   options_detail::YamlReader reader{map, path};
   options.VisitFields(reader);
+}
+
+// Checks every field's rules and the struct's relations; one InputError listing every problem,
+// each "<what>: option 'key' must be <expected>, got <value> (<description>)".
+template <typename Options>
+void ValidateOptions(const Options& options, const std::string& what) {
+  std::vector<std::string> errors;
+  Options& fields = const_cast<Options&>(options);  // the visitors of VisitFields only read here
+  options_detail::Validator validator{errors};
+  fields.VisitFields(validator);
+  if constexpr (options_detail::HasRelations<Options>::value) {
+    options.CheckRelations([&](bool ok, const std::string& message) {
+      if (!ok) errors.push_back(message);
+    });
+  }
+  if (errors.empty()) return;
+  std::string message;
+  for (const auto& error : errors) message += (message.empty() ? "" : "; ") + what + ": " + error;
+  throw InputError(message);
 }
 
 template <typename Options>

@@ -10,12 +10,11 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/statistics.h"
+#include "core/sweep_row.h"
 
 namespace raytime {
 
 namespace {
-
-using nlohmann::json;
 
 // Alignments a sweep row may carry (PoseErrorOptions::alignment); the report reads sim3 and none.
 const char* const kAlignmentNames[] = {"sim3", "se3", "none"};
@@ -34,47 +33,8 @@ struct RunRecord {
   double level_deg = 0.0;
   std::map<std::string, std::map<std::string, RunArmErrors>> errors;  // arm -> alignment -> ...
   std::map<std::string, double> stage_seconds;                        // stage id -> seconds
+  std::map<std::string, std::string> arm_stage;  // pose set -> the stage id that wrote it
 };
-
-std::string ScalarText(const json& value) {
-  return value.is_string() ? value.get<std::string>() : value.dump();
-}
-
-// "metrics.<arm>.<alignment>.<field...>" split at the first ".<alignment>." (arm names such as
-// "refined@gnc" hold no such part; fields may hold dots: gt_from_estimate.scale).
-bool SplitMetricKey(const std::string& key, std::string* arm, std::string* alignment,
-                    std::string* field) {
-  static const std::string kPrefix = "metrics.";
-  if (key.rfind(kPrefix, 0) != 0) return false;
-  const std::string rest = key.substr(kPrefix.size());
-  size_t best = std::string::npos;
-  for (const char* name : kAlignmentNames) {
-    const size_t at = rest.find("." + std::string(name) + ".");
-    if (at != std::string::npos && at < best) {
-      best = at;
-      *alignment = name;
-    }
-  }
-  if (best == std::string::npos || best == 0) return false;
-  *arm = rest.substr(0, best);
-  *field = rest.substr(best + alignment->size() + 2);
-  return true;
-}
-
-bool IsRunBookkeeping(const std::string& key) {
-  return key == "run" || key == "status" || key == "error" || key == "seconds" ||
-         key.rfind("seconds.", 0) == 0 || key.rfind("metrics.", 0) == 0 ||
-         key.rfind("guardrails.", 0) == 0;
-}
-
-// Pose set -> the stage id that wrote it: `refined@X` <- `refine@X`; other stages (prior,
-// bootstrap, classical@X) name their pose set after themselves (StageContext::OutputPoseSetName).
-std::string StageIdOfArm(const std::string& arm) {
-  const size_t at = arm.find('@');
-  const std::string base = arm.substr(0, at);
-  const std::string suffix = at == std::string::npos ? "" : arm.substr(at);
-  return (base == "refined" ? "refine" : base) + suffix;
-}
 
 std::string ArmBase(const std::string& arm) { return arm.substr(0, arm.find('@')); }
 
@@ -125,14 +85,11 @@ std::map<std::string, std::string> SceneDisplayNames(const std::set<std::string>
   return names;
 }
 
-std::string RowName(const json& row, size_t index) {
-  return "sweep row " + std::to_string(index + 1) +
-         (row.contains("run") ? " (run " + ScalarText(row["run"]) + ")" : "");
+std::string RowName(const SweepRow& row, size_t index) {
+  return "sweep row " + std::to_string(index + 1) + " (run " + row.run + ")";
 }
 
-double ParseLevel(const json& value, const std::string& row_name, const std::string& key) {
-  if (value.is_number()) return value.get<double>();
-  const std::string text = ScalarText(value);
+double ParseLevel(const std::string& text, const std::string& row_name, const std::string& key) {
   size_t used = 0;
   double level = 0.0;
   try {
@@ -145,10 +102,6 @@ double ParseLevel(const json& value, const std::string& row_name, const std::str
                      text + "'");
   }
   return level;
-}
-
-double NumberOr(const json& value, double fallback) {
-  return value.is_number() ? value.get<double>() : fallback;
 }
 
 AlignedCellStats AlignedStats(const std::vector<const RunRecord*>& runs, const std::string& arm,
@@ -193,16 +146,17 @@ CampaignCell MakeCell(const std::string& scene, double level_deg, const std::str
   cell.arm = arm;
   cell.sim3 = AlignedStats(runs, arm, "sim3", options);
   cell.none = AlignedStats(runs, arm, "none", options);
-  const std::string stage_id = StageIdOfArm(arm);
+  std::string stage_id;
   std::vector<double> seconds;
   for (const RunRecord* run : runs) {
-    const auto scored = run->errors.find(arm);
-    const auto time = run->stage_seconds.find(stage_id);
-    if (scored != run->errors.end() && time != run->stage_seconds.end()) {
-      seconds.push_back(time->second);
-    }
+    const auto writer = run->arm_stage.find(arm);
+    if (writer == run->arm_stage.end() || !run->errors.count(arm)) continue;
+    const auto time = run->stage_seconds.find(writer->second);
+    if (time == run->stage_seconds.end()) continue;
+    stage_id = writer->second;
+    seconds.push_back(time->second);
   }
-  if (!seconds.empty()) cell.stage_id = stage_id;
+  cell.stage_id = stage_id;
   cell.median_seconds = Median(seconds, kNoValue);
   return cell;
 }
@@ -459,49 +413,27 @@ int CampaignReport::FailedRunsAt(const std::string& scene, double level_deg) con
       }));
 }
 
-std::vector<json> ReadSweepRows(const std::string& path) {
-  const std::string text = ReadTextFile(path);
-  json rows;
-  try {
-    rows = json::parse(text);
-  } catch (const json::parse_error& e) {
-    const size_t end = std::min<size_t>(e.byte, text.size());
-    const int line = 1 + static_cast<int>(std::count(text.begin(), text.begin() + end, '\n'));
-    ThrowInput(path, line,
-               "not valid JSON (expected the sweep.json `raytime run` writes for a sweep): " +
-                   std::string(e.what()));
-  }
-  if (!rows.is_array()) {
-    ThrowInput(path, 0,
-               "expected a JSON array of sweep rows, got " + std::string(rows.type_name()));
-  }
-  for (size_t i = 0; i < rows.size(); ++i) {
-    if (!rows[i].is_object()) {
-      ThrowInput(path, 0, "sweep row " + std::to_string(i + 1) + " is not an object (one per run)");
-    }
-  }
-  return rows.get<std::vector<json>>();
-}
-
-CampaignReport AggregateCampaign(const std::vector<json>& rows,
+CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
                                  const CampaignReportOptions& options) {
   CampaignReport report;
   report.options = options;
   report.total_runs = static_cast<int>(rows.size());
+  const auto scene_value = [&](const SweepRow& row) {
+    const std::string* value = row.Swept(options.scene_key);
+    return value != nullptr ? *value : std::string("(not swept)");
+  };
 
   // Scene values first, so display names can be made unique.
   std::set<std::string> scene_values;
   std::vector<std::string> scene_order;
-  for (const json& row : rows) {
-    const std::string value = row.contains(options.scene_key) ? ScalarText(row[options.scene_key])
-                                                              : std::string("(not swept)");
-    if (scene_values.insert(value).second) scene_order.push_back(value);
+  for (const SweepRow& row : rows) {
+    if (scene_values.insert(scene_value(row)).second) scene_order.push_back(scene_value(row));
   }
   const std::map<std::string, std::string> scene_names = SceneDisplayNames(scene_values);
   for (const auto& value : scene_order) report.scenes.push_back(scene_names.at(value));
 
   size_t rows_with_level = 0;
-  for (const json& row : rows) rows_with_level += row.contains(options.level_key) ? 1 : 0;
+  for (const SweepRow& row : rows) rows_with_level += row.Swept(options.level_key) ? 1 : 0;
   report.level_swept = rows_with_level > 0;
 
   std::vector<RunRecord> runs;
@@ -509,44 +441,35 @@ CampaignReport AggregateCampaign(const std::vector<json>& rows,
   std::set<std::string> arms;
   std::map<std::string, std::set<std::string>> pooled_values;
   for (size_t i = 0; i < rows.size(); ++i) {
-    const json& row = rows[i];
+    const SweepRow& row = rows[i];
     const std::string row_name = RowName(row, i);
-    if (!row.contains("status")) throw InputError(row_name + ": no 'status' column");
-    if (report.level_swept && !row.contains(options.level_key)) {
+    const std::string* level = row.Swept(options.level_key);
+    if (report.level_swept && level == nullptr) {
       throw InputError(row_name + ": no '" + options.level_key + "' column, though other runs " +
                        "have one");
     }
     RunRecord run;
-    run.label = row.contains("run") ? ScalarText(row["run"]) : row_name;
-    run.scene = scene_names.at(row.contains(options.scene_key) ? ScalarText(row[options.scene_key])
-                                                               : std::string("(not swept)"));
-    run.level_deg =
-        report.level_swept ? ParseLevel(row[options.level_key], row_name, options.level_key) : 0.0;
+    run.label = row.run;
+    run.scene = scene_names.at(scene_value(row));
+    run.level_deg = report.level_swept ? ParseLevel(*level, row_name, options.level_key) : 0.0;
     levels.insert(run.level_deg);
-    for (const auto& [key, value] : row.items()) {
-      if (key == options.scene_key || key == options.level_key) continue;
-      if (!IsRunBookkeeping(key)) pooled_values[key].insert(ScalarText(value));
+    for (const auto& [key, value] : row.swept) {
+      if (key != options.scene_key && key != options.level_key) pooled_values[key].insert(value);
     }
-    if (ScalarText(row["status"]) != "ok") {
+    if (!row.Succeeded()) {
       report.failed_runs.push_back(
           {run.label, run.scene, run.level_deg,
-           row.contains("error") ? ScalarText(row["error"]) : std::string("(no error given)")});
+           row.error.empty() ? std::string("(no error given)") : row.error});
       continue;
     }
-    for (const auto& [key, value] : row.items()) {
-      std::string arm, alignment, field;
-      if (SplitMetricKey(key, &arm, &alignment, &field)) {
-        RunArmErrors& errors = run.errors[arm][alignment];
-        if (field == "mean_rotation_deg") errors.mean_rotation_deg = NumberOr(value, kNoValue);
-        if (field == "mean_centre_m") errors.mean_centre_m = NumberOr(value, kNoValue);
-        if (field == "mean_centre_relative") {
-          errors.mean_centre_relative = NumberOr(value, kNoValue);
-        }
-      } else if (key.rfind("seconds.", 0) == 0) {
-        run.stage_seconds[key.substr(8)] = NumberOr(value, kNoValue);
+    for (const auto& [arm, by_alignment] : row.errors) {
+      for (const auto& [alignment, e] : by_alignment) {
+        run.errors[arm][alignment] = {e.mean_rotation_deg, e.mean_centre_m, e.mean_centre_relative};
       }
+      arms.insert(arm);
     }
-    for (const auto& [arm, by_alignment] : run.errors) arms.insert(arm);
+    run.stage_seconds = row.stage_seconds;
+    run.arm_stage = row.pose_set_stage;
     runs.push_back(std::move(run));
   }
   report.levels.assign(levels.begin(), levels.end());

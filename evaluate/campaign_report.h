@@ -5,9 +5,8 @@
 // own frame").
 //
 // An arm is a scored pose set: `prior` (the perturbed input, the baseline), `refined@gnc`,
-// `classical`, `classical@mapper`, ... A row carries its errors as flattened columns
-// `metrics.<arm>.<alignment>.<field>` (fields of PoseErrorSummary::ToJson) and its stage times as
-// `seconds.<stage id>`; the swept keys are columns of their own.
+// `classical`, `classical@mapper`, ... Rows are core/sweep_row.h's SweepRow: per arm and
+// alignment its errors, per stage its time, which stage wrote each arm, and the swept values.
 #pragma once
 
 #include <limits>
@@ -15,6 +14,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "core/sweep_row.h"
 
 namespace raytime {
 
@@ -107,14 +108,10 @@ struct CampaignReport {
   int FailedRunsAt(const std::string& scene, double level_deg) const;
 };
 
-// The rows of a sweep.json file; InputError naming the file when it is missing, does not parse or
-// is not an array of objects.
-std::vector<nlohmann::json> ReadSweepRows(const std::string& path);
-
-// Aggregates sweep rows (objects as in sweep.json). A row with a status other than "ok" is
-// listed in failed_runs and not scored; a level that is not a number is an InputError naming the
-// run.
-CampaignReport AggregateCampaign(const std::vector<nlohmann::json>& rows,
+// Aggregates sweep rows. A run that did not succeed (status other than "ok" or
+// "ok_with_warnings") is listed in failed_runs and not scored; a level that is not a number is an
+// InputError naming the run.
+CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
                                  const CampaignReportOptions& options = {});
 
 // The Markdown report; `source` names the sweep in its header.

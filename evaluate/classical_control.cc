@@ -1,14 +1,7 @@
 #include "evaluate/classical_control.h"
 
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -20,31 +13,14 @@
 #include "core/formats/colmap_database.h"
 #include "core/formats/colmap_model.h"
 #include "core/options.h"
-
-extern char** environ;
+#include "core/process.h"
+#include "core/timing.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-std::string Quoted(const std::string& s) {
-  if (!s.empty() && s.find_first_of(" \t'\"\\$`") == std::string::npos) return s;
-  std::string quoted = "'";
-  for (const char c : s) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
-
-std::string CommandLine(const std::vector<std::string>& argv) {
-  std::string line;
-  for (const auto& arg : argv) line += (line.empty() ? "" : " ") + Quoted(arg);
-  return line;
-}
 
 // An option value as text with 17 significant digits, so COLMAP receives the threshold unchanged.
 std::string Number(double value) {
@@ -64,44 +40,19 @@ std::string RunColmap(const std::vector<std::string>& argv, const std::string& l
     std::ofstream log(log_path, std::ios::app);
     log << "\n$ " << command << "\n";
   }
-  std::vector<std::string> env_storage;
-  bool has_qt_platform = false;
-  for (char** e = environ; *e; ++e) {
-    env_storage.emplace_back(*e);
-    has_qt_platform = has_qt_platform || std::strncmp(*e, "QT_QPA_PLATFORM=", 16) == 0;
-  }
-  if (!has_qt_platform) env_storage.emplace_back("QT_QPA_PLATFORM=offscreen");
-  std::vector<char*> envp;
-  for (auto& e : env_storage) envp.push_back(e.data());
-  envp.push_back(nullptr);
-  std::vector<std::string> args = argv;
-  std::vector<char*> cargv;
-  for (auto& a : args) cargv.push_back(a.data());
-  cargv.push_back(nullptr);
-
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-  posix_spawn_file_actions_addopen(&actions, 1, log_path.c_str(), O_WRONLY | O_APPEND | O_CREAT,
-                                   0644);
-  posix_spawn_file_actions_adddup2(&actions, 1, 2);
+  ProcessOptions options;
+  options.output_path = log_path;
+  options.default_environment = {"QT_QPA_PLATFORM=offscreen"};
   pid_t pid = 0;
-  const int spawn_error =
-      posix_spawnp(&pid, cargv[0], &actions, nullptr, cargv.data(), envp.data());
-  posix_spawn_file_actions_destroy(&actions);
-  if (spawn_error != 0) {
-    throw std::runtime_error("cannot run '" + command + "': " + std::strerror(spawn_error) +
+  try {
+    pid = StartProcess(argv, options);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(std::string(e.what()) +
                              " (is COLMAP 3.8 installed? option 'colmap' names the executable)");
   }
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0) {
-    if (errno != EINTR) throw std::runtime_error("waitpid failed for '" + command + "'");
-  }
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    const std::string how = WIFEXITED(status)
-                                ? "exited with status " + std::to_string(WEXITSTATUS(status))
-                                : "was killed by signal " + std::to_string(WTERMSIG(status));
-    throw std::runtime_error("COLMAP command failed (" + how + "): " + command +
+  const ProcessStatus status = WaitProcess(pid);
+  if (!status.Succeeded()) {
+    throw std::runtime_error("COLMAP command failed (" + status.Describe() + "): " + command +
                              "; its output is in " + log_path);
   }
   std::ifstream log(log_path, std::ios::binary);
@@ -172,6 +123,14 @@ double MeanReprojectionError(const ColmapModel& model, int* num_observations) {
   return count ? sum / count : std::numeric_limits<double>::quiet_NaN();
 }
 
+// JSON has no NaN: the costs COLMAP's log did not report become null.
+void NullNonFinite(nlohmann::json* value) {
+  if (value->is_number_float() && !std::isfinite(value->get<double>())) *value = nullptr;
+  if (value->is_structured()) {
+    for (nlohmann::json& child : *value) NullNonFinite(&child);
+  }
+}
+
 // The model folder of a mapper run with the most registered images.
 std::string LargestMapperModel(const std::string& mapper_dir, const std::string& log_path) {
   std::string best;
@@ -201,49 +160,16 @@ ClassicalControlOptions ClassicalControlOptions::Tuned() {
   return options;
 }
 
-void ValidateClassicalControlOptions(const ClassicalControlOptions& o) {
-  if (o.mode != "triangulate" && o.mode != "mapper") {
-    throw InputError(
-        UnknownKeyMessage("classical.mode", o.mode, {"triangulate", "mapper"}, "mode"));
-  }
-  if (o.rounds < 1) throw InputError("classical.rounds must be at least 1");
-  if (!(o.max_angle_error_deg > 0) || !(o.max_reproj_error_px > 0) || !(o.min_tri_angle_deg >= 0)) {
-    throw InputError(
-        "classical gates must be positive (max_angle_error_deg, max_reproj_error_px) and "
-        "min_tri_angle_deg non-negative");
-  }
-  if (o.colmap.empty()) throw InputError("classical.colmap must name the COLMAP executable");
-}
-
 nlohmann::json ClassicalControlSummary::ToJson() const {
-  const auto number = [](double v) -> nlohmann::json {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
-  nlohmann::json rounds_json = nlohmann::json::array();
-  for (const auto& r : per_round) {
-    rounds_json.push_back({{"triangulate_s", r.triangulate_s},
-                           {"adjust_s", r.adjust_s},
-                           {"num_points", r.num_points},
-                           {"colmap_final_cost_px", number(r.colmap_final_cost_px)}});
-  }
-  return {{"mode", mode},
-          {"rounds", rounds},
-          {"per_round", rounds_json},
-          {"num_images", num_images},
-          {"num_registered", num_registered},
-          {"num_points", num_points},
-          {"num_observations", num_observations},
-          {"mean_reprojection_error_px", number(mean_reprojection_error_px)},
-          {"colmap_final_cost_px", number(colmap_final_cost_px)},
-          {"wall_time_s", wall_time_s},
-          {"model_dir", model_dir},
-          {"log_path", log_path}};
+  nlohmann::json out = *this;
+  NullNonFinite(&out);
+  return out;
 }
 
 PoseSet RunClassicalControl(const std::string& database_path, const ImageSet& images,
                             const PoseSet& prior, const ClassicalControlOptions& options,
                             const std::string& workdir, ClassicalControlSummary* summary) {
-  ValidateClassicalControlOptions(options);
+  ValidateOptions(options, "classical control");
   const auto start = std::chrono::steady_clock::now();
   if (!fs::is_regular_file(database_path)) {
     ThrowInput(database_path, 0, "no such file (COLMAP database for the classical control)");

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -45,18 +46,22 @@ struct ClassicalControlOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("mode", mode);
-    v("rounds", rounds);
-    v("refine_intrinsics", refine_intrinsics);
-    v("max_angle_error_deg", max_angle_error_deg);
-    v("max_reproj_error_px", max_reproj_error_px);
-    v("min_tri_angle_deg", min_tri_angle_deg);
-    v("colmap", colmap);
+    v("mode", mode,
+      "COLMAP point_triangulator + bundle_adjuster from the prior (§4.1), or the prior-free "
+      "mapper (§4.8)",
+      OneOf({"triangulate", "mapper"}));
+    v("rounds", rounds, "Triangulate-adjust alternations (§4.1: 2; tuned control: 8)", Positive());
+    v("refine_intrinsics", refine_intrinsics,
+      "Refine focal, principal point and distortion (OPENCV model, room protocol §4.3)");
+    v("max_angle_error_deg", max_angle_error_deg,
+      "COLMAP triangulation angle-error gates, degrees (tuned control: 8)", Positive());
+    v("max_reproj_error_px", max_reproj_error_px,
+      "COLMAP merge/complete/filter reprojection gates, pixels (tuned control: 16)", Positive());
+    v("min_tri_angle_deg", min_tri_angle_deg, "COLMAP minimum triangulation angle, degrees",
+      NonNegative());
+    v("colmap", colmap, "The COLMAP 3.8 executable", NonEmpty());
   }
 };
-
-// Throws InputError naming the option for an invalid value.
-void ValidateClassicalControlOptions(const ClassicalControlOptions& options);
 
 struct ClassicalRoundSummary {
   double triangulate_s = 0.0;  // point_triangulator (or mapper) wall time
@@ -66,6 +71,8 @@ struct ClassicalRoundSummary {
   // log holds none.
   double colmap_final_cost_px = 0.0;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ClassicalRoundSummary, triangulate_s, adjust_s, num_points,
+                                   colmap_final_cost_px)
 
 struct ClassicalControlSummary {
   std::string mode;
@@ -83,8 +90,12 @@ struct ClassicalControlSummary {
   std::string model_dir;  // the final COLMAP model (binary)
   std::string log_path;   // every COLMAP command and its output
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name, NaN costs as null
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ClassicalControlSummary, mode, rounds, per_round, num_images,
+                                   num_registered, num_points, num_observations,
+                                   mean_reprojection_error_px, colmap_final_cost_px, wall_time_s,
+                                   model_dir, log_path)
 
 // Runs the control on `database_path` (a COLMAP database whose image ids are the 1-based
 // positions in `images`, as WriteColmapDatabase writes it) with the images under

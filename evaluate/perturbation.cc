@@ -20,13 +20,11 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace raytime {
 
 namespace {
-
-constexpr const char* kModes = "iid, random_walk, kidnap";
-constexpr const char* kUnits = "scene_fraction, metres";
 
 class Draws {
  public:
@@ -60,33 +58,6 @@ std::vector<Draw> MakeDraws(int seed, size_t count) {
     d.direction = draws.UnitVector();
   }
   return out;
-}
-
-[[noreturn]] void BadOption(const std::string& key, const std::string& message) {
-  throw InputError("perturbation option '" + key + "': " + message);
-}
-
-void Validate(const PerturbationOptions& options) {
-  if (options.mode != "iid" && options.mode != "random_walk" && options.mode != "kidnap") {
-    BadOption("mode", "unknown value '" + options.mode + "' (valid values: " + kModes + ")");
-  }
-  if (options.translation_unit != "scene_fraction" && options.translation_unit != "metres") {
-    BadOption("translation_unit",
-              "unknown value '" + options.translation_unit + "' (valid values: " + kUnits + ")");
-  }
-  // Beyond 180° a rotation by the level is the same as one by 360° minus it, so the level
-  // would not be the error it names.
-  if (!(options.level_deg >= 0.0 && options.level_deg <= 180.0)) {
-    BadOption("level_deg", "must be in [0, 180] degrees, got " + std::to_string(options.level_deg));
-  }
-  if (!(options.translation_per_deg >= 0.0 && std::isfinite(options.translation_per_deg))) {
-    BadOption("translation_per_deg",
-              "must be finite and >= 0, got " + std::to_string(options.translation_per_deg));
-  }
-  if (!(options.scene_distance_m >= 0.0 && std::isfinite(options.scene_distance_m))) {
-    BadOption("scene_distance_m", "must be finite and >= 0 (0 estimates it), got " +
-                                      std::to_string(options.scene_distance_m));
-  }
 }
 
 Rigid3 RotateInWorld(const Rigid3& world_from_cam, const Eigen::Quaterniond& rotation) {
@@ -249,15 +220,12 @@ double EstimateSceneDistance(const PoseSet& poses) {
   for (const auto& [name, pose] : poses.world_from_cam) {
     distances.push_back((pose.translation - point).norm());
   }
-  const size_t mid = distances.size() / 2;
-  std::nth_element(distances.begin(), distances.begin() + mid, distances.end());
-  if (distances.size() % 2 == 1) return distances[mid];
-  return 0.5 * (distances[mid] + *std::max_element(distances.begin(), distances.begin() + mid));
+  return Median(distances, 0.0);
 }
 
 PoseSet PerturbPoses(const PoseSet& ground_truth, const PerturbationOptions& options,
                      PerturbationSummary* summary) {
-  Validate(options);
+  ValidateOptions(options, "perturbation");
   if (ground_truth.size() == 0) {
     if (summary != nullptr) *summary = PerturbationSummary();
     return PoseSet();

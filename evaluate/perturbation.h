@@ -4,6 +4,7 @@
 
 #include <string>
 
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -27,12 +28,22 @@ struct PerturbationOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("mode", mode);
-    v("level_deg", level_deg);
-    v("translation_per_deg", translation_per_deg);
-    v("translation_unit", translation_unit);
-    v("scene_distance_m", scene_distance_m);
-    v("seed", seed);
+    v("mode", mode,
+      "Perturbation: every frame by the level, a random walk of equal mean, or three rigid "
+      "segments (§4.8)",
+      OneOf({"iid", "random_walk", "kidnap"}));
+    v("level_deg", level_deg, "Rotation per frame, degrees (§4.8 ladder: 1, 2, 4, ... 64)",
+      NonNegative(), AtMost(180));
+    v("translation_per_deg", translation_per_deg,
+      "Centre displacement per degree, in translation_unit (1.25 % of the scene per degree)",
+      NonNegative());
+    v("translation_unit", translation_unit,
+      "Unit of translation_per_deg: fraction of the camera-to-scene distance, or metres",
+      OneOf({"scene_fraction", "metres"}));
+    v("scene_distance_m", scene_distance_m,
+      "Median camera-to-scene distance, metres; 0 estimates it from the ground truth",
+      NonNegative());
+    v("seed", seed, "Seed of the perturbation draws");
   }
 };
 

@@ -118,33 +118,13 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
 }
 
 nlohmann::json PoseErrorSummary::ToJson(bool with_frames) const {
-  nlohmann::json out;
-  out["alignment"] = alignment;
-  out["num_frames"] = num_frames;
-  out["mean_rotation_deg"] = mean_rotation_deg;
-  out["median_rotation_deg"] = median_rotation_deg;
-  out["mean_centre_m"] = mean_centre_m;
-  out["median_centre_m"] = median_centre_m;
-  out["scene_scale_m"] = scene_scale_m;
-  out["mean_centre_relative"] = mean_centre_relative;
-  out["median_centre_relative"] = median_centre_relative;
-  out["success"] = success;
+  nlohmann::json out = *this;
   const Eigen::Quaterniond& q = gt_from_estimate.rotation;
   const Eigen::Vector3d& t = gt_from_estimate.translation;
   out["gt_from_estimate"] = {{"scale", gt_from_estimate.scale},
                              {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
                              {"translation", {t.x(), t.y(), t.z()}}};
-  out["only_in_estimate"] = only_in_estimate;
-  out["only_in_ground_truth"] = only_in_ground_truth;
-  if (with_frames) {
-    nlohmann::json frames_json = nlohmann::json::array();
-    for (const FrameError& frame : frames) {
-      frames_json.push_back({{"name", frame.name},
-                             {"rotation_deg", frame.rotation_deg},
-                             {"centre_m", frame.centre_m}});
-    }
-    out["frames"] = frames_json;
-  }
+  if (!with_frames) out.erase("frames");
   return out;
 }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -20,8 +21,11 @@ struct PoseErrorOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("alignment", alignment);
-    v("success_rotation_deg", success_rotation_deg);
+    v("alignment", alignment,
+      "Alignment before scoring: Sim(3) on centres (standard), SE(3), or none (prior's frame)",
+      OneOf({"sim3", "se3", "none"}));
+    v("success_rotation_deg", success_rotation_deg,
+      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive());
   }
 };
 
@@ -30,6 +34,7 @@ struct FrameError {
   double rotation_deg = 0.0;  // angle of R_gt^-1 R_est after alignment (atan2)
   double centre_m = 0.0;      // |C_est - C_gt| after alignment, ground-truth units
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FrameError, name, rotation_deg, centre_m)
 
 struct PoseErrorSummary {
   std::string alignment;
@@ -49,8 +54,14 @@ struct PoseErrorSummary {
   std::vector<std::string> only_in_estimate;  // reported, never silently dropped
   std::vector<std::string> only_in_ground_truth;
 
+  // The fields by name; gt_from_estimate as {scale, rotation_wxyz, translation}.
   nlohmann::json ToJson(bool with_frames = true) const;
 };
+// Every field but gt_from_estimate, which ToJson writes.
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PoseErrorSummary, alignment, num_frames, mean_rotation_deg,
+                                   median_rotation_deg, mean_centre_m, median_centre_m,
+                                   scene_scale_m, mean_centre_relative, median_centre_relative,
+                                   success, frames, only_in_estimate, only_in_ground_truth)
 
 AlignmentKind AlignmentKindFromName(const std::string& name);  // throws InputError
 

@@ -17,6 +17,8 @@
 #include <tuple>
 
 #include "core/error.h"
+#include "core/timing.h"
+#include "frontend/image_reading.h"
 
 namespace fs = std::filesystem;
 
@@ -29,28 +31,9 @@ namespace {
 // blob: 100.233 reported for 100.0.
 constexpr double kOpenCvUpsampleShift = 0.25;
 
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
 }  // namespace
 
-void FeatureExtractionOptions::Check(const std::string& what) const {
-  if (max_features <= 0) throw InputError(what + ": max_features must be positive");
-  if (first_octave < -1) {
-    throw InputError(what + ": first_octave must be >= -1 (OpenCV's SIFT cannot double twice)");
-  }
-  if (!(contrast_threshold > 0)) throw InputError(what + ": contrast_threshold must be positive");
-  if (!(edge_threshold > 1)) throw InputError(what + ": edge_threshold must be > 1");
-}
-
-nlohmann::json FeatureExtractionSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_keypoints", num_keypoints},
-          {"min_keypoints", min_keypoints},
-          {"max_keypoints", max_keypoints},
-          {"seconds", seconds}};
-}
+nlohmann::json FeatureExtractionSummary::ToJson() const { return *this; }
 
 ByteDescriptors QuantizeSiftDescriptors(const cv::Mat& descriptors, bool root_sift) {
   CV_Assert(descriptors.empty() || descriptors.type() == CV_32F);
@@ -180,7 +163,7 @@ ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& o
 FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
                                          const FeatureExtractionOptions& options,
                                          std::vector<ImageFeatures>* features) {
-  options.Check("feature extraction");
+  ValidateOptions(options, "feature extraction");
   const auto start = std::chrono::steady_clock::now();
   const int num_images = static_cast<int>(images.images.size());
   features->assign(num_images, ImageFeatures());
@@ -189,12 +172,7 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
     const auto image_start = std::chrono::steady_clock::now();
     const ImageInfo& info = images.images[i];
     const std::string path = (fs::path(images.image_root) / info.name).string();
-    const cv::Mat gray = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (gray.empty()) {
-      ThrowInput(path, 0,
-                 "cannot read the image (missing, unreadable or not a format OpenCV "
-                 "decodes)");
-    }
+    const cv::Mat gray = ReadImage(path, cv::IMREAD_GRAYSCALE);
     if ((info.width > 0 && gray.cols != info.width) ||
         (info.height > 0 && gray.rows != info.height)) {
       ThrowInput(path, 0,

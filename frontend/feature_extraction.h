@@ -11,7 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
+#include "core/options.h"
 #include "core/types.h"
 #include "frontend/descriptor_matching.h"
 
@@ -39,14 +40,18 @@ struct FeatureExtractionOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("max_features", max_features);
-    v("first_octave", first_octave);
-    v("contrast_threshold", contrast_threshold);
-    v("edge_threshold", edge_threshold);
-    v("root_sift", root_sift);
+    v("max_features", max_features,
+      "Keypoint locations per image, counted in whole octaves as COLMAP's max_num_features",
+      Positive());
+    v("first_octave", first_octave,
+      "Scale-space start: -1 doubles the image (COLMAP's default), 0 native, k > 0 at 2^-k",
+      AtLeast(-1));
+    v("contrast_threshold", contrast_threshold,
+      "OpenCV SIFT contrastThreshold (0.02 ~ COLMAP's peak_threshold)", Positive());
+    v("edge_threshold", edge_threshold, "Lowe's edge threshold r on principal curvatures",
+      Above(1));
+    v("root_sift", root_sift, "RootSIFT descriptors (COLMAP's default normalization)");
   }
-  // Throws InputError naming `what` (e.g. "stage 'features'") for values out of range.
-  void Check(const std::string& what) const;
 };
 
 struct FeatureExtractionSummary {
@@ -56,14 +61,17 @@ struct FeatureExtractionSummary {
   int max_keypoints = 0;
   double seconds = 0;  // wall clock, all images
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FeatureExtractionSummary, num_images, num_keypoints,
+                                   min_keypoints, max_keypoints, seconds)
 
 // Keypoints and descriptors of one 8-bit grayscale image. Keypoint rows: x, y (OpenCV pixel
 // convention), scale = KeyPoint::size / 2 (pixels), orientation = KeyPoint::angle in radians.
 // Descriptors: 128 uint8 per keypoint, 512 x the unit-length (Root)SIFT vector, saturated at
 // 255 (COLMAP's quantization). Keypoints are sorted by decreasing response, then position, so the
-// output does not depend on thread scheduling; the budget is FeatureExtractionOptions::max_features.
+// output does not depend on thread scheduling; the budget is
+// FeatureExtractionOptions::max_features.
 ImageFeatures ExtractSift(const cv::Mat& gray, const FeatureExtractionOptions& options);
 
 // Quantizes OpenCV's float SIFT descriptors (one per row) as described at ExtractSift.

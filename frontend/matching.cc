@@ -11,6 +11,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/options.h"
+#include "core/timing.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/two_view_geometry.h"
 
@@ -18,10 +19,6 @@ namespace raytime {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-double SecondsSince(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 bool HasFocal(const CameraIntrinsics& camera) { return camera.fx() > 0 && camera.fy() > 0; }
 
@@ -148,47 +145,7 @@ void MatchPair(const PairInput& in, const MatchingOptions& options, MatchKernel 
 
 }  // namespace
 
-void MatchingOptions::Check(const std::string& what) const {
-  if (pairs != "exhaustive" && pairs != "sequential") {
-    throw InputError(what + ": " +
-                     UnknownKeyMessage("pairs", pairs, {"exhaustive", "sequential"}, "mode"));
-  }
-  if (window < 1) throw InputError(what + ": window must be >= 1");
-  if (loop_stride < 0) throw InputError(what + ": loop_stride must be >= 0 (0 disables)");
-  if (!(max_ratio > 0 && max_ratio <= 1)) throw InputError(what + ": max_ratio must be in (0, 1]");
-  if (!(max_distance > 0)) throw InputError(what + ": max_distance must be positive");
-  ParseMatchKernel(kernel, what + ": kernel");
-  if (geometry != "auto" && geometry != "essential" && geometry != "fundamental") {
-    throw InputError(
-        what + ": " +
-        UnknownKeyMessage("geometry", geometry, {"auto", "essential", "fundamental"}, "geometry"));
-  }
-  ParseRobustEstimator(estimator, what + ": estimator");
-  if (!(max_error_px > 0)) throw InputError(what + ": max_error_px must be positive");
-  if (!(confidence > 0 && confidence < 1)) {
-    throw InputError(what + ": confidence must be in (0, 1)");
-  }
-  if (max_iterations < 1) throw InputError(what + ": max_iterations must be positive");
-  if (min_num_inliers < 8) {
-    throw InputError(what + ": min_num_inliers must be >= 8 (the estimators need 8 points)");
-  }
-  if (!(ransac_error_px > 0)) throw InputError(what + ": ransac_error_px must be positive");
-}
-
-nlohmann::json MatchingSummary::ToJson() const {
-  return {{"num_images", num_images},
-          {"num_pairs", num_pairs},
-          {"num_verified_pairs", num_verified_pairs},
-          {"num_dropped_pairs", num_dropped_pairs},
-          {"num_putative", num_putative},
-          {"num_inliers", num_inliers},
-          {"num_inliers_first_pass", num_inliers_first_pass},
-          {"kernel", kernel},
-          {"seconds", seconds},
-          {"matching_thread_seconds", matching_thread_seconds},
-          {"verification_thread_seconds", verification_thread_seconds},
-          {"guided_thread_seconds", guided_thread_seconds}};
-}
+nlohmann::json MatchingSummary::ToJson() const { return *this; }
 
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options) {
   std::vector<std::pair<int, int>> pairs;
@@ -205,7 +162,7 @@ std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptio
 
 MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatures>& features,
                             const MatchingOptions& options, std::vector<PairMatches>* pairs) {
-  options.Check("matching");
+  ValidateOptions(options, "matching");
   const auto start = Clock::now();
   const int num_images = static_cast<int>(images.images.size());
   if (static_cast<int>(features.size()) != num_images) {

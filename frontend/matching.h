@@ -14,7 +14,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -63,24 +64,35 @@ struct MatchingOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("pairs", pairs);
-    v("window", window);
-    v("loop_stride", loop_stride);
-    v("max_ratio", max_ratio);
-    v("max_distance", max_distance);
-    v("mutual_check", mutual_check);
-    v("kernel", kernel);
-    v("geometry", geometry);
-    v("estimator", estimator);
-    v("ransac_error_px", ransac_error_px);
-    v("max_error_px", max_error_px);
-    v("confidence", confidence);
-    v("max_iterations", max_iterations);
-    v("min_num_inliers", min_num_inliers);
-    v("guided_matching", guided_matching);
+    v("pairs", pairs, "Pairs to match: every pair, or name-order neighbours (video)",
+      OneOf({"exhaustive", "sequential"}));
+    v("window", window, "Sequential: neighbours matched after each image", Positive());
+    v("loop_stride", loop_stride,
+      "Sequential: keyframe stride of loop-closure candidates; 0 disables", NonNegative());
+    v("max_ratio", max_ratio, "Lowe's ratio test on descriptor distances (COLMAP: 0.8)", Positive(),
+      AtMost(1));
+    v("max_distance", max_distance, "Largest descriptor distance of a match (unit descriptors)",
+      Positive());
+    v("mutual_check", mutual_check, "Keep only mutual nearest neighbours (COLMAP's cross_check)");
+    v("kernel", kernel, "Descriptor product kernel (auto: AVX2 when the CPU has it)",
+      OneOf({"auto", "avx2", "gemm"}));
+    v("geometry", geometry,
+      "Verification model: auto = essential when the focal is known, else fundamental",
+      OneOf({"auto", "essential", "fundamental"}));
+    v("estimator", estimator, "Robust estimator (OpenCV MAGSAC++ or RANSAC)",
+      OneOf({"magsac", "ransac"}));
+    v("ransac_error_px", ransac_error_px, "Robust estimator threshold, pixels (Sampson distance)",
+      Positive());
+    v("max_error_px", max_error_px,
+      "Inlier threshold and guided-matching band, pixels (COLMAP's max_error)", Positive());
+    v("confidence", confidence, "RANSAC stopping confidence (COLMAP: 0.999)", Positive(), Below(1));
+    v("max_iterations", max_iterations, "RANSAC iteration cap (COLMAP's max_num_trials)",
+      Positive());
+    v("min_num_inliers", min_num_inliers,
+      "Pairs with fewer verified inliers are dropped (COLMAP: 15; estimators need 8)", AtLeast(8));
+    v("guided_matching", guided_matching,
+      "Second matching pass within max_error_px of the epipolar lines, then verified again");
   }
-  // Throws InputError naming `what` (e.g. "stage 'matches'") for values out of range.
-  void Check(const std::string& what) const;
 };
 
 struct MatchingSummary {
@@ -98,8 +110,12 @@ struct MatchingSummary {
   double verification_thread_seconds = 0;
   double guided_thread_seconds = 0;
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(MatchingSummary, num_images, num_pairs, num_verified_pairs,
+                                   num_dropped_pairs, num_putative, num_inliers,
+                                   num_inliers_first_pass, kernel, seconds, matching_thread_seconds,
+                                   verification_thread_seconds, guided_thread_seconds)
 
 // Candidate pairs (i < j, indices into the image list), sorted.
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options);

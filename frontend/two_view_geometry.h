@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "core/hdf5_store.h"
+#include "core/features.h"
 
 namespace raytime {
 

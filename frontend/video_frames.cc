@@ -17,24 +17,11 @@ namespace fs = std::filesystem;
 
 namespace raytime {
 
-void VideoFramesOptions::Check(const std::string& what) const {
-  if (stride < 1) throw InputError(what + ": stride must be >= 1");
-  if (num_frames < 0) throw InputError(what + ": num_frames must be >= 0 (0: use stride)");
-  if (!(focal_px >= 0)) throw InputError(what + ": focal_px must be >= 0 (0: unknown)");
-  if (jpeg_quality < 1 || jpeg_quality > 100) {
-    throw InputError(what + ": jpeg_quality must be in [1, 100]");
-  }
-}
-
-nlohmann::json VideoFramesSummary::ToJson() const {
-  return {{"num_frames_read", num_frames_read},
-          {"num_frames_written", num_frames_written},
-          {"seconds", seconds}};
-}
+nlohmann::json VideoFramesSummary::ToJson() const { return *this; }
 
 ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string& folder,
                             VideoFramesSummary* summary) {
-  options.Check("video");
+  ValidateOptions(options, "video");
   const auto start = std::chrono::steady_clock::now();
   if (!fs::is_regular_file(options.video)) ThrowInput(options.video, 0, "video file not found");
   cv::VideoCapture capture(options.video);

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "core/options.h"
 #include "core/types.h"
 
 namespace raytime {
@@ -23,13 +24,14 @@ struct VideoFramesOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("video", video);
-    v("stride", stride);
-    v("num_frames", num_frames);
-    v("focal_px", focal_px);
-    v("jpeg_quality", jpeg_quality);
+    v("video", video, "Video file to sample frames from; \"\" = the dataset's images");
+    v("stride", stride, "Keep every stride-th frame (frame 0 first)", Positive());
+    v("num_frames", num_frames, "Frames spread evenly over the video; overrides stride when > 0",
+      NonNegative());
+    v("focal_px", focal_px,
+      "Video focal length, pixels (principal point at the centre); 0 = unknown", NonNegative());
+    v("jpeg_quality", jpeg_quality, "JPEG quality of the written frames", AtLeast(1), AtMost(100));
   }
-  void Check(const std::string& what) const;  // InputError naming `what`
 };
 
 struct VideoFramesSummary {
@@ -37,8 +39,9 @@ struct VideoFramesSummary {
   int num_frames_written = 0;  // kept
   double seconds = 0;
 
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(VideoFramesSummary, num_frames_read, num_frames_written, seconds)
 
 // Decodes `options.video` and writes the kept frames to `folder`/frame_NNNNNN.jpg (NNNNNN = frame
 // number in the video, so name order is time order), replacing the folder atomically. Returns

@@ -2,7 +2,8 @@
 // without an external prior"). Reads images, features and verified matches; writes the pose set
 // "bootstrap" (role prior; "bootstrap@NAME" for stage id "bootstrap@NAME"), the per-pair verdicts
 // of the wrong-pair detector as JSON and, with `filter_matches`, the matches without the rejected
-// pairs for the stages after it.
+// pairs for the stages after it. A graph that cannot support its estimate gets the warning
+// "weak_bootstrap" (issue 13).
 #include <spdlog/spdlog.h>
 
 #include <cmath>
@@ -25,8 +26,10 @@ struct BootstrapStageOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     bootstrap.VisitFields(v);
-    v("filter_matches", filter_matches);
+    v("filter_matches", filter_matches,
+      "Write the matches without the wrong pairs for the stages after this one");
   }
+  void CheckRelations(const Requirement& require) const { bootstrap.CheckRelations(require); }
 };
 
 nlohmann::json Number(double value) {
@@ -62,13 +65,6 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     return "Prior-free poses from the match graph: relative poses, rotation and translation "
            "averaging, fragility flag, wrong-pair detection";
   }
-  void Validate() override {
-    try {
-      ValidateBootstrapOptions(options_.bootstrap);
-    } catch (const std::invalid_argument& e) {
-      throw InputError(std::string("stage 'bootstrap': ") + e.what());
-    }
-  }
   std::vector<std::string> Inputs() const override {
     return {kArtifactImages, "features", "matches"};
   }
@@ -88,30 +84,32 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
       throw InputError("bootstrap input (features " + features_path + ", matches " + matches_path +
                        "): " + e.what());
     }
-    int usable = 0, pure_rotation = 0;
-    for (const auto& e : result.edges) {
-      usable += e.UsableForRotation();
-      pure_rotation += e.status == PairStatus::kPureRotation;
-    }
+    const int usable = result.support.num_usable_pairs;
+    const int pure_rotation = result.support.num_pure_rotation_pairs;
     spdlog::info(
         "bootstrap: relative poses of {} pairs in {:.2f} s: {} usable ({} near-pure "
         "rotation)",
         result.edges.size(), result.relative_pose_seconds, usable, pure_rotation);
-    spdlog::info("bootstrap: fragility {:.2f}° mean pairwise rotation residual ({} pairs) -> {}",
-                 result.fragility.mean_residual_deg, result.fragility.num_pairs,
-                 result.fragility.fragile ? "FRAGILE" : "not fragile");
+    const char* verdict = FragilityVerdict(result);
+    spdlog::log(
+        result.fragility.fragile || result.support.weak ? spdlog::level::warn : spdlog::level::info,
+        "bootstrap: fragility {:.2f}° mean pairwise rotation residual ({} pairs) -> {}{}",
+        result.fragility.mean_residual_deg, result.fragility.num_pairs, verdict,
+        result.support.weak
+            ? ": the view graph cannot support the estimate, " + DescribeWeakness(result.support)
+            : std::string());
     spdlog::info("bootstrap: wrong-pair detector rejects {} of {} usable pairs ({} rounds)",
                  result.pairs.num_wrong, usable, result.pairs.rounds);
-    spdlog::info("bootstrap: {} of {} images registered, positions by {}{}", result.num_registered,
-                 images.images.size(), options_.bootstrap.positions,
-                 result.num_centres_filled
-                     ? " (" + std::to_string(result.num_centres_filled) + " by the look-at rule)"
-                     : std::string());
-    if (result.num_registered < static_cast<int>(images.images.size())) {
+    spdlog::info(
+        "bootstrap: {} of {} images have a rotation; positions by {}: {} estimated, {} filled by "
+        "the look-at fallback",
+        result.num_rotations_registered, images.images.size(), options_.bootstrap.positions,
+        result.num_positions_estimated, result.num_positions_filled);
+    if (result.num_rotations_registered < static_cast<int>(images.images.size())) {
       spdlog::warn(
           "bootstrap: {} images are outside the largest connected pair graph and get "
           "no pose",
-          images.images.size() - result.num_registered);
+          images.images.size() - result.num_rotations_registered);
     }
 
     const PoseSet poses = BootstrapPoses(images, result);
@@ -151,15 +149,19 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
         {"num_pairs", result.edges.size()},
         {"num_usable_pairs", usable},
         {"num_pure_rotation_pairs", pure_rotation},
-        {"num_registered", result.num_registered},
-        {"num_centres_filled", result.num_centres_filled},
+        {"num_rotations_registered", result.num_rotations_registered},
+        {"num_positions_estimated", result.num_positions_estimated},
+        {"num_positions_filled", result.num_positions_filled},
         {"positions", options_.bootstrap.positions},
         {"fragility",
          {{"mean_residual_deg", result.fragility.mean_residual_deg},
           {"median_residual_deg", result.fragility.median_residual_deg},
           {"num_pairs", result.fragility.num_pairs},
           {"threshold_deg", result.fragility.threshold_deg},
-          {"fragile", result.fragility.fragile}}},
+          {"fragile", result.fragility.fragile},
+          {"verdict", verdict},
+          {"weak_reasons", result.support.reasons}}},
+        {"graph_support", GraphSupportJson(result.support)},
         {"pairs",
          {{"kept", usable - result.pairs.num_wrong},
           {"wrong", result.pairs.num_wrong},
@@ -185,12 +187,9 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
         // The pre-solve flag that decides the configuration (paper §5, SPEC §3 "Deployment").
         {"guardrails",
          {{"fragile", result.fragility.fragile},
-          {"fragility_deg", result.fragility.mean_residual_deg}}},
-        {"metrics",
-         {{"bootstrap",
-           {{"fragility_deg", result.fragility.mean_residual_deg},
-            {"num_wrong_pairs", result.pairs.num_wrong},
-            {"num_registered", result.num_registered}}}}}};
+          {"fragility_deg", result.fragility.mean_residual_deg},
+          {"weak_bootstrap", result.support.weak}}},
+        {"warnings", WarningsToJson(BootstrapWarnings(images, result))}};
     if (options_.filter_matches) summary["num_matches_pairs_written"] = written_pairs;
     return summary;
   }

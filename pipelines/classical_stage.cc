@@ -25,7 +25,7 @@ struct ClassicalStageOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("prior", prior);
+    v("prior", prior, "Pose set that seeds the 'triangulate' mode", NonEmpty());
     control.VisitFields(v);  // flat keys: classical.rounds, classical.mode, ...
   }
 };
@@ -35,10 +35,6 @@ class ClassicalStage : public StageWithOptions<ClassicalStageOptions> {
   std::string type() const override { return "classical"; }
   std::string description() const override {
     return "Classical control: COLMAP point_triangulator + bundle_adjuster from the prior";
-  }
-  void Validate() override {
-    ValidateClassicalControlOptions(options_.control);
-    if (options_.prior.empty()) throw InputError("classical.prior must name a pose set");
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages, "features", "matches"};

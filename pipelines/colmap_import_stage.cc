@@ -20,7 +20,7 @@ struct ColmapImportOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("path", path);
+    v("path", path, "The COLMAP database.db to import", NonEmpty());
   }
 };
 
@@ -33,9 +33,6 @@ class ColmapImportStage : public StageWithOptions<ColmapImportOptions> {
   std::string type() const override { return "colmap_import"; }
   std::string description() const override {
     return "Import features and matches from a COLMAP database.db";
-  }
-  void Validate() override {
-    if (options_.path.empty()) throw InputError("colmap_import.path is not set");
   }
   std::vector<std::string> Inputs() const override { return {kArtifactImages}; }
   std::vector<std::string> ExternalFiles() const override { return {options_.path}; }

@@ -31,7 +31,8 @@ class DatasetStage : public StageWithOptions<DatasetOptions> {
     writer.Commit();
     return {{"num_images", dataset.images.images.size()},
             {"num_cameras", dataset.images.cameras.size()},
-            {"has_ground_truth", dataset.ground_truth.has_value()}};
+            {"has_ground_truth", dataset.ground_truth.has_value()},
+            {"warnings", WarningsToJson(dataset.warnings)}};
   }
 };
 

@@ -16,9 +16,13 @@ struct EvaluateStageOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("poses", poses);
-    v("alignments", alignments);
-    v("success_rotation_deg", success_rotation_deg);
+    v("poses", poses, "Pose sets to score against the ground truth (e.g. prior, refined@gnc)",
+      NonEmpty());
+    v("alignments", alignments,
+      "Alignments: Sim(3) on centres (standard), SE(3), none (the prior's frame, §4.9)",
+      OneOf({"sim3", "se3", "none"}));
+    v("success_rotation_deg", success_rotation_deg,
+      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive());
   }
 };
 
@@ -27,9 +31,6 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
   std::string type() const override { return "evaluate"; }
   std::string description() const override {
     return "Score pose sets against the ground truth (Sim(3), SE(3), absolute frame)";
-  }
-  void Validate() override {
-    for (const auto& alignment : options_.alignments) AlignmentKindFromName(alignment);
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {PoseArtifact("ground_truth")};

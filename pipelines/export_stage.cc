@@ -26,8 +26,11 @@ struct ExportStageOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("poses", poses);
-    v("formats", formats);
+    v("poses", poses, "Pose sets to write (e.g. refined)", NonEmpty());
+    v("formats", formats,
+      "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
+      "<poses>_transforms.json, tum -> <poses>_tum.txt",
+      OneOf(kExportFormats));
   }
 };
 
@@ -43,13 +46,6 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
   std::string type() const override { return "export"; }
   std::string description() const override {
     return "Write pose sets as COLMAP models, transforms.json or TUM trajectories";
-  }
-  void Validate() override {
-    for (const auto& format : options_.formats) {
-      if (std::find(kExportFormats.begin(), kExportFormats.end(), format) == kExportFormats.end()) {
-        throw InputError(UnknownKeyMessage("export.formats", format, kExportFormats, "format"));
-      }
-    }
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};

@@ -34,10 +34,6 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
   std::string description() const override {
     return "Extract SIFT features of the images (or of a video's sampled frames)";
   }
-  void Validate() override {
-    options_.extraction.Check("stage 'features'");
-    options_.video.Check("stage 'features'");
-  }
   bool FromVideo() const { return !options_.video.video.empty(); }
   std::vector<std::string> Inputs() const override {
     if (FromVideo()) return {};

@@ -18,7 +18,6 @@ class MatchesStage : public StageWithOptions<MatchingOptions> {
     return "Match image pairs and verify them geometrically (ratio test, mutual check, guided "
            "matching)";
   }
-  void Validate() override { options_.Check("stage 'matches'"); }
   std::vector<std::string> Inputs() const override { return {kArtifactImages, kArtifactFeatures}; }
 
   nlohmann::json Run(const StageContext& context) override {

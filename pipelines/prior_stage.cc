@@ -9,6 +9,7 @@
 #include "bootstrap/prior_repair.h"
 #include "core/formats/dataset.h"
 #include "core/hdf5_store.h"
+#include "core/warnings.h"
 #include "evaluate/perturbation.h"
 #include "pipelines/stages.h"
 
@@ -27,42 +28,69 @@ struct PriorOptions {
   // (averaged rotations in the prior's frame, prior centres kept: recovers 32° priors);
   // "replace" (bootstrap poses Sim(3)-fitted onto the prior centres: recovers 64° priors).
   std::string repair = "none";
+  // Images without a prior pose, and prior poses without an image, are reported and left out
+  // (warnings missing_prior, missing_frames); strict makes either an error.
+  bool strict = false;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("source", source);
-    v("format", format);
-    v("path", path);
-    v("repair", repair);
+    v("source", source,
+      "Prior: ground truth perturbed (below), a pose file, the ground truth, or the bootstrap's "
+      "poses",
+      OneOf({"perturb", "file", "ground_truth", "bootstrap"}));
+    v("format", format, "Pose file format for source 'file'", OneOf(kPoseFileFormats));
+    v("path", path, "Pose file or folder for source 'file'");
+    v("repair", repair,
+      "Repair the prior with the bootstrap: averaged rotations, or all poses (§4.8)",
+      OneOf({"none", "rotations", "replace"}));
+    v("strict", strict,
+      "Refuse a prior that lacks some images or has poses of images not in the dataset");
     perturbation.VisitFields(v);  // flat keys: prior.level_deg, prior.seed, ...
+  }
+  void CheckRelations(const Requirement& require) const {
+    require(source != "file" || !path.empty(), "prior.source is 'file' but prior.path is not set");
+    require(source != "bootstrap" || repair == "none",
+            "prior.repair '" + repair +
+                "' repairs a given prior with the bootstrap; with prior.source 'bootstrap' there "
+                "is nothing to repair");
   }
 };
 
 class PriorStage : public StageWithOptions<PriorOptions> {
  public:
+  // Poses of images the dataset does not have (a capture app's poses for frames that were not
+  // extracted, say) are dropped: missing_frames, or an error when strict.
+  void DropPosesWithoutImages(const ImageSet& images, PoseSet* prior, Warnings* warnings) const {
+    const NameJoin join = JoinNames(Names(*prior), Names(images));
+    if (join.only_left.empty()) return;
+    if (options_.strict) {
+      ThrowInput(options_.path, 0,
+                 "pose names do not match the dataset's images (prior.strict): " +
+                     join.Describe(options_.path, "the dataset"));
+    }
+    for (const auto& name : join.only_left) prior->world_from_cam.erase(name);
+    warnings->push_back({"missing_frames",
+                         std::to_string(join.only_left.size()) + " pose(s) in " + options_.path +
+                             " name no image of the dataset and are left out",
+                         join.only_left,
+                         {},
+                         {}});
+  }
+  // Images without a prior pose are not refined: missing_prior, or an error when strict.
+  void ReportImagesWithoutPose(const ImageSet& images, const PoseSet& prior,
+                               Warnings* warnings) const {
+    const NameJoin join = JoinNames(Names(prior), Names(images));
+    if (join.only_right.empty()) return;
+    const std::string message =
+        std::to_string(join.only_right.size()) + " of " + std::to_string(images.images.size()) +
+        " images have no prior pose (source " + options_.source + ") and will not be refined";
+    if (options_.strict) throw InputError("prior (strict): " + message);
+    warnings->push_back({"missing_prior", message, join.only_right, {}, {}});
+  }
+
   std::string type() const override { return "prior"; }
   std::string description() const override {
     return "Make the pose prior: perturbed ground truth, a pose file, or the ground truth";
-  }
-  void Validate() override {
-    const auto& o = options_;
-    if (o.source != "perturb" && o.source != "file" && o.source != "ground_truth" &&
-        o.source != "bootstrap") {
-      throw InputError(UnknownKeyMessage(
-          "prior.source", o.source, {"perturb", "file", "ground_truth", "bootstrap"}, "source"));
-    }
-    if (o.repair != "none" && o.repair != "rotations" && o.repair != "replace") {
-      throw InputError(
-          UnknownKeyMessage("prior.repair", o.repair, {"none", "rotations", "replace"}, "repair"));
-    }
-    if (o.source == "bootstrap" && o.repair != "none") {
-      throw InputError("prior.repair '" + o.repair +
-                       "' repairs a given prior with the "
-                       "bootstrap; with prior.source 'bootstrap' there is nothing to repair");
-    }
-    if (o.source == "file" && o.path.empty()) {
-      throw InputError("prior.source is 'file' but prior.path is not set");
-    }
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
@@ -91,15 +119,13 @@ class PriorStage : public StageWithOptions<PriorOptions> {
   nlohmann::json Run(const StageContext& context) override {
     const ImageSet images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
     PoseSet prior;
+    Warnings warnings;
     nlohmann::json summary = {{"source", options_.source}};
     if (options_.source == "file") {
       prior = ReadPoseFile(options_.format, options_.path, &images);
+      DropPosesWithoutImages(images, &prior, &warnings);
     } else if (options_.source == "bootstrap") {
       prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
-      if (prior.size() < images.images.size()) {
-        spdlog::warn("prior: the bootstrap registered {} of {} images; the others have no prior",
-                     prior.size(), images.images.size());
-      }
     } else {
       const PoseSet ground_truth =
           Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
@@ -136,11 +162,13 @@ class PriorStage : public StageWithOptions<PriorOptions> {
           repair.mode, repair.num_repaired, repair.num_kept_prior,
           repair.median_rotation_change_deg);
     }
+    ReportImagesWithoutPose(images, prior, &warnings);
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(context.OutputPoseSetName("prior"), prior, PoseRole::kPrior,
                         MakeProvenance(*this));
     writer.Commit();
     summary["num_poses"] = prior.size();
+    summary["warnings"] = WarningsToJson(warnings);
     return summary;
   }
 };

@@ -5,16 +5,19 @@
 // /json/refined_intrinsics).
 //
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
-// in the environment, else the source tree's configs/presets); keys given explicitly in the
-// pipeline (or on the command line) override the preset's.
+// in the environment, else the source tree's configs/presets); a key given explicitly in the
+// pipeline, in --set or on the command line always overrides the preset's, whatever its value.
 #include <spdlog/spdlog.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <set>
 
 #include "core/error.h"
+#include "core/graph.h"
 #include "core/hdf5_store.h"
+#include "core/warnings.h"
 #include "pipelines/stages.h"
 #include "refine/refine.h"
 
@@ -33,8 +36,10 @@ struct RefineStageOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("preset", preset);
-    v("prior", prior);
+    v("preset", preset,
+      "Named preset (configs/presets/refine/NAME.yaml) applied before the explicit keys",
+      NonEmpty());
+    v("prior", prior, "Pose set the solve starts from (e.g. prior, prior@bootstrap)", NonEmpty());
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
 };
@@ -68,6 +73,104 @@ fs::path PresetPath(const std::string& name) {
   return path;
 }
 
+// Images with a prior pose joined by verified pairs, as connected components (largest first,
+// image indices ascending). Images with a prior but no verified pair to another such image are
+// reported as `unmatched_cameras`: no match constrains them, so they are not refined.
+std::vector<std::vector<int>> MatchedComponents(const ImageSet& images,
+                                                const std::vector<PairMatches>& matches,
+                                                const PoseSet& prior, Warnings* warnings) {
+  const int n = static_cast<int>(images.images.size());
+  std::vector<std::pair<int, int>> edges;
+  std::vector<bool> matched(n, false);
+  for (const PairMatches& pair : matches) {
+    if (pair.geometry.inlier_matches.rows() == 0 || pair.image1 == pair.image2) continue;
+    if (!prior.Has(images.images.at(pair.image1).name) ||
+        !prior.Has(images.images.at(pair.image2).name)) {
+      continue;
+    }
+    edges.emplace_back(pair.image1, pair.image2);
+    matched[pair.image1] = matched[pair.image2] = true;
+  }
+  const std::vector<int> labels = ConnectedComponents(n, edges);
+  std::vector<std::vector<int>> components;
+  Warning unmatched{"unmatched_cameras", "", {}, {}, {}};
+  for (int i = 0; i < n; ++i) {
+    if (!prior.Has(images.images[i].name)) continue;
+    if (!matched[i]) {
+      unmatched.images.push_back(images.images[i].name);
+      continue;
+    }
+    if (labels[i] >= static_cast<int>(components.size())) components.resize(labels[i] + 1);
+    components[labels[i]].push_back(i);
+  }
+  // Labels count the unmatched singletons too; keep the matched components in label order.
+  components.erase(std::remove_if(components.begin(), components.end(),
+                                  [](const std::vector<int>& c) { return c.empty(); }),
+                   components.end());
+  if (!unmatched.images.empty()) {
+    unmatched.message = std::to_string(unmatched.images.size()) +
+                        " image(s) with a prior pose have no verified pair with another: they are "
+                        "not refined and not in the refined poses";
+    warnings->push_back(unmatched);
+  }
+  return components;
+}
+
+// The refiner's input for one component: its images (in image-list order), their keypoints and
+// prior poses, and the verified pairs between them; `names` receives the images' names.
+RefineInput ComponentInput(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                           const std::vector<PairMatches>& matches, const PoseSet& prior,
+                           const std::vector<int>& component, std::vector<std::string>* names) {
+  RefineInput input;
+  input.intrinsics = images.cameras.at(images.images.front().camera_index);
+  std::vector<int> refine_index(images.images.size(), -1);
+  for (int i : component) {
+    refine_index[i] = static_cast<int>(names->size());
+    names->push_back(images.images[i].name);
+    input.prior_world_from_cam.push_back(prior.world_from_cam.at(images.images[i].name));
+    input.keypoints.push_back(features[i].keypoints.leftCols<2>().cast<double>());
+  }
+  for (const PairMatches& pair : matches) {
+    const int i = refine_index.at(pair.image1);
+    const int j = refine_index.at(pair.image2);
+    if (i < 0 || j < 0 || pair.geometry.inlier_matches.rows() == 0) continue;
+    input.pairs.push_back({i, j, pair.geometry.inlier_matches});
+  }
+  return input;
+}
+
+// A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
+// written (the campaign reports score them), but never as if the solve had succeeded quietly.
+void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
+                          Warnings* warnings) {
+  if (summary.returned_prior) {
+    warnings->push_back({"returned_prior",
+                         "guardrail " + summary.guardrails_fired.front() +
+                             " fired: the refined poses of these images are the prior's, "
+                             "unrefined",
+                         names,
+                         {},
+                         {{"fired", summary.guardrails_fired}}});
+  }
+  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  if (pairs.fired) {
+    Warning warning{"inconsistent_pairs",
+                    std::to_string(pairs.num_inconsistent) + " of " +
+                        std::to_string(pairs.num_pairs) +
+                        " image pairs keep matches the solution does not explain (wrong pairs, "
+                        "e.g. repeated structure, may have pulled it off)",
+                    {},
+                    {},
+                    {{"fraction", pairs.fraction},
+                     {"fraction_threshold", pairs.fraction_threshold},
+                     {"pair_threshold_px", pairs.pair_threshold_px}}};
+    for (const PairResidual& pair : pairs.pairs) {
+      warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
+    }
+    warnings->push_back(warning);
+  }
+}
+
 class RefineStage : public StageWithOptions<RefineStageOptions> {
  public:
   std::string type() const override { return "refine"; }
@@ -75,37 +178,20 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     return "Refine the prior's poses with the ray-time GNC solver (preset " + options_.preset + ")";
   }
 
-  // Preset first, then the explicit keys. Values already set before Configure (command-line
-  // flags of `raytime refine`) count as explicit too.
-  void Configure(const YAML::Node& node, const std::string& path) override {
-    RefineStageOptions default_options;
-    const nlohmann::json defaults = OptionsToJson(default_options);
-    const nlohmann::json current = OptionsToJson(options_);
-    RefineStageOptions probe = options_;
-    ApplyYaml(node, probe, path, "stage 'refine'");
-
-    RefineStageOptions merged;
-    merged.preset = probe.preset;
-    const fs::path preset_path = PresetPath(merged.preset);
+  // The preset's values, under the keys the pipeline gives explicitly (StageWithOptions).
+  void ApplyPreset(const YAML::Node& node, const std::string& path) override {
+    if (node && node.IsMap() && node["preset"]) {
+      ReadYamlField(node["preset"], options_.preset, path, "preset");
+    }
+    const fs::path preset_path = PresetPath(options_.preset);
     YAML::Node preset;
     try {
       preset = YAML::LoadFile(preset_path.string());
     } catch (const YAML::Exception& e) {
       ThrowInput(preset_path.string(), e.mark.line + 1, e.msg);
     }
-    ApplyYaml(preset, merged.refine, preset_path.string(), "refine preset '" + merged.preset + "'");
-    nlohmann::json explicit_values = nlohmann::json::object();
-    for (const auto& [key, value] : current.items()) {
-      if (value != defaults[key]) explicit_values[key] = value;
-    }
-    OptionsFromJson(explicit_values, merged);
-    ApplyYaml(node, merged, path, "stage 'refine'");
-    options_ = merged;
-    Validate();
-  }
-  void Validate() override {
-    options_.refine.Validate();
-    if (options_.prior.empty()) throw InputError("refine.prior must name a pose set");
+    ApplyYaml(preset, options_.refine, preset_path.string(),
+              "refine preset '" + options_.preset + "'");
   }
 
   std::vector<std::string> Inputs() const override {
@@ -136,61 +222,104 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     }
 
     // The images with a prior pose take part; the others are reported and left out.
-    RefineInput input;
-    input.intrinsics = images.cameras.at(images.images.front().camera_index);
-    std::vector<int> refine_index(images.images.size(), -1);
-    std::vector<std::string> names;
+    Warnings warnings;
     std::vector<std::string> without_prior;
-    for (size_t i = 0; i < images.images.size(); ++i) {
-      const auto it = prior.world_from_cam.find(images.images[i].name);
-      if (it == prior.world_from_cam.end()) {
-        without_prior.push_back(images.images[i].name);
-        continue;
+    for (const ImageInfo& image : images.images) {
+      if (!prior.Has(image.name)) without_prior.push_back(image.name);
+    }
+    // Reported by the stage that made the prior (missing_prior); counted here.
+    const std::vector<std::vector<int>> components =
+        MatchedComponents(images, matches, prior, &warnings);
+    if (components.empty()) {
+      throw InputError("refine: no verified image pair joins two images with a prior pose (" +
+                       std::to_string(matches.size()) + " pairs in " + context.Require("matches") +
+                       "): nothing to refine. Check the matches stage's summary (verified "
+                       "pairs, min_num_inliers).");
+    }
+    // A self-calibrated camera must come from one solve: only the largest component then.
+    const size_t num_solved = options_.refine.SelfCalibrates() ? 1 : components.size();
+    if (components.size() > 1) {
+      Warning warning;
+      warning.code = "disconnected_graph";
+      std::string sizes;
+      for (size_t c = 0; c < components.size(); ++c) {
+        sizes += (c ? ", " : "") + std::to_string(components[c].size());
+        for (int i : components[c]) {
+          if (c > 0) warning.images.push_back(images.images[i].name);
+        }
       }
-      refine_index[i] = static_cast<int>(names.size());
-      names.push_back(images.images[i].name);
-      input.prior_world_from_cam.push_back(it->second);
-      input.keypoints.push_back(features[i].keypoints.leftCols<2>().cast<double>());
+      warning.message =
+          "the match graph has " + std::to_string(components.size()) + " connected components (" +
+          sizes + " images); " +
+          (num_solved == 1 ? "only the largest is refined (self-calibration needs one solve); "
+                             "the images of the others are not in the refined poses"
+                           : "each is refined in its own gauge, anchored to the prior only: "
+                             "their relative placement is the prior's");
+      warning.details = {{"component_sizes", nlohmann::json::array()},
+                         {"refined_components", num_solved}};
+      for (const auto& component : components) {
+        warning.details["component_sizes"].push_back(component.size());
+      }
+      warnings.push_back(warning);
     }
-    if (!without_prior.empty()) {
-      spdlog::warn("refine: {} image(s) have no prior pose and are left out (first: {})",
-                   without_prior.size(), without_prior.front());
-    }
-    for (const PairMatches& pair : matches) {
-      const int i = refine_index.at(pair.image1);
-      const int j = refine_index.at(pair.image2);
-      if (i < 0 || j < 0 || pair.geometry.inlier_matches.rows() == 0) continue;
-      input.pairs.push_back({i, j, pair.geometry.inlier_matches});
-    }
-
-    RefineOutput output;
-    const RefineSummary summary = RefinePoses(input, options_.refine, &output);
 
     PoseSet refined;
-    for (size_t k = 0; k < names.size(); ++k)
-      refined.world_from_cam[names[k]] = output.world_from_cam[k];
+    nlohmann::json result;
+    nlohmann::json component_summaries = nlohmann::json::array();
+    std::set<std::string> fired;
+    bool returned_prior = false;
+    CameraIntrinsics intrinsics = images.cameras.at(images.images.front().camera_index);
+    for (size_t c = 0; c < num_solved; ++c) {
+      std::vector<std::string> names;
+      const RefineInput input =
+          ComponentInput(images, features, matches, prior, components[c], &names);
+      RefineOutput output;
+      const RefineSummary summary = RefinePoses(input, options_.refine, &output);
+      for (size_t k = 0; k < names.size(); ++k) {
+        refined.world_from_cam[names[k]] = output.world_from_cam[k];
+      }
+      AddGuardrailWarnings(summary, names, &warnings);
+      fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
+      returned_prior = returned_prior || summary.returned_prior;
+      if (c == 0) {
+        result = summary.ToJson();
+        intrinsics = output.intrinsics;
+      }
+      component_summaries.push_back({{"num_images", names.size()},
+                                     {"first_image", names.front()},
+                                     {"total_iterations", summary.total_iterations},
+                                     {"final_cost", summary.final_cost},
+                                     {"guardrails_fired", summary.guardrails_fired},
+                                     {"returned_prior", summary.returned_prior}});
+      spdlog::info("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
+                   summary.total_iterations, summary.total_seconds,
+                   summary.returned_prior ? " (guardrail fired: prior returned)" : "");
+    }
+    // One verdict over the components: a check that fired anywhere is reported.
+    result["guardrails"]["fired"] = std::vector<std::string>(fired.begin(), fired.end());
+    result["guardrails"]["returned_prior"] = returned_prior;
+    if (components.size() > 1) result["components"] = component_summaries;
+
     const std::string pose_set = context.OutputPoseSetName("refined");
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(pose_set, refined, PoseRole::kRefined, MakeProvenance(*this));
-    nlohmann::json result = summary.ToJson();
     result["preset"] = options_.preset;
     result["pose_set"] = pose_set;
+    result["num_refined"] = refined.size();
     result["num_images_without_prior"] = without_prior.size();
     if (options_.refine.SelfCalibrates()) {
       ImageSet refined_images = images;
-      refined_images.cameras.at(images.images.front().camera_index) = output.intrinsics;
+      refined_images.cameras.at(images.images.front().camera_index) = intrinsics;
       writer.WriteImages(refined_images);
-      const auto& p = output.intrinsics.params;
+      const auto& p = intrinsics.params;
       result["refined_intrinsics"] = {{"fx", p[kFx]}, {"fy", p[kFy]}, {"cx", p[kCx]},
                                       {"cy", p[kCy]}, {"k1", p[kK1]}, {"k2", p[kK2]},
                                       {"p1", p[kP1]}, {"p2", p[kP2]}};
       writer.WriteJson("refined_intrinsics", result["refined_intrinsics"]);
     }
+    result["warnings"] = WarningsToJson(warnings);
     writer.WriteJson("refine_summary", result);
     writer.Commit();
-    spdlog::info("refine: {} poses, {} iterations in {:.2f} s{}", refined.size(),
-                 summary.total_iterations, summary.total_seconds,
-                 summary.returned_prior ? " (guardrail fired: prior returned)" : "");
     return result;
   }
 };

@@ -10,6 +10,7 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/formats/strecha.h"
+#include "frontend/image_reading.h"
 
 namespace fs = std::filesystem;
 
@@ -25,8 +26,7 @@ int ResizeScene(const DatasetOptions& input, const std::string& output_root,
     fs::create_directories(fs::path(dir) / "gt_dense_cameras");
     for (const auto& image : dataset.images.images) {
       const std::string source = (fs::path(dataset.images.image_root) / image.name).string();
-      const cv::Mat pixels = cv::imread(source, cv::IMREAD_COLOR);
-      if (pixels.empty()) ThrowInput(source, 0, "cannot decode image");
+      const cv::Mat pixels = ReadImage(source, cv::IMREAD_COLOR);
       const double scale = static_cast<double>(options.width) / pixels.cols;
       const int height = static_cast<int>(std::lround(pixels.rows * scale));
       cv::Mat resized;

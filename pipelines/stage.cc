@@ -25,6 +25,60 @@ std::string StageTypeOfId(const std::string& stage_id) {
   return stage_id.substr(0, stage_id.find('@'));
 }
 
+std::vector<std::string> Stage::OptionKeys() {
+  std::vector<std::string> keys;
+  for (const OptionDoc& doc : OptionDocs()) keys.push_back(doc.key);
+  return keys;
+}
+
+void Stage::BindCli(CLI::App* app) {
+  cli_docs_ = OptionDocs();
+  for (const OptionDoc& doc : cli_docs_) {
+    CLI::Option* option = app->add_option("--" + doc.key, cli_values_[doc.key], doc.HelpText());
+    option->default_str(doc.default_value)->type_name(doc.type);
+    if (!doc.is_list) option->expected(1);
+  }
+}
+
+namespace {
+
+// A command-line value as YAML: "1e-3" -> number, "[1, 2]" -> list; text options as written.
+YAML::Node ParseCliValue(const std::string& text, bool is_text) {
+  if (is_text && !(text.size() >= 2 && text.front() == '[' && text.back() == ']')) {
+    return YAML::Node(text);
+  }
+  try {
+    return YAML::Load(text);
+  } catch (const YAML::Exception&) {
+    return YAML::Node(text);
+  }
+}
+
+}  // namespace
+
+YAML::Node Stage::CliOptions() const {
+  YAML::Node node(YAML::NodeType::Map);
+  for (const OptionDoc& doc : cli_docs_) {
+    const std::vector<std::string>& values = cli_values_.at(doc.key);
+    if (values.empty()) continue;
+    const bool is_text = doc.type == "TEXT";
+    if (!doc.is_list) {
+      node[doc.key] = ParseCliValue(values.front(), is_text && !doc.is_list);
+      continue;
+    }
+    // `--gnc_scales 1e4 1e3` or `--gnc_scales "[1e4, 1e3]"` (`[]` for an empty list).
+    const YAML::Node first = ParseCliValue(values.front(), false);
+    if (values.size() == 1 && first.IsSequence()) {
+      node[doc.key] = first;
+      continue;
+    }
+    YAML::Node list(YAML::NodeType::Sequence);
+    for (const auto& value : values) list.push_back(ParseCliValue(value, is_text));
+    node[doc.key] = list;
+  }
+  return node;
+}
+
 }  // namespace raytime
 
 #include "core/hdf5_store.h"

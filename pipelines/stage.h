@@ -45,10 +45,21 @@ class Stage {
   virtual std::string description() const = 0;
 
   // Option handling, generated from the options struct (see StageWithOptions).
+  // Sets every option: the defaults (and a preset's values, where the stage has presets), then
+  // the keys given in `options` (explicit keys always win), then validates them all at once.
+  // InputError naming `path` on an unknown key, a wrong type or an invalid value.
   virtual void Configure(const YAML::Node& options, const std::string& path) = 0;
+  // Checks the keys and value types of `options` without validating values: overrides are
+  // checked as they are given, and validated once all of them are in place.
+  virtual void CheckKeysAndTypes(const YAML::Node& options, const std::string& path) = 0;
   virtual nlohmann::json OptionsJson() = 0;
-  virtual std::vector<std::string> OptionKeys() = 0;
-  virtual void BindCli(CLI::App* app) = 0;
+  // Every option's key, default, description and rules, in declaration order.
+  virtual std::vector<OptionDoc> OptionDocs() = 0;
+  std::vector<std::string> OptionKeys();
+  // `raytime STAGE`: one --KEY per option with its description; CliOptions() returns the flags
+  // given on the command line as the YAML mapping for Configure.
+  void BindCli(CLI::App* app);
+  YAML::Node CliOptions() const;
 
   // Artifacts read. What a stage wrote is read back from its HDF5 file by the runner.
   virtual std::vector<std::string> Inputs() const = 0;
@@ -57,41 +68,42 @@ class Stage {
   // Files outside the work directory whose contents the result depends on (content-hashed).
   virtual std::vector<std::string> ExternalFiles() const { return {}; }
 
-  // Runs the stage and returns its summary (timings, counts, metrics, guardrail verdicts).
+  // Runs the stage and returns its summary (timings, counts, metrics, guardrail verdicts, and
+  // "warnings": an array of core/warnings.h objects the pipeline collects into summary.json).
   virtual nlohmann::json Run(const StageContext& context) = 0;
-};
 
-namespace stage_detail {
-struct CliBinder {
-  CLI::App* app;
-  template <typename T>
-  void operator()(const char* key, T& field) {
-    auto* option = app->add_option(std::string("--") + key, field);
-    option->capture_default_str();
-  }
+ private:
+  std::vector<OptionDoc> cli_docs_;                             // of the bound options
+  std::map<std::string, std::vector<std::string>> cli_values_;  // --KEY values given
 };
-}  // namespace stage_detail
 
 // Implements the option plumbing of Stage from an options struct with VisitFields.
 template <typename Options>
 class StageWithOptions : public Stage {
  public:
   void Configure(const YAML::Node& node, const std::string& path) override {
-    ApplyYaml(node, options_, path, "stage '" + type() + "'");
-    Validate();
+    options_ = Options();
+    ApplyPreset(node, path);
+    ApplyYaml(node, options_, path, What());
+    ValidateOptions(options_, What());
+  }
+  void CheckKeysAndTypes(const YAML::Node& node, const std::string& path) override {
+    Options probe;
+    ApplyYaml(node, probe, path, What());
   }
   nlohmann::json OptionsJson() override { return OptionsToJson(options_); }
-  std::vector<std::string> OptionKeys() override { return raytime::OptionKeys(options_); }
-  void BindCli(CLI::App* app) override {
-    stage_detail::CliBinder binder{app};
-    options_.VisitFields(binder);
+  std::vector<OptionDoc> OptionDocs() override {
+    Options defaults;
+    return raytime::OptionDocs(defaults);
   }
-  // Checks option values after Configure (and after CLI parsing); throws InputError.
-  virtual void Validate() {}
 
   const Options& options() const { return options_; }
 
  protected:
+  // Stages with named presets set the preset's values here, before the explicit keys.
+  virtual void ApplyPreset(const YAML::Node& node, const std::string& path) {}
+  std::string What() const { return "stage '" + type() + "'"; }
+
   Options options_;
 };
 

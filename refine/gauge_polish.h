@@ -12,6 +12,7 @@
 // the two agree and may rise slightly when the fit trusts the prior's rotations more than E does.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <vector>
 
 #include "core/geometry.h"
@@ -26,6 +27,8 @@ struct GaugePolishSummary {
   double translation = 0.0;   // prior length units
   double scale = 1.0;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GaugePolishSummary, prior_cost_before, prior_cost_after,
+                                   rotation_deg, translation, scale)
 
 // `movable[i]` marks the cameras some residual reaches (the others keep their poses); ray times
 // are scaled with the similarity's scale. The similarity minimizes the prior terms with

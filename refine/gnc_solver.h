@@ -13,7 +13,7 @@ struct GncSolverSettings {
   std::vector<double> scales;  // arctan scales a, px², in solve order; the last is nominal
   int max_iterations = 100;    // per stage
   double function_tolerance = 1e-6;
-  int num_threads = 1;
+  int num_threads = 1;  // Ceres' threads; 1 is deterministic (RefineOptions::deterministic)
 };
 
 // Solves every stage; stops early after a stage whose Ceres termination is FAILURE.

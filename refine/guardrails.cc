@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "core/statistics.h"
+
 namespace raytime {
 
 TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
@@ -46,9 +48,7 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
   for (size_t i = 0; i < prior.size(); ++i) {
     displacements.push_back((prior_from_solution * solution_centres[i] - prior_centres[i]).norm());
   }
-  const size_t mid = displacements.size() / 2;
-  std::nth_element(displacements.begin(), displacements.begin() + mid, displacements.end());
-  verdict.median_displacement = displacements[mid];
+  verdict.median_displacement = UpperMedian(displacements, 0.0);
   verdict.fired = verdict.median_displacement > verdict.threshold;
   return verdict;
 }
@@ -66,9 +66,7 @@ InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>&
     medians.push_back(pair.median_px);
     if (pair.median_px > pair_threshold_px) verdict.pairs.push_back(pair);
   }
-  const size_t mid = medians.size() / 2;
-  std::nth_element(medians.begin(), medians.begin() + mid, medians.end());
-  verdict.median_pair_px = medians[mid];
+  verdict.median_pair_px = UpperMedian(medians, 0.0);
   verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
   verdict.fraction = static_cast<double>(verdict.num_inconsistent) / verdict.num_pairs;
   verdict.fired = verdict.fraction > max_fraction;

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/graph.h"
 
 namespace raytime {
 namespace {
@@ -94,14 +95,6 @@ void IndexObservations(const UsedMatches& used, ProblemLayout* layout) {
   layout->num_matches_input = used.num_input;
 }
 
-int FindRoot(std::vector<int>* parent, int x) {
-  while ((*parent)[x] != x) {
-    (*parent)[x] = (*parent)[(*parent)[x]];  // path halving
-    x = (*parent)[x];
-  }
-  return x;
-}
-
 }  // namespace
 
 std::vector<int> CappedMatchIndices(int image1, int image2, int count, int cap, int seed) {
@@ -140,18 +133,15 @@ ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_
   ProblemLayout layout;
   IndexObservations(CollectMatches(input, max_matches_per_pair, seed), &layout);
   const int n = static_cast<int>(layout.observations.size());
-  std::vector<int> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
+  // UnionFind keeps the smaller index as the root, so every root is its track's first
+  // observation in (image, keypoint) order: that observation is the anchor.
+  UnionFind tracks(n);
   for (const LayoutMatch& match : layout.matches) {
-    const int ra = FindRoot(&parent, match.observation1);
-    const int rb = FindRoot(&parent, match.observation2);
-    // The smaller index becomes the root, so every root is its track's first observation in
-    // (image, keypoint) order: that observation is the anchor.
-    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+    tracks.Union(match.observation1, match.observation2);
   }
   // Observations are visited in index order, so each anchor precedes its track's members.
   for (int o = 0; o < n; ++o) {
-    const int anchor = FindRoot(&parent, o);
+    const int anchor = tracks.Find(o);
     if (anchor == o) continue;
     if (layout.observations[o].image == layout.observations[anchor].image) continue;
     LayoutObservation& anchor_obs = layout.observations[anchor];

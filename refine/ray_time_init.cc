@@ -3,15 +3,10 @@
 #include <algorithm>
 
 #include "core/camera.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
-
-double Median(std::vector<double> values) {
-  const size_t mid = values.size() / 2;
-  std::nth_element(values.begin(), values.begin() + mid, values.end());
-  return values[mid];
-}
 
 // Rays that are parallel to within this (1 - cos²) carry no depth information.
 constexpr double kMinSinSquared = 1e-10;
@@ -64,7 +59,7 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
     }
   }
   summary->num_depth_samples = static_cast<int>(all_depths.size());
-  const double global = all_depths.empty() ? constant : Median(all_depths);
+  const double global = UpperMedian(all_depths, constant);
 
   std::vector<double> image_depth(num_images, global);
   std::vector<bool> image_has_ray_time(num_images, false);
@@ -75,13 +70,13 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
     if (depths[i].empty()) {
       ++summary->images_with_fallback;
     } else {
-      image_depth[i] = Median(std::move(depths[i]));
+      image_depth[i] = UpperMedian(std::move(depths[i]), global);
     }
     used_depths.push_back(image_depth[i]);
   }
   summary->min_depth = *std::min_element(used_depths.begin(), used_depths.end());
   summary->max_depth = *std::max_element(used_depths.begin(), used_depths.end());
-  summary->median_depth = Median(used_depths);
+  summary->median_depth = UpperMedian(used_depths, constant);
 
   std::vector<double> ray_times(num_ray_times);
   for (size_t t = 0; t < num_ray_times; ++t) {

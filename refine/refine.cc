@@ -11,6 +11,8 @@
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/options.h"
+#include "core/timing.h"
 #include "refine/gauge_polish.h"
 #include "refine/gnc_solver.h"
 #include "refine/guardrails.h"
@@ -21,10 +23,6 @@
 
 namespace raytime {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 void ValidateInput(const RefineInput& input) {
   const size_t n = input.prior_world_from_cam.size();
@@ -118,7 +116,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   solver_settings.scales = settings.scales;
   solver_settings.max_iterations = options.max_iterations;
   solver_settings.function_tolerance = options.function_tolerance;
-  solver_settings.num_threads = options.Threads();
+  solver_settings.num_threads = options.deterministic ? 1 : options.Threads();
   const auto solve_start = std::chrono::steady_clock::now();
   pass.stages = SolveGnc(&problem, solver_settings, &pass.elimination_group_size);
   pass.solve_seconds = SecondsSince(solve_start);
@@ -175,7 +173,7 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
 RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
                           RefineOutput* output) {
   const auto start = std::chrono::steady_clock::now();
-  options.Validate();
+  ValidateOptions(options, "refine");
   ValidateInput(input);
   RefineSummary summary;
 
@@ -298,94 +296,22 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
 }
 
 nlohmann::json RefineSummary::ToJson() const {
-  using nlohmann::json;
-  json out;
-  out["passes"] = json::array();
-  for (const RefinePassSummary& pass : passes) {
-    json p = {{"name", pass.name},
-              {"num_cameras", pass.num_cameras},
-              {"num_observations", pass.num_observations},
-              {"num_ray_times", pass.num_ray_times},
-              {"num_tracks", pass.num_tracks},
-              {"num_matches_input", pass.num_matches_input},
-              {"num_matches_used", pass.num_matches_used},
-              {"num_residuals", pass.num_residuals},
-              {"elimination_group_size", pass.elimination_group_size},
-              {"orientation_weight", pass.orientation_weight},
-              {"self_calibration", pass.self_calibration},
-              {"ray_time_init",
-               {{"mode", pass.ray_time_init.mode},
-                {"num_depth_samples", pass.ray_time_init.num_depth_samples},
-                {"images_with_fallback", pass.ray_time_init.images_with_fallback},
-                {"min_depth", pass.ray_time_init.min_depth},
-                {"median_depth", pass.ray_time_init.median_depth},
-                {"max_depth", pass.ray_time_init.max_depth}}},
-              {"gauge_polish",
-               {{"prior_cost_before", pass.gauge_polish.prior_cost_before},
-                {"prior_cost_after", pass.gauge_polish.prior_cost_after},
-                {"rotation_deg", pass.gauge_polish.rotation_deg},
-                {"translation", pass.gauge_polish.translation},
-                {"scale", pass.gauge_polish.scale}}},
-              {"build_seconds", pass.build_seconds},
-              {"solve_seconds", pass.solve_seconds},
-              {"stages", json::array()}};
-    for (const GncStageSummary& s : pass.stages) {
-      p["stages"].push_back({{"loss_scale_px2", s.loss_scale_px2},
-                             {"iterations", s.iterations},
-                             {"successful_steps", s.successful_steps},
-                             {"initial_cost", s.initial_cost},
-                             {"final_cost", s.final_cost},
-                             {"seconds", s.seconds},
-                             {"jacobian_seconds", s.jacobian_seconds},
-                             {"residual_seconds", s.residual_seconds},
-                             {"linear_solver_seconds", s.linear_solver_seconds},
-                             {"jacobian_evaluations", s.jacobian_evaluations},
-                             {"termination", s.termination},
-                             {"message", s.message}});
-    }
-    out["passes"].push_back(p);
-  }
-  out["total_iterations"] = total_iterations;
-  out["initial_cost"] = initial_cost;
-  out["final_cost"] = final_cost;
-  out["timings"] = {{"build_seconds", build_seconds},
-                    {"solve_seconds", solve_seconds},
-                    {"jacobian_seconds", jacobian_seconds},
-                    {"total_seconds", total_seconds}};
-  out["guardrails"] = {{"fired", guardrails_fired},
-                       {"returned_prior", returned_prior},
-                       {"solver_failed", solver_failed},
-                       {"trust_region",
-                        {{"enabled", trust_region.enabled},
-                         {"fired", trust_region.fired},
-                         {"max_rotation_deg", trust_region.max_rotation_deg},
-                         {"max_translation", trust_region.max_translation},
-                         {"rotation_threshold_deg", trust_region.rotation_threshold_deg},
-                         {"translation_threshold", trust_region.translation_threshold}}},
-                       {"wander",
-                        {{"enabled", wander.enabled},
-                         {"fired", wander.fired},
-                         {"median_displacement", wander.median_displacement},
-                         {"expected", wander.expected},
-                         {"threshold", wander.threshold}}}};
-  json inconsistent = json::array();
-  for (const PairResidual& pair : inconsistent_pairs.pairs) {
-    inconsistent.push_back({{"image1", pair.image1},
-                            {"image2", pair.image2},
-                            {"median_px", pair.median_px},
-                            {"num_matches", pair.num_matches}});
-  }
-  out["guardrails"]["inconsistent_pairs"] = {
-      {"enabled", inconsistent_pairs.enabled},
-      {"fired", inconsistent_pairs.fired},
-      {"num_pairs", inconsistent_pairs.num_pairs},
-      {"num_inconsistent", inconsistent_pairs.num_inconsistent},
-      {"fraction", inconsistent_pairs.fraction},
-      {"median_pair_px", inconsistent_pairs.median_pair_px},
-      {"pair_threshold_px", inconsistent_pairs.pair_threshold_px},
-      {"fraction_threshold", inconsistent_pairs.fraction_threshold},
-      {"pairs", inconsistent}};
-  return out;
+  return {{"passes", passes},
+          {"total_iterations", total_iterations},
+          {"initial_cost", initial_cost},
+          {"final_cost", final_cost},
+          {"timings",
+           {{"build_seconds", build_seconds},
+            {"solve_seconds", solve_seconds},
+            {"jacobian_seconds", jacobian_seconds},
+            {"total_seconds", total_seconds}}},
+          {"guardrails",
+           {{"fired", guardrails_fired},
+            {"returned_prior", returned_prior},
+            {"solver_failed", solver_failed},
+            {"trust_region", trust_region},
+            {"wander", wander},
+            {"inconsistent_pairs", inconsistent_pairs}}}};
 }
 
 }  // namespace raytime

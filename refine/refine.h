@@ -61,6 +61,10 @@ struct GncStageSummary {
   std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
   std::string message;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GncStageSummary, loss_scale_px2, iterations, successful_steps,
+                                   initial_cost, final_cost, seconds, jacobian_seconds,
+                                   residual_seconds, linear_solver_seconds, jacobian_evaluations,
+                                   termination, message)
 
 struct RayTimeInitSummary {
   std::string mode;              // "auto" or "constant"
@@ -71,6 +75,8 @@ struct RayTimeInitSummary {
   double median_depth = 0.0;
   double max_depth = 0.0;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RayTimeInitSummary, mode, num_depth_samples,
+                                   images_with_fallback, min_depth, median_depth, max_depth)
 
 // One pass of the refiner: a problem object and its GNC stages (two passes in the staged room
 // recipe of §4.3, one otherwise).
@@ -92,6 +98,11 @@ struct RefinePassSummary {
   double build_seconds = 0.0;
   double solve_seconds = 0.0;
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefinePassSummary, name, num_cameras, num_observations,
+                                   num_ray_times, num_tracks, num_matches_input, num_matches_used,
+                                   num_residuals, elimination_group_size, orientation_weight,
+                                   self_calibration, ray_time_init, stages, gauge_polish,
+                                   build_seconds, solve_seconds)
 
 // Prior trust region (§3.6): per-frame motion of the solution from the prior, prior's frame.
 struct TrustRegionVerdict {
@@ -102,6 +113,8 @@ struct TrustRegionVerdict {
   double rotation_threshold_deg = 0.0;
   double translation_threshold = 0.0;  // trust_region_translation_m * length_unit_m
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrustRegionVerdict, enabled, fired, max_rotation_deg,
+                                   max_translation, rotation_threshold_deg, translation_threshold)
 
 // Room-scale wander test (§4.3).
 struct WanderVerdict {
@@ -111,6 +124,8 @@ struct WanderVerdict {
   double expected = 0.0;             // wander_expected_m * length_unit_m
   double threshold = 0.0;            // wander_factor * expected
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(WanderVerdict, enabled, fired, median_displacement, expected,
+                                   threshold)
 
 // One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
 // of the symmetric epipolar distance restricted to positive ray times (the cross-projection
@@ -121,6 +136,7 @@ struct PairResidual {
   int num_matches = 0;     // used matches (after the cap)
   double median_px = 0.0;  // pixels, root mean square of the two directions per match
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairResidual, image1, image2, num_matches, median_px)
 
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): the fraction of
 // image pairs whose matches the solution does not explain. Flag only: the solution is returned.
@@ -135,6 +151,9 @@ struct InconsistentPairsVerdict {
   double fraction_threshold = 0.0;  // max_inconsistent_pair_fraction
   std::vector<PairResidual> pairs;  // the inconsistent pairs, in input order
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num_pairs,
+                                   num_inconsistent, fraction, median_pair_px, pair_threshold_px,
+                                   fraction_threshold, pairs)
 
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
@@ -157,6 +176,9 @@ struct RefineSummary {
   std::vector<std::string> guardrails_fired;
   bool returned_prior = false;
 
+  // The fields by name (as the NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE lists above), with the four
+  // totals of seconds under "timings" and the verdicts under "guardrails" ("fired" =
+  // guardrails_fired).
   nlohmann::json ToJson() const;
 };
 

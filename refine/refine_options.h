@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "core/options.h"
+
 namespace raytime {
 
 struct RefineOptions {
@@ -58,9 +60,14 @@ struct RefineOptions {
   // evaluation point, copied into each residual's Jacobian. Off: every residual recomputes its
   // chain with automatic differentiation (same values and Jacobians, slower).
   bool use_evaluation_cache = true;
-  // Threads for Ceres and the cache; 0 = hardware concurrency. Results are bit-identical between
-  // runs with 1 thread; with more, Ceres' parallel reductions change the summation order.
+  // Threads for the cache (and for Ceres when not deterministic); 0 = hardware concurrency.
   int num_threads = 0;
+  // Bit-identical results for the same inputs whatever the thread count and scheduling
+  // (DEVELOPERS.md): Ceres runs on one thread, since with more it sums the cost, the gradient and
+  // the Schur complement's blocks in the order its threads finish; the cache stays parallel (each
+  // observation's entry is computed on its own). false gives Ceres num_threads too: faster on many
+  // cores, last digits differ between runs.
+  bool deterministic = true;
   // Per GNC stage: Ceres iteration limit and relative cost-change tolerance (Ceres defaults are
   // 50 and 1e-6; warm-started stages converge well before the limit).
   int max_iterations = 100;
@@ -116,40 +123,83 @@ struct RefineOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("parameterization", parameterization);
-    v("loss_scale_px2", loss_scale_px2);
-    v("gnc_scales", gnc_scales);
-    v("position_weight", position_weight);
-    v("orientation_weight", orientation_weight);
-    v("gauge_orientation_weight", gauge_orientation_weight);
-    v("ray_time_init", ray_time_init);
-    v("ray_time_constant_m", ray_time_constant_m);
-    v("max_matches_per_pair", max_matches_per_pair);
-    v("match_cap_seed", match_cap_seed);
-    v("refine_focal", refine_focal);
-    v("refine_principal_point", refine_principal_point);
-    v("refine_distortion", refine_distortion);
-    v("use_evaluation_cache", use_evaluation_cache);
-    v("num_threads", num_threads);
-    v("max_iterations", max_iterations);
-    v("function_tolerance", function_tolerance);
-    v("trust_region", trust_region);
-    v("trust_region_rotation_deg", trust_region_rotation_deg);
-    v("trust_region_translation_m", trust_region_translation_m);
-    v("length_unit_m", length_unit_m);
-    v("wander_test", wander_test);
-    v("wander_expected_m", wander_expected_m);
-    v("wander_factor", wander_factor);
-    v("inconsistent_pairs_test", inconsistent_pairs_test);
-    v("inconsistent_pair_px", inconsistent_pair_px);
-    v("max_inconsistent_pair_fraction", max_inconsistent_pair_fraction);
-    v("staged", staged);
-    v("stage1_orientation_weight", stage1_orientation_weight);
-    v("stage1_max_matches_per_pair", stage1_max_matches_per_pair);
+    v("parameterization", parameterization,
+      "Structure variables: one ray time per observation (the method) or per track (§3.6 "
+      "ablation)",
+      OneOf({"per_observation", "anchored"}));
+    v("loss_scale_px2", loss_scale_px2, "Arctan loss scale a of the nominal objective, px² (§3.3)",
+      Positive());
+    v("gnc_scales", gnc_scales,
+      "GNC schedule of arctan scales solved in order, px² (§3.5); loss_scale_px2 is appended "
+      "last; [] = plain solve",
+      Positive());
+    v("position_weight", position_weight, "λp, weight of the position prior, 1/length² (§3.3)",
+      NonNegative());
+    v("orientation_weight", orientation_weight,
+      "λR, weight of the orientation prior, 1/rad² (§3.3)", NonNegative());
+    v("gauge_orientation_weight", gauge_orientation_weight,
+      "Weight of the prior's rotations when fitting the solution's global similarity after the "
+      "solve, 1/rad² (0 = centres only)",
+      NonNegative());
+    v("ray_time_init", ray_time_init,
+      "Ray-time start: per-image median closest-approach depth under the prior, or the constant "
+      "below (§3.2)",
+      OneOf({"auto", "constant"}));
+    v("ray_time_constant_m", ray_time_constant_m,
+      "Start of every ray time with ray_time_init 'constant', prior length units (paper: 1 m)",
+      Positive());
+    v("max_matches_per_pair", max_matches_per_pair,
+      "At most this many matches per image pair, drawn with a per-pair seed (§4.7: 100); 0 keeps "
+      "all",
+      NonNegative());
+    v("match_cap_seed", match_cap_seed, "Seed of the per-pair match draw");
+    v("refine_focal", refine_focal, "Self-calibrate the focal lengths fx, fy (§3.1, §4.3)");
+    v("refine_principal_point", refine_principal_point,
+      "Self-calibrate the principal point cx, cy (§3.1, §4.3)");
+    v("refine_distortion", refine_distortion,
+      "Self-calibrate the distortion k1, k2, p1, p2 (§3.1, §4.3)");
+    v("use_evaluation_cache", use_evaluation_cache,
+      "Shared evaluation cache: undistortion and ray points once per observation (§3.7)");
+    v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
+    v("deterministic", deterministic,
+      "Bit-identical results whatever the thread count (Ceres on one thread, the cache parallel)");
+    v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive());
+    v("function_tolerance", function_tolerance,
+      "Ceres relative cost-change tolerance per GNC stage", Positive());
+    v("trust_region", trust_region,
+      "Return the prior when the solution moves a frame beyond the thresholds below (§3.6)");
+    v("trust_region_rotation_deg", trust_region_rotation_deg,
+      "Trust-region rotation threshold per frame, degrees (§3.6)", Positive());
+    v("trust_region_translation_m", trust_region_translation_m,
+      "Trust-region centre threshold per frame, metres at object scale x length_unit_m (§3.6)",
+      Positive());
+    v("length_unit_m", length_unit_m,
+      "Scene length unit relative to metric object captures; scales the metre thresholds",
+      Positive());
+    v("wander_test", wander_test,
+      "Return the prior when the Sim(3)-aligned median displacement exceeds wander_factor x "
+      "expected (§4.3)");
+    v("wander_expected_m", wander_expected_m,
+      "Expected per-frame displacement of the wander test, metres x length_unit_m (§4.3)",
+      Positive());
+    v("wander_factor", wander_factor, "Wander test threshold as a multiple of the expected",
+      Positive());
+    v("inconsistent_pairs_test", inconsistent_pairs_test,
+      "Flag a solution that leaves more than max_inconsistent_pair_fraction of pairs unexplained "
+      "(cf. §4.11)");
+    v("inconsistent_pair_px", inconsistent_pair_px,
+      "A pair is inconsistent above this median positive-ray epipolar distance, pixels",
+      Positive());
+    v("max_inconsistent_pair_fraction", max_inconsistent_pair_fraction,
+      "Fraction of inconsistent pairs above which the test fires", NonNegative(), Below(1));
+    v("staged", staged,
+      "Staged room recipe: poses-only GNC pass, then a warm self-calibration pass (§4.3)");
+    v("stage1_orientation_weight", stage1_orientation_weight,
+      "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative());
+    v("stage1_max_matches_per_pair", stage1_max_matches_per_pair,
+      "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative());
   }
 
-  // Throws InputError naming the first invalid field.
-  void Validate() const;
   // True when any intrinsic is refined.
   bool SelfCalibrates() const {
     return refine_focal || refine_principal_point || refine_distortion;

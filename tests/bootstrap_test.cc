@@ -1,6 +1,7 @@
 // Prior-free bootstrap (SPEC §4, issue 5) on synthetic scenes with known poses: exact recovery on
 // noise-free graphs, robustness to 20 % outlier pairs, the five-point relative pose, the look-at
-// seed, the fragility statistic, the focal search and the prior repairs.
+// seed, the fragility statistic, the graph-support verdict (issue 13), the focal search and the
+// prior repairs.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -15,6 +16,7 @@
 #include "bootstrap/translation_averaging.h"
 #include "bootstrap/wrong_pairs.h"
 #include "core/camera.h"
+#include "core/error.h"
 #include "core/geometry.h"
 
 namespace raytime {
@@ -196,8 +198,8 @@ TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
   }
   ASSERT_GT(num_outliers, 15);
   SolveGlobalPoses(16, BootstrapOptions(), &result);
-  EXPECT_EQ(result.num_registered, 16);
-  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.registered), 0.5);
+  EXPECT_EQ(result.num_rotations_registered, 16);
+  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.rotation_registered), 0.5);
   EXPECT_LT(MaxCentreErrorRelative(scene, result.centres), 0.02);
 
   int flagged_outliers = 0, false_positives = 0;
@@ -241,10 +243,48 @@ TEST(Bootstrap, PureRotationPairsServeRotationsOnly) {
     }
   }
   SolveGlobalPoses(8, BootstrapOptions(), &result);
-  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.registered), 1e-6);
+  EXPECT_LT(MaxRotationErrorDeg(scene, result.world_from_cam, result.rotation_registered), 1e-6);
   // Camera 0 has no translation direction left: it is placed by the look-at fill.
-  EXPECT_EQ(result.num_centres_filled, 1);
+  EXPECT_EQ(result.num_positions_filled, 1);
+  EXPECT_EQ(result.num_positions_estimated, 7);
+  EXPECT_FALSE(result.position_estimated[0]);
   EXPECT_EQ(result.pairs.num_wrong, 0);
+  // One filled centre of eight (12.5 %) and 7 pure rotations of 28 pairs (25 %): still supported.
+  EXPECT_EQ(result.support.num_pure_rotation_pairs, 7);
+  EXPECT_FALSE(result.support.weak);
+  EXPECT_STREQ(FragilityVerdict(result), "not fragile");
+}
+
+TEST(GraphSupport, CountsSharesAndReasons) {
+  std::vector<ViewGraphEdge> edges(10);
+  for (int k = 0; k < 10; ++k) {
+    edges[k].status = k < 6 ? PairStatus::kPureRotation
+                            : (k < 9 ? PairStatus::kValid : PairStatus::kTooFewInliers);
+    edges[k].median_parallax_deg = k;  // usable pairs 0..8: median 4
+  }
+  GraphSupport support = AssessGraphSupport(edges, {10, 9, 5, 3}, GraphSupportOptions());
+  EXPECT_EQ(support.num_usable_pairs, 9);
+  EXPECT_EQ(support.num_pure_rotation_pairs, 6);
+  EXPECT_EQ(support.num_direction_pairs, 3);
+  EXPECT_NEAR(support.pure_rotation_share, 6.0 / 9.0, 1e-12);
+  EXPECT_NEAR(support.filled_share, 3.0 / 9.0, 1e-12);
+  EXPECT_NEAR(support.median_parallax_deg, 4.0, 1e-12);
+  EXPECT_TRUE(support.weak);
+  EXPECT_EQ(support.reasons, (std::vector<std::string>{"pure_rotation_share", "filled_share"}));
+  EXPECT_NE(DescribeWeakness(support).find("67% of the usable pairs (6 of 9)"), std::string::npos)
+      << DescribeWeakness(support);
+  EXPECT_EQ(GraphSupportJson(support)["num_positions_filled"], 3);
+
+  GraphSupportOptions lenient;
+  lenient.max_pure_rotation_share = 0.7;
+  lenient.max_filled_share = 0.4;
+  support = AssessGraphSupport(edges, {10, 9, 5, 3}, lenient);
+  EXPECT_FALSE(support.weak);
+  EXPECT_TRUE(support.reasons.empty());
+  EXPECT_EQ(DescribeWeakness(support), "");
+  EXPECT_THROW(AssessGraphSupport(edges, {10, 9, 7, 3}, lenient), std::invalid_argument);
+  lenient.max_filled_share = 1.5;
+  EXPECT_THROW(AssessGraphSupport(edges, {10, 9, 5, 3}, lenient), InputError);
 }
 
 Eigen::Vector3d Noisy(const Eigen::Vector3d& ray, double sigma_rad, std::mt19937& rng) {
@@ -307,7 +347,7 @@ TEST(RelativePose, FlagsPureRotationAndTooFewInliers) {
   EXPECT_EQ(few.status, PairStatus::kTooFewInliers);
   RelativePoseOptions bad;
   bad.algorithm = "eight_point";
-  EXPECT_THROW(EstimateRelativePose(b1, b2, 1000.0, bad), std::invalid_argument);
+  EXPECT_THROW(EstimateRelativePose(b1, b2, 1000.0, bad), InputError);
 }
 
 TEST(LookAtSeed, NeverDegenerate) {
@@ -341,10 +381,12 @@ struct SyntheticCapture {
   std::vector<PairMatches> matches;
 };
 
-SyntheticCapture MakeCapture(int num_cameras, int num_points, const CameraIntrinsics& camera,
+SyntheticCapture MakeCapture(const Scene& scene, const CameraIntrinsics& camera,
                              std::mt19937& rng) {
   SyntheticCapture capture;
-  capture.scene = OrbitScene(num_cameras, num_points, rng);
+  capture.scene = scene;
+  const int num_cameras = static_cast<int>(scene.rotations.size());
+  const int num_points = static_cast<int>(scene.points.size());
   capture.images.cameras = {camera};
   std::normal_distribution<double> noise(0.0, 0.3);
   std::vector<std::vector<int>> row_of_point(num_cameras);
@@ -397,6 +439,36 @@ SyntheticCapture MakeCapture(int num_cameras, int num_points, const CameraIntrin
   return capture;
 }
 
+SyntheticCapture MakeCapture(int num_cameras, int num_points, const CameraIntrinsics& camera,
+                             std::mt19937& rng) {
+  const Scene scene = OrbitScene(num_cameras, num_points, rng);
+  return MakeCapture(scene, camera, rng);
+}
+
+// A slow hand-held sweep like issue 13's desk capture: the camera turns by `step_deg` per frame
+// about a centre that drifts by `baseline` per frame, facing points 3 to 6 units away, so every
+// pair is a near-pure rotation (here at most 0.4° of parallax).
+Scene SweepScene(int num_cameras, double step_deg, double baseline, int num_points,
+                 std::mt19937& rng) {
+  Scene scene;
+  for (int i = 0; i < num_cameras; ++i) {
+    const double yaw = RadiansFromDegrees(step_deg * i);
+    const Eigen::Vector3d centre(baseline * i, 0.0, 0.0);
+    scene.centres.push_back(centre);
+    scene.rotations.push_back(
+        LookAt(centre, centre + Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.05)));
+  }
+  std::uniform_real_distribution<double> azimuth(RadiansFromDegrees(-30.0),
+                                                 RadiansFromDegrees(step_deg * num_cameras + 30));
+  std::uniform_real_distribution<double> elevation(-0.3, 0.3), distance(3.0, 6.0);
+  for (int k = 0; k < num_points; ++k) {
+    const double a = azimuth(rng), e = elevation(rng), d = distance(rng);
+    scene.points.emplace_back(d * std::cos(e) * std::cos(a), d * std::cos(e) * std::sin(a),
+                              d * std::sin(e));
+  }
+  return scene;
+}
+
 CameraIntrinsics TestCamera() {
   CameraIntrinsics camera;
   camera.width = 1200;
@@ -413,17 +485,69 @@ TEST(Bootstrap, RecoversSyntheticCaptureFromKeypoints) {
     options.positions = positions;
     const BootstrapResult result =
         RunBootstrap(capture.images, capture.features, capture.matches, options);
-    EXPECT_EQ(result.num_registered, 8);
-    EXPECT_LT(MaxRotationErrorDeg(capture.scene, result.world_from_cam, result.registered), 0.1)
+    EXPECT_EQ(result.num_rotations_registered, 8);
+    EXPECT_LT(MaxRotationErrorDeg(capture.scene, result.world_from_cam, result.rotation_registered),
+              0.1)
         << positions;
     EXPECT_EQ(result.pairs.num_wrong, 0) << positions;
+    // A healthy orbit: every pair has parallax, every centre comes from the graph.
+    EXPECT_FALSE(result.support.weak) << positions;
+    EXPECT_EQ(result.support.num_pure_rotation_pairs, 0) << positions;
+    EXPECT_STREQ(FragilityVerdict(result), "not fragile") << positions;
+    EXPECT_TRUE(BootstrapWarnings(capture.images, result).empty()) << positions;
+    EXPECT_EQ(result.num_positions_filled, 0) << positions;
     if (positions == "lud") {
+      EXPECT_EQ(result.num_positions_estimated, 8);
       EXPECT_LT(MaxCentreErrorRelative(capture.scene, result.centres), 0.02);
+    } else {
+      EXPECT_EQ(result.num_positions_estimated, 0) << "requested look-at seed, not estimated";
     }
     const PoseSet poses = BootstrapPoses(capture.images, result);
     EXPECT_EQ(poses.size(), 8u);
     EXPECT_TRUE(poses.Has("0007.jpg"));
   }
+}
+
+// Issue 13: a sweep of near-pure rotations registers every rotation soundly, but no centre comes
+// from the graph; the bootstrap says so instead of reporting "not fragile".
+TEST(Bootstrap, NearPureRotationSweepIsWeak) {
+  std::mt19937 rng(14);
+  const SyntheticCapture capture =
+      MakeCapture(SweepScene(12, 3.0, 0.002, 600, rng), TestCamera(), rng);
+  const BootstrapResult result =
+      RunBootstrap(capture.images, capture.features, capture.matches, BootstrapOptions());
+  EXPECT_EQ(result.num_rotations_registered, 12);
+  EXPECT_LT(MaxRotationErrorDeg(capture.scene, result.world_from_cam, result.rotation_registered),
+            0.1);
+  EXPECT_FALSE(result.fragility.fragile) << "the rotations agree: the paper's flag cannot see it";
+  EXPECT_GT(result.support.num_usable_pairs, 40);
+  EXPECT_EQ(result.support.num_pure_rotation_pairs, result.support.num_usable_pairs);
+  EXPECT_LT(result.support.median_parallax_deg, 1.0);
+  EXPECT_EQ(result.num_positions_estimated, 0);
+  EXPECT_EQ(result.num_positions_filled, 12);
+  EXPECT_TRUE(result.support.weak);
+  EXPECT_EQ(result.support.reasons,
+            (std::vector<std::string>{"pure_rotation_share", "filled_share"}));
+  EXPECT_STREQ(FragilityVerdict(result), "weak");
+
+  const Warnings warnings = BootstrapWarnings(capture.images, result);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_EQ(warnings[0].code, "weak_bootstrap");
+  EXPECT_EQ(warnings[0].images.size(), 12u);
+  EXPECT_EQ(warnings[0].details["num_positions_filled"], 12);
+  EXPECT_EQ(warnings[0].details["max_pure_rotation_share"], 0.5);
+  EXPECT_NE(warnings[0].message.find("near-pure rotations"), std::string::npos);
+  const nlohmann::json json = WarningsToJson(warnings);
+  EXPECT_EQ(json[0]["code"], "weak_bootstrap");
+  EXPECT_EQ(json[0]["images"][0], "0000.jpg");
+
+  // The same sweep walked 0.15 units per frame (about 2° of parallax between neighbours) is
+  // estimated from the graph.
+  const SyntheticCapture walk = MakeCapture(SweepScene(12, 3.0, 0.15, 600, rng), TestCamera(), rng);
+  const BootstrapResult walked =
+      RunBootstrap(walk.images, walk.features, walk.matches, BootstrapOptions());
+  EXPECT_FALSE(walked.support.weak) << DescribeWeakness(walked.support);
+  EXPECT_EQ(walked.num_positions_estimated, 12);
 }
 
 TEST(Bootstrap, RejectsInconsistentMatches) {
@@ -434,7 +558,10 @@ TEST(Bootstrap, RejectsInconsistentMatches) {
                std::invalid_argument);
   BootstrapOptions bad;
   bad.positions = "centroid";
-  EXPECT_THROW(ValidateBootstrapOptions(bad), std::invalid_argument);
+  EXPECT_THROW(ValidateOptions(bad, "bootstrap"), InputError);
+  bad = BootstrapOptions();
+  bad.focal.focal_max_ratio = bad.focal.focal_min_ratio;  // a relation between two fields
+  EXPECT_THROW(ValidateOptions(bad, "bootstrap"), InputError);
 }
 
 TEST(FocalSearch, FindsTheFocalOfAnUndistortedCamera) {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/sweep_row.h"
 #include "evaluate/campaign_report.h"
 
 namespace raytime {
@@ -59,39 +60,44 @@ struct ArmErrors {
   double none_deg;
 };
 
-// A sweep row as `raytime run` writes it: swept values as strings, flattened metrics.
-json Row(const std::string& scene, const std::string& level, const std::string& seed,
-         const std::map<std::string, ArmErrors>& arms,
-         const std::map<std::string, double>& seconds = {}) {
-  json row = {{"run", "root=" + scene + ",level_deg=" + level + ",seed=" + seed},
-              {"dataset.root", "data/strecha/" + scene},
-              {"prior.level_deg", level},
-              {"prior.seed", seed},
-              {"status", "ok"},
-              {"seconds", 1.0}};
+// The stage that writes an arm's pose set, by the pipelines' naming: refined@X <- refine@X.
+std::string WriterOf(const std::string& arm) {
+  const size_t at = arm.find('@');
+  const std::string base = arm.substr(0, at);
+  return (base == "refined" ? std::string("refine") : base) +
+         (at == std::string::npos ? "" : arm.substr(at));
+}
+
+// A sweep row as `raytime run` writes it: swept values as strings, errors per arm and alignment.
+SweepRow Row(const std::string& scene, const std::string& level, const std::string& seed,
+             const std::map<std::string, ArmErrors>& arms,
+             const std::map<std::string, double>& seconds = {}) {
+  SweepRow row;
+  row.run = "root=" + scene + ",level_deg=" + level + ",seed=" + seed;
+  row.swept = {
+      {"dataset.root", "data/strecha/" + scene}, {"prior.level_deg", level}, {"prior.seed", seed}};
+  row.status = "ok";
+  row.seconds = 1.0;
   for (const auto& [arm, errors] : arms) {
-    const std::string sim3 = "metrics." + arm + ".sim3.";
-    const std::string none = "metrics." + arm + ".none.";
-    row[sim3 + "mean_rotation_deg"] = errors.sim3_deg;
-    row[sim3 + "median_rotation_deg"] = errors.sim3_deg;
-    row[sim3 + "mean_centre_m"] = 0.01 * errors.sim3_deg;
-    row[sim3 + "success"] = errors.sim3_deg < 1.0;
-    row[sim3 + "gt_from_estimate.scale"] = 1.0;
-    row[none + "mean_rotation_deg"] = errors.none_deg;
-    row[none + "mean_centre_m"] = 0.02 * errors.none_deg;
-    // Only scene A has a scene scale (2 m): the relative error is absent elsewhere (null, as a
-    // NaN metric is written).
-    row[sim3 + "mean_centre_relative"] =
-        scene == "A" ? json(0.01 * errors.sim3_deg / 2.0) : json(nullptr);
+    SweepPoseErrors& sim3 = row.errors[arm]["sim3"];
+    sim3.mean_rotation_deg = sim3.median_rotation_deg = errors.sim3_deg;
+    sim3.mean_centre_m = 0.01 * errors.sim3_deg;
+    sim3.success = errors.sim3_deg < 1.0;
+    // Only scene A has a scene scale (2 m): the relative error is absent elsewhere (NaN).
+    if (scene == "A") sim3.mean_centre_relative = 0.01 * errors.sim3_deg / 2.0;
+    SweepPoseErrors& none = row.errors[arm]["none"];
+    none.mean_rotation_deg = errors.none_deg;
+    none.mean_centre_m = 0.02 * errors.none_deg;
+    row.pose_set_stage[arm] = WriterOf(arm);
   }
-  for (const auto& [stage, value] : seconds) row["seconds." + stage] = value;
-  row["guardrails.refine@gnc.trust_region.passed"] = true;
+  row.stage_seconds = seconds;
+  row.guardrails_fired["refine@gnc"] = {};
   return row;
 }
 
 // Two scenes x levels {0, 4} x seeds {0, 1}; scene B's run at 4°, seed 1 failed.
-std::vector<json> HandMadeRows() {
-  std::vector<json> rows = {
+std::vector<SweepRow> HandMadeRows() {
+  std::vector<SweepRow> rows = {
       Row("A", "0", "0",
           {{"prior", {0, 0}}, {"refined@gnc", {0.2, 0.3}}, {"classical", {0.15, 0.1}}}),
       Row("A", "0", "1",
@@ -117,13 +123,13 @@ std::vector<json> HandMadeRows() {
           {{"refine", 30.0}, {"classical@mapper", 60.0}}),
       Row("B", "0", "1", {{"prior", {0, 0}}, {"refined@gnc", {0.22, 0.3}}}),
   };
-  json failed = {{"run", "root=B,level_deg=4,seed=1"},
-                 {"dataset.root", "data/strecha/B"},
-                 {"prior.level_deg", "4"},
-                 {"prior.seed", "1"},
-                 {"status", "failed"},
-                 {"error", "refine@gnc: solver | diverged"},
-                 {"seconds", 2.0}};
+  SweepRow failed;
+  failed.run = "root=B,level_deg=4,seed=1";
+  failed.swept = {
+      {"dataset.root", "data/strecha/B"}, {"prior.level_deg", "4"}, {"prior.seed", "1"}};
+  failed.status = "failed";
+  failed.error = "refine@gnc: solver | diverged";
+  failed.seconds = 2.0;
   rows.push_back(failed);
   return rows;
 }
@@ -247,9 +253,8 @@ TEST(CampaignReportTest, SuccessThresholdIsConfigurable) {
 }
 
 TEST(CampaignReportTest, UnsweptLevelAndSceneFormOneCell) {
-  json row = Row("A", "0", "0", {{"prior", {2.0, 2.0}}});
-  row.erase("dataset.root");
-  row.erase("prior.level_deg");
+  SweepRow row = Row("A", "0", "0", {{"prior", {2.0, 2.0}}});
+  row.swept = {{"prior.seed", "0"}};
   const CampaignReport report = AggregateCampaign({row});
   EXPECT_FALSE(report.level_swept);
   EXPECT_EQ(report.scenes, (std::vector<std::string>{"(not swept)"}));
@@ -259,8 +264,8 @@ TEST(CampaignReportTest, UnsweptLevelAndSceneFormOneCell) {
 }
 
 TEST(CampaignReportTest, BadLevelNamesTheRun) {
-  std::vector<json> rows = HandMadeRows();
-  rows[2]["prior.level_deg"] = "four";
+  std::vector<SweepRow> rows = HandMadeRows();
+  rows[2].swept[1].second = "four";
   try {
     AggregateCampaign(rows);
     FAIL() << "expected an InputError";
@@ -299,7 +304,13 @@ class SweepFileTest : public ::testing::Test {
 };
 
 TEST_F(SweepFileTest, ReadsRowsAndNamesTheFileOnBadInput) {
-  EXPECT_EQ(ReadSweepRows(Write(json(HandMadeRows()).dump(2))).size(), 8u);
+  json rows = json::array();
+  for (const SweepRow& row : HandMadeRows()) rows.push_back(row.ToJson());
+  const std::vector<SweepRow> read = ReadSweepRows(Write(rows.dump(2)));
+  ASSERT_EQ(read.size(), 8u);
+  // Every field survives the round trip (NaN as null and back).
+  EXPECT_EQ(read[5].ToJson(), HandMadeRows()[5].ToJson());
+  EXPECT_EQ(read[7].error, "refine@gnc: solver | diverged");
 
   const std::string missing = (dir_ / "nothing.json").string();
   EXPECT_NE(ReadError(missing).find(missing), std::string::npos);
@@ -309,7 +320,7 @@ TEST_F(SweepFileTest, ReadsRowsAndNamesTheFileOnBadInput) {
   EXPECT_NE(message.find(malformed + ":4"), std::string::npos) << message;
 
   EXPECT_NE(ReadError(Write("{\"run\": 1}")).find("expected a JSON array"), std::string::npos);
-  EXPECT_NE(ReadError(Write("[1]")).find("sweep row 1 is not an object"), std::string::npos);
+  EXPECT_NE(ReadError(Write("[1]")).find("sweep row 1: not a sweep row"), std::string::npos);
 }
 
 }  // namespace

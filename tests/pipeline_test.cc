@@ -1,35 +1,29 @@
 // End-to-end tests of `raytime run` through the real binary: the demo on the sample scene, a
 // shared Strecha scene, stage-by-stage skipping, overrides, sweeps, and clear errors on bad input.
+#include <fcntl.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
-#include <cstdio>
+#include <chrono>
+#include <thread>
+
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
+
+#include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-// Runs `raytime ARGS` from the source directory, so the configs' relative paths resolve.
-CommandResult Raytime(const std::string& args) {
-  const std::string command =
-      std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + RAYTIME_BINARY + " " + args + " 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+using raytime::CommandResult;
+using raytime::RunRaytime;
+using raytime::RunRaytimeStdout;
 
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
@@ -64,7 +58,7 @@ class PipelineTest : public ::testing::Test {
 
 TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   const std::string run_dir = (workdir_ / "demo").string();
-  CommandResult first = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult first = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["status"], "ok");
@@ -84,7 +78,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined" / "images.txt"));
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined_transforms.json"));
 
-  CommandResult second = Raytime("run configs/demo.yaml --workdir " + run_dir);
+  CommandResult second = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(second.exit_code, 0) << second.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             std::vector<std::string>(7, "skipped"));
@@ -92,7 +86,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // Changing the prior's seed reruns the prior and what depends on it, not the dataset or the
   // front end.
   CommandResult third =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(third.exit_code, 0) << third.output;
   EXPECT_EQ(
       StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
@@ -101,7 +95,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   // A damaged intermediate is rebuilt rather than trusted.
   fs::resize_file(fs::path(run_dir) / "prior.h5", 100);
   CommandResult fourth =
-      Raytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir + " --set prior.seed=7");
   ASSERT_EQ(fourth.exit_code, 0) << fourth.output;
   EXPECT_EQ(StageStatuses(ReadJson(fs::path(run_dir) / "summary.json")),
             (std::vector<std::string>{"skipped", "skipped", "skipped", "ran", "skipped", "skipped",
@@ -113,9 +107,9 @@ TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   if (!fs::exists(scene)) GTEST_SKIP() << "shared data not available at " << scene;
   const std::string run_dir = (workdir_ / "entry").string();
   CommandResult result =
-      Raytime("run configs/demo.yaml --workdir " + run_dir +
-              " --set dataset.format=strecha --set dataset.root=" + scene.string() +
-              " --set prior.level_deg=0");
+      RunRaytime("run configs/demo.yaml --workdir " + run_dir +
+                 " --set dataset.format=strecha --set dataset.root=" + scene.string() +
+                 " --set prior.level_deg=0");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
   EXPECT_EQ(summary["metrics"]["prior"]["none"]["num_frames"], 10);
@@ -137,14 +131,16 @@ sweep:
   prior.seed: [0, 1]
 )");
   const std::string run_dir = (workdir_ / "sweep").string();
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json rows = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows.size(), 4u);
   for (const auto& row : rows) {
     EXPECT_EQ(row["status"], "ok");
-    const double level = std::stod(row["prior.level_deg"].get<std::string>());
-    EXPECT_NEAR(row["metrics.prior.none.mean_rotation_deg"].get<double>(), level, 1e-9);
+    EXPECT_EQ(row["swept"][0][0], "prior.level_deg");
+    const double level = std::stod(row["swept"][0][1].get<std::string>());
+    EXPECT_NEAR(row["errors"]["prior"]["none"]["mean_rotation_deg"].get<double>(), level, 1e-9);
+    EXPECT_EQ(row["pose_set_stage"]["prior"], "prior");
   }
   std::ifstream csv(fs::path(run_dir) / "sweep.csv");
   int lines = 0;
@@ -173,13 +169,12 @@ sweep:
   EXPECT_EQ(dataset_cached, 3);
 
   // Rerunning the sweep skips every stage of every run and reproduces the rows.
-  CommandResult again = Raytime("run " + pipeline + " --workdir " + run_dir);
+  CommandResult again = RunRaytime("run " + pipeline + " --workdir " + run_dir);
   ASSERT_EQ(again.exit_code, 0) << again.output;
   const json rows_again = ReadJson(fs::path(run_dir) / "sweep.json");
   ASSERT_EQ(rows_again.size(), 4u);
   for (size_t r = 0; r < rows.size(); ++r) {
-    EXPECT_EQ(rows_again[r]["metrics.prior.none.mean_rotation_deg"],
-              rows[r]["metrics.prior.none.mean_rotation_deg"]);
+    EXPECT_EQ(rows_again[r]["errors"], rows[r]["errors"]);
   }
   for (const auto& entry : fs::directory_iterator(fs::path(run_dir) / "runs")) {
     for (const auto& stage : ReadJson(entry.path() / "summary.json")["stages"]) {
@@ -198,7 +193,7 @@ stages:
 )");
   const std::string run_dir = (workdir_ / "arms").string();
   CommandResult result =
-      Raytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
+      RunRaytime("run " + pipeline + " --workdir " + run_dir + " --set prior@large.level_deg=16");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json metrics = ReadJson(fs::path(run_dir) / "summary.json")["metrics"];
   EXPECT_NEAR(metrics["prior@small"]["none"]["mean_rotation_deg"].get<double>(), 1.0, 1e-9);
@@ -210,7 +205,7 @@ stages:
   - prior: {}
   - prior: {}
 )");
-  CommandResult dup = Raytime("run " + duplicate + " --workdir " + run_dir);
+  CommandResult dup = RunRaytime("run " + duplicate + " --workdir " + run_dir);
   EXPECT_EQ(dup.exit_code, 2);
   EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
@@ -221,7 +216,7 @@ stages:
   - prior: {}
   - evalute: {}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'evaluate'"), std::string::npos) << result.output;
@@ -233,13 +228,13 @@ stages:
   - prior:
       level_degs: 4
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":4:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("did you mean 'level_deg'"), std::string::npos) << result.output;
 
-  CommandResult override_result = Raytime("run configs/demo.yaml --workdir " +
-                                          (workdir_ / "w").string() + " --set prior.sed=3");
+  CommandResult override_result = RunRaytime("run configs/demo.yaml --workdir " +
+                                             (workdir_ / "w").string() + " --set prior.sed=3");
   EXPECT_EQ(override_result.exit_code, 2);
   EXPECT_NE(override_result.output.find("did you mean 'seed'"), std::string::npos)
       << override_result.output;
@@ -251,7 +246,7 @@ TEST_F(PipelineTest, WrongValueTypeIsReported) {
 stages:
   - prior: {level_deg: four}
 )");
-  CommandResult result = Raytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + (workdir_ / "w").string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find(pipeline + ":3:"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("must be a number"), std::string::npos) << result.output;
@@ -263,8 +258,8 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
            fs::copy_options::recursive);
   fs::remove(scene / "images" / "0003.jpg");
   const fs::path run_dir = workdir_ / "run";
-  CommandResult result = Raytime("run configs/demo.yaml --workdir " + run_dir.string() +
-                                 " --set dataset.root=" + scene.string());
+  CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                    " --set dataset.root=" + scene.string());
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_NE(result.output.find("0003.jpg"), std::string::npos) << result.output;
   EXPECT_TRUE(result.output.find("missing image") != std::string::npos ||
@@ -278,13 +273,34 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
   EXPECT_EQ(summary["status"], "failed");
 }
 
+TEST_F(PipelineTest, TruncatedImageFailsTheFeaturesStageNamingTheFile) {
+  const fs::path scene = workdir_ / "scene";
+  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
+           fs::copy_options::recursive);
+  const fs::path image = scene / "images" / "0003.jpg";
+  fs::resize_file(image, fs::file_size(image) / 2);
+  const fs::path run_dir = workdir_ / "run";
+  const CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
+                                          " --set dataset.root=" + scene.string());
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_NE(result.output.find(image.string() + ": truncated JPEG"), std::string::npos)
+      << result.output;
+  const json summary = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(summary["status"], "failed");
+  EXPECT_NE(summary["error"].get<std::string>().find(image.string() + ": truncated JPEG"),
+            std::string::npos)
+      << summary["error"];
+  EXPECT_EQ(StageStatuses(summary), std::vector<std::string>{"ran"});  // dataset only
+  EXPECT_FALSE(fs::exists(run_dir / "features.h5"));
+}
+
 TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
   const std::string run_dir = (workdir_ / "demo").string();
-  ASSERT_EQ(Raytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
+  ASSERT_EQ(RunRaytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
   // The exported COLMAP model scores as the pipeline's own evaluation scored the pose set.
-  CommandResult result = Raytime("evaluate --est " + run_dir +
-                                 "/refined --est-format colmap --gt data/sample/fountain-P11 "
-                                 "--gt-format strecha --align none --json");
+  CommandResult result = RunRaytime("evaluate --est " + run_dir +
+                                    "/refined --est-format colmap --gt data/sample/fountain-P11 "
+                                    "--gt-format strecha --align none --json");
   ASSERT_EQ(result.exit_code, 0) << result.output;
   const json errors = json::parse(result.output);
   const json summary = ReadJson(fs::path(run_dir) / "summary.json");
@@ -292,6 +308,140 @@ TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
               summary["metrics"]["refined"]["none"]["mean_rotation_deg"].get<double>(), 1e-6);
   EXPECT_NEAR(errors["mean_centre_m"].get<double>(),
               summary["metrics"]["refined"]["none"]["mean_centre_m"].get<double>(), 1e-6);
+}
+
+TEST_F(PipelineTest, StageAloneWritesOnlyItsSummaryOnStdout) {
+  const std::string pipeline = WriteFile("dataset.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+)");
+  const std::string run_dir = (workdir_ / "run").string();
+  ASSERT_EQ(RunRaytime("run " + pipeline + " --workdir " + run_dir).exit_code, 0);
+  std::string log;
+  const CommandResult result = RunRaytimeStdout(
+      "prior --in " + run_dir + "/dataset.h5 --out " + run_dir + "/p.h5 --level_deg 2", &log);
+  ASSERT_EQ(result.exit_code, 0) << log;
+  // Everything on stdout is the summary: it parses whole (logs went to stderr).
+  const json summary = json::parse(result.output);
+  EXPECT_EQ(summary["num_poses"], 11);
+  EXPECT_NE(log.find("prior: iid perturbation at 2"), std::string::npos) << log;
+}
+
+// Temporary files (".NAME.tmp.PID.N") below a folder.
+std::vector<std::string> TemporaryFilesBelow(const fs::path& dir) {
+  std::vector<std::string> found;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
+      found.push_back(entry.path().string());
+    }
+  }
+  return found;
+}
+
+TEST_F(PipelineTest, InterruptedRunSaysSoAndTheRerunCleansUp) {
+  const std::string pipeline = WriteFile("features.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - features: {}
+)");
+  const fs::path run_dir = workdir_ / "run";
+  fs::create_directories(run_dir);
+  // Start the run, wait until it is inside the features stage, press Ctrl-C.
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int log = ::open((workdir_ / "run.log").c_str(), O_CREAT | O_WRONLY | O_TRUNC, 0644);
+    ::dup2(log, STDOUT_FILENO);
+    ::dup2(log, STDERR_FILENO);
+    if (::chdir(RAYTIME_SOURCE_DIR) != 0) ::_exit(127);
+    ::execl(RAYTIME_BINARY, RAYTIME_BINARY, "run", pipeline.c_str(), "--workdir", run_dir.c_str(),
+            static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  bool in_features = false;
+  while (!in_features && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::ifstream in(run_dir / "summary.json");
+    const json summary = json::parse(in, nullptr, false);
+    in_features = !summary.is_discarded() && summary.value("stage", "") == "features";
+  }
+  ASSERT_TRUE(in_features) << "the run never reached the features stage";
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  const json interrupted = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(interrupted["status"], "interrupted");
+  EXPECT_EQ(interrupted["stage"], "features");
+  EXPECT_EQ(interrupted["signal"], SIGINT);
+  EXPECT_TRUE(TemporaryFilesBelow(run_dir).empty());
+
+  // What a killed run leaves (its process is gone) goes when the next run starts here.
+  const fs::path stale = run_dir / ".features.h5.tmp.2147483646.0";
+  std::ofstream(stale) << "half-written";
+  const CommandResult rerun = RunRaytime("run " + pipeline + " --workdir " + run_dir.string());
+  ASSERT_EQ(rerun.exit_code, 0) << rerun.output;
+  EXPECT_FALSE(fs::exists(stale));
+  EXPECT_TRUE(TemporaryFilesBelow(run_dir).empty());
+  const json finished = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(finished["status"], "ok");
+  EXPECT_FALSE(finished.contains("stage"));
+
+  // The same result as a run that was never interrupted.
+  const fs::path clean_dir = workdir_ / "clean";
+  ASSERT_EQ(RunRaytime("run " + pipeline + " --workdir " + clean_dir.string()).exit_code, 0);
+  EXPECT_EQ(ReadJson(clean_dir / "summary.json")["stages"][1]["summary"]["num_keypoints"],
+            finished["stages"][1]["summary"]["num_keypoints"]);
+}
+
+TEST_F(PipelineTest, PriorFileWithMissingAndExtraFramesWarns) {
+  // A COLMAP model of the sample's ground truth without one image and with a pose of an image
+  // the dataset does not have: both reported, the run goes on (status ok_with_warnings).
+  const std::string run_dir = (workdir_ / "export").string();
+  const std::string export_pipeline = WriteFile("export.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {source: ground_truth}
+  - export: {poses: [prior], formats: [colmap_text]}
+)");
+  ASSERT_EQ(RunRaytime("run " + export_pipeline + " --workdir " + run_dir).exit_code, 0);
+  const fs::path images_txt = fs::path(run_dir) / "prior" / "images.txt";
+  std::ifstream in(images_txt);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  in.close();
+  const size_t at = text.find("0003.jpg");
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, 8, "9999.jpg");  // 0003.jpg has no pose now; 9999.jpg is no image
+  std::ofstream(images_txt) << text;
+
+  const std::string pipeline = WriteFile("prior_file.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {source: file, format: colmap}
+)");
+  const std::string second = (workdir_ / "file").string();
+  const CommandResult result = RunRaytime("run " + pipeline + " --workdir " + second +
+                                          " --set prior.path=" + run_dir + "/prior");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadJson(fs::path(second) / "summary.json");
+  EXPECT_EQ(summary["status"], "ok_with_warnings");
+  std::map<std::string, json> by_code;
+  for (const auto& warning : summary["warnings"]) by_code[warning["code"]] = warning;
+  ASSERT_TRUE(by_code.count("missing_prior")) << summary["warnings"].dump();
+  ASSERT_TRUE(by_code.count("missing_frames")) << summary["warnings"].dump();
+  EXPECT_EQ(by_code["missing_prior"]["images"], json::array({"0003.jpg"}));
+  EXPECT_EQ(by_code["missing_frames"]["images"], json::array({"9999.jpg"}));
+  EXPECT_EQ(by_code["missing_prior"]["stage"], "prior");
+  // The log says each once, in words.
+  EXPECT_NE(result.output.find("have no prior pose"), std::string::npos) << result.output;
+
+  // prior.strict refuses the same file, naming it.
+  const CommandResult strict =
+      RunRaytime("run " + pipeline + " --workdir " + second + " --set prior.path=" + run_dir +
+                 "/prior --set prior.strict=true");
+  EXPECT_EQ(strict.exit_code, 2);
+  EXPECT_NE(strict.output.find("9999.jpg"), std::string::npos) << strict.output;
 }
 
 }  // namespace

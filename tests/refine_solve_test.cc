@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
 
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
@@ -277,18 +280,27 @@ TEST(RefineSolveTest, CacheOffGivesTheSameSolve) {
   }
 }
 
-TEST(RefineSolveTest, DeterministicForOneThread) {
+// The default (deterministic) solve is bit-identical run to run and whatever the thread count:
+// only the cache, whose entries are computed independently, runs in parallel.
+TEST(RefineSolveTest, DeterministicWhateverTheThreadCount) {
   SyntheticScene scene = MakeSyntheticScene(SmallNoisyScene());
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 2.0, 4);
   RefineOptions options = BasinOptions();
+  ASSERT_TRUE(options.deterministic);
   options.num_threads = 1;
-  RefineOutput first, second;
+  RefineOutput first;
   RefinePoses(scene.input, options, &first);
-  RefinePoses(scene.input, options, &second);
-  for (size_t i = 0; i < first.world_from_cam.size(); ++i) {
-    EXPECT_EQ(first.world_from_cam[i].rotation.coeffs(),
-              second.world_from_cam[i].rotation.coeffs());
-    EXPECT_EQ(first.world_from_cam[i].translation, second.world_from_cam[i].translation);
+  for (const int threads : {1, 2, 4}) {
+    options.num_threads = threads;
+    RefineOutput again;
+    RefinePoses(scene.input, options, &again);
+    for (size_t i = 0; i < first.world_from_cam.size(); ++i) {
+      EXPECT_EQ(first.world_from_cam[i].rotation.coeffs(),
+                again.world_from_cam[i].rotation.coeffs())
+          << threads << " threads, image " << i;
+      EXPECT_EQ(first.world_from_cam[i].translation, again.world_from_cam[i].translation)
+          << threads << " threads, image " << i;
+    }
   }
 }
 
@@ -350,6 +362,129 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   EXPECT_EQ(summary.passes[1].num_matches_used, summary.passes[1].num_matches_input);
   EXPECT_LT(Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.2);
   EXPECT_NEAR(output.intrinsics.params[kFx] / truth.params[kFx], 1.0, 0.005);
+}
+
+// Every key path of a JSON value, arrays as "[]" (their elements' keys merged).
+void CollectKeyPaths(const nlohmann::json& value, const std::string& path,
+                     std::set<std::string>* out) {
+  if (value.is_object()) {
+    for (const auto& [key, child] : value.items()) {
+      const std::string child_path = path.empty() ? key : path + "." + key;
+      out->insert(child_path);
+      CollectKeyPaths(child, child_path, out);
+    }
+  } else if (value.is_array()) {
+    for (const auto& child : value) CollectKeyPaths(child, path + "[]", out);
+  }
+}
+
+// summary.json, sweep tables and campaign reports read RefineSummary::ToJson by these keys
+// (e.g. timings.total_seconds, guardrails.inconsistent_pairs, passes[].stages[]): a tiny solve
+// with every guardrail on and every pair flagged fills each of them.
+TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
+  SyntheticSceneOptions scene_options = SmallNoisyScene();
+  scene_options.num_cameras = 4;
+  scene_options.num_points = 60;
+  SyntheticScene scene = MakeSyntheticScene(scene_options);
+  RefineOptions options;
+  options.wander_test = true;
+  options.inconsistent_pair_px = 1e-9;
+  options.num_threads = 1;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  ASSERT_FALSE(summary.inconsistent_pairs.pairs.empty());
+  const nlohmann::json json = summary.ToJson();
+  std::set<std::string> keys;
+  CollectKeyPaths(json, "", &keys);
+  const std::set<std::string> expected = {
+      "passes",
+      "passes[].name",
+      "passes[].num_cameras",
+      "passes[].num_observations",
+      "passes[].num_ray_times",
+      "passes[].num_tracks",
+      "passes[].num_matches_input",
+      "passes[].num_matches_used",
+      "passes[].num_residuals",
+      "passes[].elimination_group_size",
+      "passes[].orientation_weight",
+      "passes[].self_calibration",
+      "passes[].ray_time_init",
+      "passes[].ray_time_init.mode",
+      "passes[].ray_time_init.num_depth_samples",
+      "passes[].ray_time_init.images_with_fallback",
+      "passes[].ray_time_init.min_depth",
+      "passes[].ray_time_init.median_depth",
+      "passes[].ray_time_init.max_depth",
+      "passes[].gauge_polish",
+      "passes[].gauge_polish.prior_cost_before",
+      "passes[].gauge_polish.prior_cost_after",
+      "passes[].gauge_polish.rotation_deg",
+      "passes[].gauge_polish.translation",
+      "passes[].gauge_polish.scale",
+      "passes[].build_seconds",
+      "passes[].solve_seconds",
+      "passes[].stages",
+      "passes[].stages[].loss_scale_px2",
+      "passes[].stages[].iterations",
+      "passes[].stages[].successful_steps",
+      "passes[].stages[].initial_cost",
+      "passes[].stages[].final_cost",
+      "passes[].stages[].seconds",
+      "passes[].stages[].jacobian_seconds",
+      "passes[].stages[].residual_seconds",
+      "passes[].stages[].linear_solver_seconds",
+      "passes[].stages[].jacobian_evaluations",
+      "passes[].stages[].termination",
+      "passes[].stages[].message",
+      "total_iterations",
+      "initial_cost",
+      "final_cost",
+      "timings",
+      "timings.build_seconds",
+      "timings.solve_seconds",
+      "timings.jacobian_seconds",
+      "timings.total_seconds",
+      "guardrails",
+      "guardrails.fired",
+      "guardrails.returned_prior",
+      "guardrails.solver_failed",
+      "guardrails.trust_region",
+      "guardrails.trust_region.enabled",
+      "guardrails.trust_region.fired",
+      "guardrails.trust_region.max_rotation_deg",
+      "guardrails.trust_region.max_translation",
+      "guardrails.trust_region.rotation_threshold_deg",
+      "guardrails.trust_region.translation_threshold",
+      "guardrails.wander",
+      "guardrails.wander.enabled",
+      "guardrails.wander.fired",
+      "guardrails.wander.median_displacement",
+      "guardrails.wander.expected",
+      "guardrails.wander.threshold",
+      "guardrails.inconsistent_pairs",
+      "guardrails.inconsistent_pairs.enabled",
+      "guardrails.inconsistent_pairs.fired",
+      "guardrails.inconsistent_pairs.num_pairs",
+      "guardrails.inconsistent_pairs.num_inconsistent",
+      "guardrails.inconsistent_pairs.fraction",
+      "guardrails.inconsistent_pairs.median_pair_px",
+      "guardrails.inconsistent_pairs.pair_threshold_px",
+      "guardrails.inconsistent_pairs.fraction_threshold",
+      "guardrails.inconsistent_pairs.pairs",
+      "guardrails.inconsistent_pairs.pairs[].image1",
+      "guardrails.inconsistent_pairs.pairs[].image2",
+      "guardrails.inconsistent_pairs.pairs[].median_px",
+      "guardrails.inconsistent_pairs.pairs[].num_matches",
+  };
+  EXPECT_EQ(keys, expected);
+  // Values come from the fields of the same name.
+  EXPECT_EQ(json["timings"]["total_seconds"], summary.total_seconds);
+  EXPECT_EQ(json["guardrails"]["fired"], summary.guardrails_fired);
+  EXPECT_EQ(json["guardrails"]["inconsistent_pairs"]["num_inconsistent"],
+            summary.inconsistent_pairs.num_inconsistent);
+  EXPECT_EQ(json["passes"][0]["stages"].size(), summary.passes[0].stages.size());
+  EXPECT_EQ(json["passes"][0]["stages"][0]["iterations"], summary.passes[0].stages[0].iterations);
 }
 
 }  // namespace

@@ -1,37 +1,22 @@
 // End-to-end test of `raytime report` (SPEC §6 campaigns): a tiny real sweep on the sample scene
 // (prior and evaluate only, no solver: seconds), then the report, its cells and its plots.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
-#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
 
+#include "tests/raytime_command.h"
+
 namespace fs = std::filesystem;
 
 namespace {
 
-struct CommandResult {
-  int exit_code = -1;
-  std::string output;  // stdout and stderr
-};
-
-// Runs `ENVIRONMENT raytime ARGS` from the source directory, so relative scene paths resolve.
-CommandResult Raytime(const std::string& args, const std::string& environment = "") {
-  const std::string command = std::string("cd ") + RAYTIME_SOURCE_DIR + " && " + environment + " " +
-                              RAYTIME_BINARY + " " + args + " 2>&1";
-  CommandResult result;
-  FILE* pipe = popen(command.c_str(), "r");
-  char buffer[4096];
-  while (size_t n = fread(buffer, 1, sizeof(buffer), pipe)) result.output.append(buffer, n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+using raytime::CommandResult;
+using raytime::RunRaytime;
 
 std::string ReadFile(const fs::path& path) {
   std::ifstream in(path);
@@ -71,8 +56,8 @@ sweep:
   prior.seed: [0, 1]
 )";
     const std::string sweep_dir = (dir_ / "sweep").string();
-    const CommandResult run =
-        Raytime("run " + pipeline.string() + " --workdir " + sweep_dir + " --jobs 1 --no-report");
+    const CommandResult run = RunRaytime("run " + pipeline.string() + " --workdir " + sweep_dir +
+                                         " --jobs 1 --no-report");
     // The missing scene's runs fail, so the sweep reports failure, but it writes every row.
     EXPECT_EQ(run.exit_code, 2) << run.output;
     EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "sweep.json")) << run.output;
@@ -85,7 +70,7 @@ sweep:
 TEST_F(ReportCommandTest, ReportsCountsCellsAndPlotsOfASweep) {
   const std::string sweep_dir = RunSmallSweep();
   const fs::path out = dir_ / "report";
-  const CommandResult result = Raytime("report --sweep " + sweep_dir + " --out " + out.string());
+  const CommandResult result = RunRaytime("report --sweep " + sweep_dir + " --out " + out.string());
   ASSERT_EQ(result.exit_code, 0) << result.output;
 
   const std::string report = ReadFile(out / "report.md");
@@ -124,7 +109,7 @@ TEST_F(ReportCommandTest, MissingMatplotlibWarnsAndKeepsTheReport) {
   std::ofstream(dir_ / "python" / "matplotlib" / "__init__.py")
       << "raise ImportError('simulated: matplotlib is not installed')\n";
   const CommandResult result =
-      Raytime("report --sweep " + sweep_dir, "PYTHONPATH=" + (dir_ / "python").string());
+      RunRaytime("report --sweep " + sweep_dir, "PYTHONPATH=" + (dir_ / "python").string());
   ASSERT_EQ(result.exit_code, 0) << result.output;
   EXPECT_NE(result.output.find("matplotlib is missing"), std::string::npos) << result.output;
   EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "report.md"));
@@ -134,13 +119,13 @@ TEST_F(ReportCommandTest, MissingMatplotlibWarnsAndKeepsTheReport) {
 
 TEST_F(ReportCommandTest, MissingOrMalformedSweepIsNamed) {
   const std::string missing = (dir_ / "nothing").string();
-  const CommandResult no_sweep = Raytime("report --sweep " + missing);
+  const CommandResult no_sweep = RunRaytime("report --sweep " + missing);
   EXPECT_EQ(no_sweep.exit_code, 2) << no_sweep.output;
   EXPECT_NE(no_sweep.output.find(missing + "/sweep.json"), std::string::npos) << no_sweep.output;
 
   fs::create_directories(dir_ / "bad");
   std::ofstream(dir_ / "bad" / "sweep.json") << "[{\"run\": \"a\", \"status\": \"ok\"},\n{\n";
-  const CommandResult malformed = Raytime("report --sweep " + (dir_ / "bad").string());
+  const CommandResult malformed = RunRaytime("report --sweep " + (dir_ / "bad").string());
   EXPECT_EQ(malformed.exit_code, 2) << malformed.output;
   EXPECT_NE(malformed.output.find((dir_ / "bad" / "sweep.json").string() + ":"), std::string::npos)
       << malformed.output;

@@ -25,8 +25,8 @@
 #include <string>
 #include <vector>
 
+#include "core/features.h"
 #include "core/formats/colmap_model.h"
-#include "core/hdf5_store.h"
 #include "core/types.h"
 
 namespace raytime {

@@ -8,6 +8,7 @@
 #include "core/formats/nerfstudio.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
+#include "core/intrinsics.h"
 #include "core/options.h"
 
 namespace fs = std::filesystem;
@@ -62,7 +63,7 @@ Dataset LoadDataset(const DatasetOptions& options) {
   Dataset dataset;
   PoseSet poses;
   if (options.format == "strecha") {
-    ReadStrechaScene(options.root, &dataset.images, &poses);
+    ReadStrechaScene(options.root, &dataset.images, &poses, &dataset.warnings);
     AddFilesBelow((fs::path(options.root) / "gt_dense_cameras").string(), &dataset.files);
   } else if (options.format == "colmap") {
     const std::string model_dir = FindColmapModel(options.root, options.model);
@@ -77,6 +78,9 @@ Dataset LoadDataset(const DatasetOptions& options) {
     throw InputError(UnknownKeyMessage("dataset.format", options.format,
                                        {"strecha", "colmap", "nerfstudio"}, "format"));
   }
+  // Per-view cameras that differ only by numerical noise (DTU's K) are one camera, for every
+  // format alike.
+  MergeNearlyEqualCameras(&dataset.images, &dataset.warnings);
   SortImagesByName(&dataset.images);
   CheckImagesExist(dataset.images, options.root);
   for (const auto& image : dataset.images.images) {
@@ -100,14 +104,6 @@ PoseSet ReadPoseFile(const std::string& format, const std::string& path, const I
     ReadStrechaScene(path, &unused, &poses);
   } else {
     throw InputError(UnknownKeyMessage("pose files", format, kPoseFileFormats, "format"));
-  }
-  if (images) {
-    const NameJoin join = JoinNames(Names(poses), Names(*images));
-    if (!join.Complete()) {
-      ThrowInput(
-          path, 0,
-          "pose names do not match the dataset's images: " + join.Describe(path, "the dataset"));
-    }
   }
   return poses;
 }

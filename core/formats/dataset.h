@@ -6,7 +6,9 @@
 #include <string>
 #include <vector>
 
+#include "core/options.h"
 #include "core/types.h"
+#include "core/warnings.h"
 
 namespace raytime {
 
@@ -24,11 +26,11 @@ struct DatasetOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("format", format);
-    v("root", root);
-    v("images", images);
-    v("model", model);
-    v("transforms", transforms);
+    v("format", format, "Dataset layout", OneOf({"strecha", "colmap", "nerfstudio"}));
+    v("root", root, "Dataset folder", NonEmpty());
+    v("images", images, "colmap: image folder relative to root");
+    v("model", model, "colmap: model folder relative to root; \"\" tries sparse/0, sparse, root");
+    v("transforms", transforms, "nerfstudio: transforms file relative to root");
   }
 };
 
@@ -36,6 +38,9 @@ struct Dataset {
   ImageSet images;
   std::optional<PoseSet> ground_truth;
   std::vector<std::string> files;  // every file the dataset was read from (for content hashes)
+  // What the readers accepted with a doubt (e.g. a negligible skew dropped); the dataset stage
+  // reports them in its summary.
+  Warnings warnings;
 };
 
 // Loads the dataset and checks that every image file exists (InputError naming the first
@@ -47,8 +52,8 @@ extern const std::vector<std::string> kPoseFileFormats;
 
 // Reads the poses of a file or folder: "colmap" (model folder), "nerfstudio" (transforms.json),
 // "tum" (trajectory), "strecha" (scene root). `images`, when given, supplies the names for TUM
-// rows (in name order) and must join completely with the poses read (InputError listing names
-// that do not match).
+// rows (in name order). Names are not joined here: the caller decides what a pose without an
+// image, or an image without a pose, means (JoinNames).
 PoseSet ReadPoseFile(const std::string& format, const std::string& path,
                      const ImageSet* images = nullptr);
 

@@ -8,6 +8,7 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/formats/text_util.h"
+#include "core/intrinsics.h"
 
 namespace fs = std::filesystem;
 
@@ -18,7 +19,7 @@ constexpr size_t kNumbersPerCamera = 26;
 constexpr char kLayout[] = "K (3x3), distortion (3), R (3x3), centre (3), width height";
 }  // namespace
 
-StrechaCamera ReadStrechaCamera(const std::string& path) {
+StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
   const std::string contents = ReadTextFile(path);
   const auto lines = text::SplitLines(contents);
   std::vector<double> v;
@@ -37,10 +38,6 @@ StrechaCamera ReadStrechaCamera(const std::string& path) {
                "found " + std::to_string(v.size()) + " numbers, expected " +
                    std::to_string(kNumbersPerCamera) + ": " + kLayout);
   }
-  // Row-major K: our intrinsics have no skew and K's last row must be (0, 0, 1).
-  if (v[1] != 0 || v[3] != 0 || v[6] != 0 || v[7] != 0 || v[8] != 1) {
-    ThrowInput(path, 0, "K must be [fx 0 cx; 0 fy cy; 0 0 1]");
-  }
   if (v[9] != 0 || v[10] != 0 || v[11] != 0) {
     ThrowInput(path, 0, "distortion must be 0 0 0 (the images are undistorted)");
   }
@@ -55,9 +52,11 @@ StrechaCamera ReadStrechaCamera(const std::string& path) {
     ThrowInput(path, 0, "R has a non-positive determinant, not a rotation");
   }
   StrechaCamera camera;
-  camera.intrinsics.width = static_cast<int>(width);
-  camera.intrinsics.height = static_cast<int>(height);
-  camera.intrinsics.params = {v[0], v[4], v[2], v[5], 0, 0, 0, 0};
+  // NAME.camera belongs to image NAME.
+  camera.intrinsics =
+      IntrinsicsFromK(Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&v[0]),
+                      static_cast<int>(width), static_cast<int>(height), path,
+                      fs::path(path).stem().string(), warnings);
   camera.world_from_cam = Rigid3(Eigen::Quaterniond(Orthonormalize(world_from_cam_rotation)),
                                  Eigen::Vector3d(v[21], v[22], v[23]));
   return camera;
@@ -80,7 +79,8 @@ void WriteStrechaCamera(const std::string& path, const StrechaCamera& camera) {
   WriteTextFileAtomically(path, out);
 }
 
-void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground_truth) {
+void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground_truth,
+                      Warnings* warnings) {
   const fs::path camera_dir = fs::path(root) / "gt_dense_cameras";
   const fs::path image_dir = fs::path(root) / "images";
   for (const fs::path& dir : {camera_dir, image_dir}) {
@@ -116,7 +116,8 @@ void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground
   PoseSet poses;
   image_set.image_root = image_dir.string();
   for (const std::string& name : join.both) {  // sorted by name
-    const StrechaCamera camera = ReadStrechaCamera((camera_dir / (name + suffix)).string());
+    const StrechaCamera camera =
+        ReadStrechaCamera((camera_dir / (name + suffix)).string(), warnings);
     const auto same =
         std::find(image_set.cameras.begin(), image_set.cameras.end(), camera.intrinsics);
     const int camera_index = static_cast<int>(same - image_set.cameras.begin());

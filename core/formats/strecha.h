@@ -8,6 +8,7 @@
 #include <string>
 
 #include "core/types.h"
+#include "core/warnings.h"
 
 namespace raytime {
 
@@ -16,13 +17,15 @@ struct StrechaCamera {
   Rigid3 world_from_cam;
 };
 
-// Errors name the file, and for a wrong count say how many numbers were found and expected.
-StrechaCamera ReadStrechaCamera(const std::string& path);
+// Errors name the file, and for a wrong count say how many numbers were found and expected. K goes
+// through IntrinsicsFromK (core/intrinsics.h): a negligible skew is dropped with a warning.
+StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings = nullptr);
 void WriteStrechaCamera(const std::string& path, const StrechaCamera& camera);  // atomic
 
 // Reads every ROOT/gt_dense_cameras/*.camera; each must have its image in ROOT/images (a missing
 // image is an InputError naming it, as is an image without a camera file). Images with
 // identical intrinsics share one camera.
-void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground_truth);
+void ReadStrechaScene(const std::string& root, ImageSet* images, PoseSet* ground_truth,
+                      Warnings* warnings = nullptr);
 
 }  // namespace raytime

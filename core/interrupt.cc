@@ -1,0 +1,82 @@
+#include "core/interrupt.h"
+
+#include <fcntl.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "core/atomic_file.h"
+
+namespace raytime {
+namespace {
+
+int g_pipe[2] = {-1, -1};
+
+std::mutex& ActionsMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+std::map<int, std::function<void(int)>>& Actions() {
+  static std::map<int, std::function<void(int)>> actions;
+  return actions;
+}
+
+void OnSignal(int signal) {
+  const unsigned char byte = static_cast<unsigned char>(signal);
+  const int saved = errno;
+  [[maybe_unused]] const ssize_t written = ::write(g_pipe[1], &byte, 1);
+  errno = saved;
+}
+
+void Watch() {
+  unsigned char byte = 0;
+  while (::read(g_pipe[0], &byte, 1) != 1) {
+    if (errno != EINTR) return;
+  }
+  const int signal = byte;
+  {
+    std::lock_guard<std::mutex> lock(ActionsMutex());
+    for (auto it = Actions().rbegin(); it != Actions().rend(); ++it) {
+      try {
+        it->second(signal);
+      } catch (...) {
+        // An action that fails must not keep the others from running.
+      }
+    }
+  }
+  RemovePendingTemporaryFiles();
+  ::_exit(128 + signal);
+}
+
+}  // namespace
+
+void InstallInterruptHandler() {
+  if (g_pipe[0] >= 0) return;
+  if (::pipe2(g_pipe, O_CLOEXEC) != 0) return;
+  struct sigaction action = {};
+  action.sa_handler = OnSignal;
+  sigemptyset(&action.sa_mask);
+  action.sa_flags = SA_RESTART;
+  ::sigaction(SIGINT, &action, nullptr);
+  ::sigaction(SIGTERM, &action, nullptr);
+  std::thread(Watch).detach();
+}
+
+InterruptAction::InterruptAction(std::function<void(int)> action) {
+  static int next_id = 0;
+  std::lock_guard<std::mutex> lock(ActionsMutex());
+  id_ = next_id++;
+  Actions()[id_] = std::move(action);
+}
+
+InterruptAction::~InterruptAction() {
+  std::lock_guard<std::mutex> lock(ActionsMutex());
+  Actions().erase(id_);
+}
+
+}  // namespace raytime

@@ -1,0 +1,29 @@
+// Clean ends on SIGINT and SIGTERM. A signal handler only writes the signal number into a pipe;
+// a watcher thread reads it, runs the registered actions (newest first: e.g. stop child
+// processes, write summary.json with status "interrupted", remove this process's temporary
+// files) and exits with 128 + the signal (130 for Ctrl-C, 143 for kill). Nothing runs inside the
+// handler itself, so the actions may allocate, lock and write files.
+#pragma once
+
+#include <functional>
+
+namespace raytime {
+
+// Installs the handlers and starts the watcher; call once at the start of main. Children started
+// later get the default dispositions back when they exec.
+void InstallInterruptHandler();
+
+// Registers `action` for the lifetime of this object. Actions run on the watcher thread, newest
+// first, with the signal number; they must not wait for the thread that registered them.
+class InterruptAction {
+ public:
+  explicit InterruptAction(std::function<void(int signal)> action);
+  ~InterruptAction();
+  InterruptAction(const InterruptAction&) = delete;
+  InterruptAction& operator=(const InterruptAction&) = delete;
+
+ private:
+  int id_;
+};
+
+}  // namespace raytime

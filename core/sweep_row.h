@@ -1,0 +1,71 @@
+// One row per run of a sweep: the run's swept values, status, stage times, pose errors,
+// guardrail verdicts and warning codes. Written by the sweep runner (WORKDIR/sweep.json, and
+// flattened to WORKDIR/sweep.csv) and read by the campaign report: the one place that defines
+// what a row holds.
+#pragma once
+
+#include <limits>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace raytime {
+
+// Errors of one pose set under one alignment (the evaluate stage's PoseErrorSummary); NaN where
+// the run did not report a value.
+struct SweepPoseErrors {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  int num_frames = 0;
+  double mean_rotation_deg = kNone;
+  double median_rotation_deg = kNone;
+  double mean_centre_m = kNone;
+  double median_centre_m = kNone;
+  double mean_centre_relative = kNone;
+  double median_centre_relative = kNone;
+  bool success = false;
+
+  nlohmann::json ToJson() const;
+  // From the fields of PoseErrorSummary::ToJson (absent or null ones stay NaN).
+  static SweepPoseErrors FromJson(const nlohmann::json& json);
+};
+
+struct SweepRow {
+  std::string run;                                         // the run's label
+  std::vector<std::pair<std::string, std::string>> swept;  // "prior.level_deg" -> "4"
+  // "ok", "ok_with_warnings", "failed" or "interrupted" (summary.json's status).
+  std::string status;
+  std::string error;
+  double seconds = 0.0;                         // the run's wall time
+  std::map<std::string, double> stage_seconds;  // stage id -> its own computation, also if reused
+  // Pose set (arm) -> alignment -> errors.
+  std::map<std::string, std::map<std::string, SweepPoseErrors>> errors;
+  std::map<std::string, std::string> pose_set_stage;  // pose set -> the stage id that wrote it
+  std::map<std::string, std::vector<std::string>> guardrails_fired;  // stage id -> checks fired
+  std::vector<std::string> warnings;                                 // warning codes, in order
+
+  // A finished run whose numbers count (warnings included: they are verdicts, not failures).
+  bool Succeeded() const { return status == "ok" || status == "ok_with_warnings"; }
+  // The swept value of `key`, or nullptr.
+  const std::string* Swept(const std::string& key) const;
+
+  nlohmann::json ToJson() const;
+  // InputError naming `where` when the object is not a sweep row.
+  static SweepRow FromJson(const nlohmann::json& json, const std::string& where);
+  // Flat columns for CSV: run, the swept keys, status, error, seconds, seconds.<stage>,
+  // metrics.<arm>.<alignment>.<field>, guardrails.<stage>, warnings.
+  std::vector<std::pair<std::string, std::string>> Columns() const;
+};
+
+// RFC 4180 field: quoted when it holds a comma, a quote or a line break.
+std::string CsvField(const std::string& text);
+
+// WORKDIR/sweep.json and WORKDIR/sweep.csv (atomically).
+void WriteSweepTables(const std::string& workdir, const std::vector<SweepRow>& rows);
+
+// The rows of a sweep.json; InputError naming the file (and line) when it does not parse or a
+// row is not one.
+std::vector<SweepRow> ReadSweepRows(const std::string& path);
+
+}  // namespace raytime

@@ -1,0 +1,321 @@
+#include "pipelines/stage_cache.h"
+
+#include <fcntl.h>
+#include <spdlog/spdlog.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <ctime>
+#include <filesystem>
+#include <map>
+#include <mutex>
+
+#include "core/atomic_file.h"
+#include "core/error.h"
+#include "core/hdf5_store.h"
+#include "core/interrupt.h"
+#include "core/timing.h"
+#include "core/version.h"
+#include "pipelines/content_hash.h"
+#include "pipelines/stage.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace raytime {
+namespace {
+
+// XXH3 of this executable's file, computed once per process.
+const std::string& ExecutableHash() {
+  static const std::string hash = HashFileContents(fs::read_symlink("/proc/self/exe").string());
+  return hash;
+}
+
+std::string UtcNow() {
+  const std::time_t now = std::time(nullptr);
+  char buffer[32];
+  std::strftime(buffer, sizeof(buffer), "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  return buffer;
+}
+
+// Artifacts found in a stage's HDF5 output.
+std::vector<std::string> ArtifactsIn(const std::string& path) {
+  const Hdf5Reader reader(path);
+  std::vector<std::string> artifacts;
+  if (reader.HasImages()) artifacts.push_back(kArtifactImages);
+  for (const auto& name : reader.PoseSetNames()) artifacts.push_back(PoseArtifact(name));
+  if (reader.HasFeatures()) artifacts.push_back("features");
+  if (reader.HasMatches()) artifacts.push_back("matches");
+  return artifacts;
+}
+
+struct ArtifactSource {
+  std::string file;
+  std::string stage_key;  // content key of the stage that wrote it
+};
+
+// Exclusive lock on a cache key, held while one process computes or copies that stage, so
+// parallel sweep runs needing the same stage compute it once.
+class CacheLock {
+ public:
+  CacheLock(const std::string& cache_dir, const std::string& key) {
+    fs::create_directories(cache_dir);
+    fd_ = ::open((fs::path(cache_dir) / (key + ".lock")).c_str(), O_CREAT | O_RDWR, 0644);
+    if (fd_ >= 0) ::flock(fd_, LOCK_EX);
+  }
+  ~CacheLock() {
+    if (fd_ >= 0) ::close(fd_);  // releases the lock
+  }
+  CacheLock(const CacheLock&) = delete;
+  CacheLock& operator=(const CacheLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
+// Hard link where possible (the cache and the runs share a file system), copy otherwise; the
+// target appears atomically. Writers never modify an HDF5 file in place (they rename a new one
+// over it), so linked copies cannot change under a reader.
+void LinkOrCopy(const fs::path& from, const fs::path& to) {
+  WriteAtomically(to.string(), [&](const std::string& tmp) {
+    std::error_code error;
+    fs::create_hard_link(from, tmp, error);
+    if (error) fs::copy_file(from, tmp, fs::copy_options::overwrite_existing);
+  });
+}
+
+// What a stage's content key is made of. The id is in it ("refine@gnc" writes pose set
+// "refined@gnc", not "refined"), and so is the executable's contents, so a rebuilt raytime never
+// reuses a stage output computed by different code (the version string alone does not change
+// between development builds).
+std::string StageKey(const PipelineStageSpec& stage_spec, Stage& stage,
+                     const std::map<std::string, ArtifactSource>& artifacts) {
+  json material = {{"id", stage_spec.id},
+                   {"version", Version()},
+                   {"executable", ExecutableHash()},
+                   {"options", stage.OptionsJson()},
+                   {"inputs", json::object()},
+                   {"external", json::object()}};
+  for (const auto& input : stage.Inputs()) {
+    const auto it = artifacts.find(input);
+    material["inputs"][input] = it == artifacts.end() ? "" : it->second.stage_key;
+  }
+  for (const auto& file : stage.ExternalFiles()) {
+    material["external"][file] = HashFileContents(file);
+  }
+  return HashBytes(material.dump());
+}
+
+// summary.json of one run: rewritten (atomically) at every change, also from the interrupt
+// watcher's thread, hence the lock.
+class RunSummary {
+ public:
+  RunSummary(const std::string& path, json summary) : path_(path), summary_(std::move(summary)) {}
+
+  template <typename Change>
+  void Update(Change&& change) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    change(summary_);
+    WriteTextFileAtomically(path_, summary_.dump(2));
+  }
+  json Get() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return summary_;
+  }
+
+ private:
+  std::string path_;
+  std::mutex mutex_;
+  json summary_;
+};
+
+// The checks a stage reports as fired, for the run's guardrails section.
+void CollectStage(const std::string& id, const json& stage_summary, json* summary) {
+  if (stage_summary.contains("metrics")) (*summary)["metrics"].update(stage_summary["metrics"]);
+  if (stage_summary.contains("guardrails")) {
+    (*summary)["guardrails"][id] = stage_summary["guardrails"];
+  }
+  if (stage_summary.contains("warnings")) {
+    for (json warning : stage_summary["warnings"]) {
+      warning["stage"] = id;
+      (*summary)["warnings"].push_back(warning);
+    }
+  }
+}
+
+}  // namespace
+
+void LogWarnings(const std::string& stage_id, const json& stage_summary) {
+  if (!stage_summary.contains("warnings")) return;
+  for (const json& warning : stage_summary["warnings"]) {
+    spdlog::warn("{}: {} [{}]", stage_id, warning.value("message", ""), warning.value("code", ""));
+  }
+}
+
+json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
+  const auto run_start = std::chrono::steady_clock::now();
+  fs::create_directories(fs::path(workdir) / ".raytime");
+  for (const auto& path : RemoveStaleTemporaryFiles(workdir)) {
+    spdlog::info("removed {} (left by an interrupted run)", path);
+  }
+  if (!options.cache_dir.empty()) RemoveStaleTemporaryFiles(options.cache_dir);
+
+  RunSummary run((fs::path(workdir) / "summary.json").string(),
+                 {{"raytime_version", Version()},
+                  {"pipeline", spec.path},
+                  {"name", spec.name},
+                  {"workdir", workdir},
+                  {"pid", static_cast<int>(::getpid())},
+                  {"started_utc", UtcNow()},
+                  {"status", "running"},
+                  {"stages", json::array()},
+                  {"metrics", json::object()},
+                  {"guardrails", json::object()},
+                  {"pose_sets", json::object()},
+                  {"warnings", json::array()}});
+  run.Update([](json&) {});
+  const auto finish = [&](json& summary, const std::string& status) {
+    summary["status"] = status;
+    summary["finished_utc"] = UtcNow();
+    summary["seconds"] = SecondsSince(run_start);
+  };
+  const InterruptAction on_interrupt([&](int signal) {
+    run.Update([&](json& summary) {
+      finish(summary, "interrupted");
+      summary["signal"] = signal;
+      summary["error"] =
+          "interrupted by signal " + std::to_string(signal) +
+          (summary.contains("stage") ? " during stage " + summary["stage"].get<std::string>()
+                                     : std::string());
+    });
+    spdlog::error("interrupted (signal {}); {}", signal,
+                  (fs::path(workdir) / "summary.json").string());
+  });
+
+  std::map<std::string, ArtifactSource> artifacts;
+  try {
+    for (size_t i = 0; i < spec.stages.size(); ++i) {
+      const PipelineStageSpec& stage_spec = spec.stages[i];
+      run.Update([&](json& summary) { summary["stage"] = stage_spec.id; });
+      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
+      try {
+        stage->Configure(stage_spec.options, spec.path);
+      } catch (const InputError& e) {
+        const std::string message = e.what();
+        if (message.rfind(spec.path + ":", 0) == 0) throw;
+        ThrowInput(spec.path, stage_spec.line, message);
+      }
+      const std::string tag = "[" + std::to_string(i + 1) + "/" +
+                              std::to_string(spec.stages.size()) + "] " + stage_spec.id;
+
+      StageContext context;
+      context.stage_id = stage_spec.id;
+      context.workdir = workdir;
+      context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
+      for (const auto& [artifact, source] : artifacts) context.artifacts[artifact] = source.file;
+      const std::string key = StageKey(stage_spec, *stage, artifacts);
+      const std::string record_path =
+          (fs::path(workdir) / ".raytime" / (stage_spec.id + ".json")).string();
+
+      // 1. This work directory already holds the result.
+      json record;
+      bool unchanged = !options.force && fs::exists(record_path) && fs::exists(context.output_path);
+      if (unchanged) {
+        record = json::parse(ReadTextFile(record_path), nullptr, false);
+        unchanged = !record.is_discarded() && record.value("key", "") == key;
+        for (const auto& extra : stage->ExtraOutputs()) {
+          unchanged = unchanged && fs::exists(fs::path(workdir) / extra);
+        }
+      }
+      std::vector<std::string> produced;
+      if (unchanged) {
+        try {
+          produced = ArtifactsIn(context.output_path);
+        } catch (const InputError& e) {
+          spdlog::warn("{}: previous output is unreadable, rerunning ({})", tag, e.what());
+          unchanged = false;
+        }
+      }
+      json entry = {{"id", stage_spec.id},
+                    {"type", stage_spec.type},
+                    {"key", key},
+                    {"options", stage->OptionsJson()}};
+      if (unchanged) {
+        spdlog::info("{}: inputs and options unchanged, skipped", tag);
+        entry["status"] = "skipped";
+        entry["seconds"] = 0.0;
+        entry["previous_seconds"] = record["seconds"];
+      } else {
+        // 2. Another run computed it (sweeps share a cache); stages that write folders besides
+        // their HDF5 file always run.
+        const bool cacheable = !options.cache_dir.empty() && stage->ExtraOutputs().empty();
+        std::unique_ptr<CacheLock> lock;
+        const fs::path cached = fs::path(options.cache_dir) / key;
+        if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
+        if (cacheable && !options.force && fs::exists(cached / "record.json")) {
+          spdlog::info("{}: computed by another run, taken from the cache", tag);
+          record = json::parse(ReadTextFile((cached / "record.json").string()));
+          LinkOrCopy(cached / "output.h5", context.output_path);
+          entry["status"] = "cached";
+          entry["seconds"] = 0.0;
+          entry["previous_seconds"] = record["seconds"];
+        } else {
+          // 3. Run it.
+          spdlog::info("{}: {}", tag, stage->description());
+          const auto start = std::chrono::steady_clock::now();
+          const json stage_summary = stage->Run(context);
+          const double seconds = SecondsSince(start);
+          spdlog::info("{}: done in {:.2f} s", tag, seconds);
+          record = {{"key", key},
+                    {"summary", stage_summary},
+                    {"seconds", seconds},
+                    {"finished_utc", UtcNow()}};
+          entry["status"] = "ran";
+          entry["seconds"] = seconds;
+          if (cacheable) {
+            WriteDirectoryAtomically(cached.string(), [&](const std::string& dir) {
+              LinkOrCopy(context.output_path, fs::path(dir) / "output.h5");
+              WriteTextFileAtomically((fs::path(dir) / "record.json").string(), record.dump(2));
+            });
+          }
+        }
+        WriteTextFileAtomically(record_path, record.dump(2));
+        produced = ArtifactsIn(context.output_path);
+      }
+      entry["summary"] = record["summary"];
+      LogWarnings(stage_spec.id, entry["summary"]);
+      for (const auto& artifact : produced) {
+        artifacts[artifact] = {context.output_path, key};
+      }
+      run.Update([&](json& summary) {
+        for (const auto& artifact : produced) {
+          // Which stage wrote each pose set, for reports that time an arm by its stage.
+          if (artifact.rfind("poses/", 0) == 0)
+            summary["pose_sets"][artifact.substr(6)] = stage_spec.id;
+        }
+        CollectStage(stage_spec.id, entry["summary"], &summary);
+        summary["stages"].push_back(entry);
+      });
+    }
+  } catch (const std::exception& e) {
+    run.Update([&](json& summary) {
+      finish(summary, "failed");
+      summary["error"] = e.what();
+    });
+    throw;
+  }
+  run.Update([&](json& summary) {
+    summary.erase("stage");
+    finish(summary, summary["warnings"].empty() ? "ok" : "ok_with_warnings");
+  });
+  const json summary = run.Get();
+  if (summary["status"] == "ok_with_warnings") {
+    spdlog::warn("finished with {} warning(s) (see {}/summary.json)", summary["warnings"].size(),
+                 workdir);
+  }
+  spdlog::info("summary: {}", (fs::path(workdir) / "summary.json").string());
+  return summary;
+}
+
+}  // namespace raytime

@@ -1,0 +1,199 @@
+#include "pipelines/sweep.h"
+
+#include <signal.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "core/atomic_file.h"
+#include "core/error.h"
+#include "core/interrupt.h"
+#include "core/process.h"
+#include "core/timing.h"
+#include "core/version.h"
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace raytime {
+namespace {
+
+// A sweep run in its own process: `raytime run RUN_DIR/pipeline.yaml --workdir RUN_DIR
+// --cache-dir CACHE`, output to RUN_DIR/run.log.
+pid_t SpawnRun(const std::string& run_dir, const std::string& cache_dir, bool force) {
+  std::vector<std::string> args = {fs::read_symlink("/proc/self/exe").string(),
+                                   "run",
+                                   (fs::path(run_dir) / "pipeline.yaml").string(),
+                                   "--workdir",
+                                   run_dir,
+                                   "--cache-dir",
+                                   cache_dir};
+  if (force) args.push_back("--force");
+  ProcessOptions options;
+  options.output_path = (fs::path(run_dir) / "run.log").string();
+  options.append_output = false;
+  return StartProcess(args, options);
+}
+
+// The checks a stage's "guardrails" verdict says fired: its "fired" list, or its true flags.
+std::vector<std::string> FiredChecks(const json& verdict) {
+  std::vector<std::string> fired;
+  if (verdict.contains("fired") && verdict["fired"].is_array()) {
+    return verdict["fired"].get<std::vector<std::string>>();
+  }
+  for (const auto& [name, value] : verdict.items()) {
+    if (value.is_boolean() && value.get<bool>()) fired.push_back(name);
+  }
+  return fired;
+}
+
+}  // namespace
+
+SweepRow SweepRowFromRun(const std::string& label,
+                         const std::vector<std::pair<std::string, std::string>>& swept,
+                         const std::string& run_dir) {
+  SweepRow row;
+  row.run = label;
+  row.swept = swept;
+  const fs::path summary_path = fs::path(run_dir) / "summary.json";
+  const json summary = fs::exists(summary_path)
+                           ? json::parse(ReadTextFile(summary_path.string()), nullptr, false)
+                           : json();
+  if (summary.is_discarded() || !summary.is_object()) {
+    row.status = "failed";
+    row.error = "no summary.json (see " + run_dir + "/run.log)";
+    return row;
+  }
+  row.status = summary.value("status", "failed");
+  // A process that ended without finishing its summary (killed) is a failure, not a result.
+  if (row.status == "running") {
+    row.status = "failed";
+    row.error = "the run ended without finishing (see " + run_dir + "/run.log)";
+  }
+  if (summary.contains("error")) row.error = summary["error"].get<std::string>();
+  row.seconds = summary.value("seconds", 0.0);
+  // Copies: iterating items() of a temporary would outlive it.
+  const json stages = summary.value("stages", json::array());
+  const json metrics = summary.value("metrics", json::object());
+  const json pose_sets = summary.value("pose_sets", json::object());
+  const json guardrails = summary.value("guardrails", json::object());
+  const json warnings = summary.value("warnings", json::array());
+  for (const auto& stage : stages) {
+    // Time of the stage's own computation, also when this run reused it.
+    row.stage_seconds[stage["id"].get<std::string>()] = stage["status"] == "ran"
+                                                            ? stage["seconds"].get<double>()
+                                                            : stage.value("previous_seconds", 0.0);
+  }
+  for (const auto& [arm, by_alignment] : metrics.items()) {
+    if (!by_alignment.is_object()) continue;
+    for (const auto& [alignment, errors] : by_alignment.items()) {
+      if (!errors.is_object()) continue;
+      row.errors[arm][alignment] = SweepPoseErrors::FromJson(errors);
+    }
+  }
+  for (const auto& [pose_set, id] : pose_sets.items()) {
+    row.pose_set_stage[pose_set] = id.get<std::string>();
+  }
+  for (const auto& [id, verdict] : guardrails.items()) {
+    row.guardrails_fired[id] = FiredChecks(verdict);
+  }
+  for (const auto& warning : warnings) {
+    row.warnings.push_back(warning.value("code", ""));
+  }
+  return row;
+}
+
+json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
+  const std::vector<SweepRun> runs = ExpandSweep(spec);
+  const int jobs = options.jobs > 0
+                       ? options.jobs
+                       : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const std::string cache_dir =
+      options.cache_dir.empty() ? (fs::path(workdir) / "cache").string() : options.cache_dir;
+  fs::create_directories(workdir);
+  RemoveStaleTemporaryFiles(workdir);
+  spdlog::info("sweep: {} runs, {} at a time, cache {}", runs.size(), jobs, cache_dir);
+
+  std::vector<std::string> run_dirs;
+  for (const SweepRun& run : runs) {
+    run_dirs.push_back((fs::path(workdir) / "runs" / run.label).string());
+    fs::create_directories(run_dirs.back());
+    WriteTextFileAtomically((fs::path(run_dirs.back()) / "pipeline.yaml").string(),
+                            PipelineToYaml(run.spec));
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  std::mutex mutex;  // rows and running children, shared with the interrupt watcher
+  std::vector<SweepRow> rows(runs.size());
+  std::vector<bool> finished(runs.size(), false);
+  std::map<pid_t, size_t> running;
+  int failures = 0;
+  const auto write = [&](const std::string& status) {
+    std::vector<SweepRow> table;
+    for (size_t i = 0; i < runs.size(); ++i) {
+      if (finished[i]) table.push_back(rows[i]);
+    }
+    WriteSweepTables(workdir, table);
+    json rows_json = json::array();
+    for (const SweepRow& row : table) rows_json.push_back(row.ToJson());
+    const json summary = {
+        {"raytime_version", Version()}, {"pipeline", spec.path}, {"name", spec.name},
+        {"workdir", workdir},           {"runs", rows_json},     {"num_runs", runs.size()},
+        {"failures", failures},         {"status", status},      {"seconds", SecondsSince(start)}};
+    WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
+  };
+  // On SIGINT/SIGTERM: stop the running children (each writes its own "interrupted" summary),
+  // keep every row finished so far, and say the sweep was interrupted.
+  const InterruptAction on_interrupt([&](int signal) {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
+    for (const auto& [pid, index] : running) {
+      WaitProcess(pid);
+      rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
+      finished[index] = true;
+    }
+    write("interrupted");
+    spdlog::error("sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
+                  std::count(finished.begin(), finished.end(), true), runs.size(), workdir);
+  });
+
+  size_t next = 0, done = 0;
+  while (done < runs.size()) {
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      while (next < runs.size() && static_cast<int>(running.size()) < jobs) {
+        running[SpawnRun(run_dirs[next], cache_dir, options.force)] = next;
+        ++next;
+      }
+    }
+    const pid_t pid = WaitAnyProcess().pid;
+    std::lock_guard<std::mutex> lock(mutex);
+    const auto it = running.find(pid);
+    if (it == running.end()) continue;
+    const size_t index = it->second;
+    running.erase(it);
+    ++done;
+    rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
+    finished[index] = true;
+    const SweepRow& row = rows[index];
+    if (!row.Succeeded()) ++failures;
+    spdlog::info("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), row.run, row.status,
+                 row.seconds);
+    if (!row.Succeeded()) {
+      spdlog::error("sweep run {} failed: {}", row.run,
+                    row.error.empty() ? std::string("see run.log") : row.error);
+    }
+    write(done < runs.size() ? "running" : (failures ? "failed" : "ok"));
+  }
+  if (failures) {
+    throw InputError(std::to_string(failures) + " of " + std::to_string(runs.size()) +
+                     " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
+  }
+  return json::parse(ReadTextFile((fs::path(workdir) / "summary.json").string()));
+}
+
+}  // namespace raytime

@@ -1,0 +1,25 @@
+// Sweeps: every combination of a pipeline's sweep values run as a separate process (HDF5 is not
+// thread-safe), up to `jobs` at once, each in WORKDIR/runs/<label>/ with its resolved
+// pipeline.yaml and run.log. They share a content-addressed cache of stage outputs
+// (WORKDIR/cache), so stages identical across runs (a scene's features and matches) are
+// computed once. One row per run (core/sweep_row.h) in WORKDIR/sweep.json and sweep.csv,
+// rewritten after every run so an interrupted sweep keeps its rows.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/sweep_row.h"
+#include "pipelines/stage_cache.h"
+
+namespace raytime {
+
+nlohmann::json RunSweep(const PipelineSpec& spec, const std::string& workdir,
+                        const RunOptions& options);
+
+// A run's row from its summary.json (a missing or unreadable one makes a failed row).
+SweepRow SweepRowFromRun(const std::string& label,
+                         const std::vector<std::pair<std::string, std::string>>& swept,
+                         const std::string& run_dir);
+
+}  // namespace raytime

@@ -1,0 +1,153 @@
+// Option conventions of every stage (issue 13): overrides applied in any order and validated
+// once, explicit keys beating a preset whatever their value, one description per option, rules
+// that name the option and list an enumeration's values, and command lines that mean the same as
+// YAML.
+#include <gtest/gtest.h>
+
+#include <CLI/CLI.hpp>
+#include <fstream>
+#include <map>
+
+#include "core/error.h"
+#include "core/options.h"
+#include "pipelines/pipeline_spec.h"
+#include "pipelines/stage.h"
+#include "temp_dir.h"
+
+namespace raytime {
+namespace {
+
+// A pipeline file with a dataset and the given stage entries.
+std::string WritePipeline(const TempDir& dir, const std::string& stages) {
+  const std::string path = dir / "pipeline.yaml";
+  std::ofstream(path) << "name: t\ndataset: {format: strecha, root: " << RAYTIME_SOURCE_DIR
+                      << "/data/sample/fountain-P11}\nstages:\n"
+                      << stages;
+  return path;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(PipelineOptionsTest, OverridesApplyInAnyOrderAndAreValidatedOnce) {
+  TempDir dir("options");
+  const std::string path = WritePipeline(dir, "  - prior: {level_deg: 4}\n");
+  const std::vector<std::string> overrides = {"prior.source=file", "prior.format=colmap",
+                                              "prior.path=" + dir / "model"};
+  // Every order of the three --set values, as in the README's own-prior command.
+  std::vector<size_t> order = {0, 1, 2};
+  do {
+    PipelineSpec spec = LoadPipeline(path);
+    for (size_t k : order) ApplyOverride(&spec, overrides[k]);
+    EXPECT_NO_THROW(ValidatePipeline(spec)) << order[0] << order[1] << order[2];
+  } while (std::next_permutation(order.begin(), order.end()));
+
+  // The same values missing one: refused once everything is in place, naming file and line.
+  PipelineSpec spec = LoadPipeline(path);
+  ApplyOverride(&spec, "prior.source=file");
+  const std::string message = ErrorOf([&] { ValidatePipeline(spec); });
+  EXPECT_NE(message.find(path + ":4:"), std::string::npos) << message;
+  EXPECT_NE(message.find("prior.path is not set"), std::string::npos) << message;
+}
+
+TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
+  TempDir dir("options");
+  PipelineSpec spec = LoadPipeline(WritePipeline(dir, "  - prior: {}\n"));
+  EXPECT_NE(ErrorOf([&] { ApplyOverride(&spec, "prior.sed=1"); }).find("did you mean 'seed'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=[1, 2]"); }).find("a number"),
+            std::string::npos);
+  // A value of the right type but outside its rule waits for validation, then names the rule,
+  // the value and what the option means.
+  ApplyOverride(&spec, "prior.level_deg=-3");
+  const std::string message = ErrorOf([&] { ValidatePipeline(spec); });
+  EXPECT_NE(message.find("option 'level_deg' must be non-negative, got -3.0"), std::string::npos)
+      << message;
+  EXPECT_NE(message.find("degrees"), std::string::npos) << message;
+}
+
+TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
+  TempDir dir("options");
+  const std::string path = WritePipeline(
+      dir, "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: [a, b]\n");
+  // prior.path is only set by the sweep: the base pipeline alone is incomplete, its runs are not.
+  const PipelineSpec spec = LoadPipeline(path);
+  const std::vector<SweepRun> runs = ExpandSweep(spec);
+  ASSERT_EQ(runs.size(), 2u);
+  EXPECT_EQ(runs[1].label, "path=b");
+  EXPECT_EQ(runs[1].swept, (std::vector<std::pair<std::string, std::string>>{{"prior.path", "b"}}));
+}
+
+TEST(PipelineOptionsTest, ExplicitKeysBeatThePresetWhateverTheirValue) {
+  // The basin preset turns the trust region off; true is also the built-in default.
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  refine->Configure(YAML::Load("{preset: basin}"), "test");
+  EXPECT_EQ(refine->OptionsJson()["trust_region"], false);
+  EXPECT_EQ(refine->OptionsJson()["max_matches_per_pair"], 100);
+  refine->Configure(YAML::Load("{preset: basin, trust_region: true}"), "test");
+  EXPECT_EQ(refine->OptionsJson()["trust_region"], true);
+  EXPECT_EQ(refine->OptionsJson()["max_matches_per_pair"], 100);  // the rest stays the preset's
+  // Configure starts from the defaults every time: nothing leaks from an earlier call.
+  refine->Configure(YAML::Load("{}"), "test");
+  EXPECT_EQ(refine->OptionsJson()["preset"], "gnc");
+  EXPECT_EQ(refine->OptionsJson()["trust_region"], true);
+}
+
+TEST(PipelineOptionsTest, CommandLineFlagsAreExplicitKeys) {
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  CLI::App app;
+  refine->BindCli(&app);
+  app.parse(R"(--preset basin --trust_region 1 --gnc_scales "[1e4, 1e3]")", false);
+  refine->Configure(refine->CliOptions(), "command line");
+  const nlohmann::json options = refine->OptionsJson();
+  EXPECT_EQ(options["preset"], "basin");
+  EXPECT_EQ(options["trust_region"], true);
+  EXPECT_EQ(options["gnc_scales"], (std::vector<double>{1e4, 1e3}));
+  EXPECT_EQ(options["max_matches_per_pair"], 100);
+}
+
+TEST(PipelineOptionsTest, EveryOptionOfEveryStageIsDocumented) {
+  for (const std::string& type : StageTypes()) {
+    std::unique_ptr<Stage> stage = CreateStage(type);
+    const std::vector<OptionDoc> docs = stage->OptionDocs();
+    EXPECT_FALSE(docs.empty()) << type;
+    for (const OptionDoc& doc : docs) {
+      SCOPED_TRACE(type + "." + doc.key);
+      EXPECT_GE(doc.description.size(), 12u) << "'" << doc.description << "'";
+      EXPECT_EQ(doc.description.find('\n'), std::string::npos);
+      for (const std::string& value : doc.values) {
+        EXPECT_NE(doc.HelpText().find(value), std::string::npos) << doc.HelpText();
+      }
+    }
+    // The defaults of every stage pass their own rules, given the options a stage requires.
+    const std::map<std::string, std::string> required = {{"dataset", "{root: x}"},
+                                                         {"colmap_import", "{path: x}"}};
+    EXPECT_NO_THROW(stage->Configure(
+        YAML::Load(required.count(type) ? required.at(type) : std::string("{}")), "t"))
+        << type;
+  }
+  // Text options that take one of a fixed set of values say so.
+  const auto docs = CreateStage("refine")->OptionDocs();
+  const auto it = std::find_if(docs.begin(), docs.end(),
+                               [](const OptionDoc& d) { return d.key == "parameterization"; });
+  ASSERT_NE(it, docs.end());
+  EXPECT_EQ(it->values, (std::vector<std::string>{"per_observation", "anchored"}));
+  EXPECT_NE(it->HelpText().find("one of: per_observation, anchored"), std::string::npos);
+}
+
+TEST(PipelineOptionsTest, EnumerationErrorsSuggestTheNearestValue) {
+  std::unique_ptr<Stage> matches = CreateStage("matches");
+  const std::string message =
+      ErrorOf([&] { matches->Configure(YAML::Load("{pairs: sequentail}"), "p.yaml"); });
+  EXPECT_NE(message.find("one of: exhaustive, sequential"), std::string::npos) << message;
+  EXPECT_NE(message.find("did you mean 'sequential'"), std::string::npos) << message;
+}
+
+}  // namespace
+}  // namespace raytime

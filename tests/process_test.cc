@@ -1,0 +1,107 @@
+// The process launcher (core/process.h) on /bin/sh: exit codes and signals, output files
+// (truncated or appended), working directory, default environment, a program that cannot start,
+// and several children waited for in whatever order they end.
+#include "core/process.h"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <stdlib.h>
+
+#include <filesystem>
+#include <map>
+#include <stdexcept>
+
+#include "core/atomic_file.h"
+#include "tests/temp_dir.h"
+
+namespace raytime {
+namespace {
+
+TEST(Process, ExitCodeAndOutputFile) {
+  TempDir dir("process");
+  ProcessOptions options;
+  options.output_path = dir / "out.log";
+  options.append_output = false;
+  const ProcessStatus status =
+      RunProcess({"/bin/sh", "-c", "echo hi; echo err >&2; exit 3"}, options);
+  EXPECT_EQ(status.exit_code, 3);
+  EXPECT_EQ(status.signal, 0);
+  EXPECT_FALSE(status.Succeeded());
+  EXPECT_EQ(status.Describe(), "exited with status 3");
+  EXPECT_EQ(ReadTextFile(options.output_path), "hi\nerr\n");
+
+  options.append_output = true;
+  EXPECT_TRUE(RunProcess({"/bin/sh", "-c", "echo again"}, options).Succeeded());
+  EXPECT_EQ(ReadTextFile(options.output_path), "hi\nerr\nagain\n");
+  options.append_output = false;
+  EXPECT_TRUE(RunProcess({"/bin/sh", "-c", "echo fresh"}, options).Succeeded());
+  EXPECT_EQ(ReadTextFile(options.output_path), "fresh\n");
+}
+
+TEST(Process, LooksUpThePathAndReadsNothingFromStdin) {
+  TempDir dir("process");
+  ProcessOptions options;
+  options.output_path = dir / "out.log";
+  EXPECT_TRUE(RunProcess({"sh", "-c", "readlink /proc/self/fd/0"}, options).Succeeded());
+  EXPECT_EQ(ReadTextFile(options.output_path), "/dev/null\n");
+}
+
+TEST(Process, WorkingDirectoryAndDefaultEnvironment) {
+  TempDir dir("process");
+  std::filesystem::create_directories(dir / "sub");
+  ProcessOptions options;
+  options.output_path = dir / "out.log";  // the caller's path, opened before the chdir
+  options.working_dir = dir / "sub";
+  options.default_environment = {"RAYTIME_PROCESS_TEST=default"};
+  ::unsetenv("RAYTIME_PROCESS_TEST");
+  EXPECT_TRUE(RunProcess({"sh", "-c", "pwd; echo $RAYTIME_PROCESS_TEST"}, options).Succeeded());
+  const std::string sub = std::filesystem::canonical(dir / "sub").string();
+  EXPECT_EQ(ReadTextFile(options.output_path), sub + "\ndefault\n");
+
+  // The caller's environment wins over a default.
+  ::setenv("RAYTIME_PROCESS_TEST", "caller", 1);
+  options.append_output = false;
+  EXPECT_TRUE(RunProcess({"sh", "-c", "echo $RAYTIME_PROCESS_TEST"}, options).Succeeded());
+  ::unsetenv("RAYTIME_PROCESS_TEST");
+  EXPECT_EQ(ReadTextFile(options.output_path), "caller\n");
+}
+
+TEST(Process, AProgramThatCannotStartNamesIt) {
+  try {
+    StartProcess({"raytime-no-such-program", "--flag"});
+    FAIL() << "expected an error";
+  } catch (const std::runtime_error& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("cannot run 'raytime-no-such-program --flag'"), std::string::npos)
+        << message;
+    EXPECT_NE(message.find("No such file"), std::string::npos) << message;
+  }
+  TempDir dir("process");
+  ProcessOptions options;
+  options.working_dir = dir / "missing";
+  EXPECT_THROW(StartProcess({"/bin/sh", "-c", "exit 0"}, options), std::runtime_error);
+}
+
+TEST(Process, WaitsForSeveralChildrenAndSignalsOne) {
+  std::map<pid_t, int> expected;
+  for (int code : {4, 5, 6}) {
+    expected[StartProcess({"/bin/sh", "-c", "exit " + std::to_string(code)})] = code;
+  }
+  const pid_t sleeper = StartProcess({"sleep", "60"});
+  for (int n = 0; n < 3; ++n) {
+    const FinishedProcess finished = WaitAnyProcess();
+    ASSERT_EQ(expected.count(finished.pid), 1u) << finished.pid;
+    EXPECT_EQ(finished.status.exit_code, expected[finished.pid]);
+    expected.erase(finished.pid);
+  }
+  EXPECT_TRUE(SignalProcess(sleeper, SIGTERM));
+  const FinishedProcess finished = WaitAnyProcess();
+  EXPECT_EQ(finished.pid, sleeper);
+  EXPECT_EQ(finished.status.signal, SIGTERM);
+  EXPECT_EQ(finished.status.exit_code, -1);
+  EXPECT_EQ(finished.status.Describe(), "was killed by signal " + std::to_string(SIGTERM));
+  EXPECT_THROW(WaitAnyProcess(), std::runtime_error) << "no children are left";
+}
+
+}  // namespace
+}  // namespace raytime
