@@ -1,5 +1,6 @@
-// libFuzzer target: a sweep's sweep.json as `raytime report` reads it (evaluate/campaign_report.h:
-// ReadSweepRows, AggregateCampaign, then both report formats). The input is the file.
+// libFuzzer target: a sweep's sweep.json as `raytime report` reads it (core/sweep_row.h:
+// ReadSweepRows; evaluate/campaign_report.h: AggregateCampaign, then both report formats). The
+// input is the file.
 #include <string>
 #include <string_view>
 
