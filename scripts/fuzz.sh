@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (tests/fuzz/, clang + ASan/UBSan) into build-fuzz/ and runs each
-# for SECONDS (default 600), one after another at the lowest CPU priority, printing seconds,
-# executions, corpus size and result per target. Exits non-zero when any target crashed.
+# for SECONDS (default 600), one after another as one process each at niceness FUZZ_NICE (default
+# 19, the lowest CPU priority), printing seconds, executions, executions per second, corpus size,
+# peak RSS and result per target. Exits non-zero when any target crashed.
 #
 #   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET ...]     (targets: tests/fuzz/*_fuzzer.cc)
+#   FUZZ_NICE=10 scripts/fuzz.sh 600 tum
+#   scripts/fuzz.sh 0                                      (only build)
 #
 # Each run starts from the committed seeds (tests/fuzz/corpus/TARGET) and keeps what it finds in
 # build-fuzz/fuzz/corpus/TARGET, so a rerun continues where the last one stopped. A crashing input
@@ -24,6 +27,7 @@ cmake -S . -B "$build" -G Ninja -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER
   -DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG="-g -O1" -DRAYTIME_FUZZ=ON "${launcher[@]}" \
   >/dev/null
 nice ninja -C "$build" -j "${RAYTIME_JOBS:-2}" fuzzers
+[ "$seconds" != 0 ] || exit 0  # libFuzzer reads -max_total_time=0 as no limit
 
 if (($# > 0)); then
   targets=("$@")
@@ -44,7 +48,7 @@ export TMPDIR="$scratch"
 export ASAN_OPTIONS="${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 
-printf '%-16s %8s %12s %8s  %s\n' target seconds executions corpus result
+printf '%-16s %8s %12s %8s %8s %8s  %s\n' target seconds executions exec/s corpus rss_mb result
 failed=0
 for name in "${targets[@]}"; do
   fuzzer="$build/tests/fuzz/${name}_fuzzer"
@@ -57,7 +61,7 @@ for name in "${targets[@]}"; do
   [ -f "tests/fuzz/dict/$name.dict" ] && dict=("-dict=tests/fuzz/dict/$name.dict")
   start=$(date +%s)
   status=0
-  nice -n 19 "$fuzzer" -max_total_time="$seconds" -timeout=30 -rss_limit_mb=2048 \
+  nice -n "${FUZZ_NICE:-19}" "$fuzzer" -max_total_time="$seconds" -timeout=30 -rss_limit_mb=2048 \
     -print_final_stats=1 -artifact_prefix="$crashes/" "${dict[@]}" \
     "$corpus" "tests/fuzz/corpus/$name" >"$log" 2>&1 || status=$?
   elapsed=$(($(date +%s) - start))
@@ -65,13 +69,21 @@ for name in "${targets[@]}"; do
   if [ -z "$execs" ]; then  # a crash ends the run before the final stats
     execs=$(grep -oE '^#[0-9]+' "$log" | tail -1 | tr -d '#' || true)
   fi
-  size=$(find "$corpus" -type f | wc -l)
+  rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
+  rss=$(sed -n 's/^stat::peak_rss_mb: *//p' "$log" | tail -1)
+  if [ -z "$rss" ]; then  # after a crash: the last status line's "rss: NMb"
+    rss=$(grep -oE 'rss: [0-9]+Mb' "$log" | tail -1 | grep -oE '[0-9]+' || true)
+  fi
+  # libFuzzer's corpus (seeds and finds) on its last status line, else the files it kept.
+  size=$(grep -oE 'corp: [0-9]+/' "$log" | tail -1 | grep -oE '[0-9]+' || true)
+  [ -n "$size" ] || size=$(find "$corpus" -type f | wc -l)
   if ((status == 0)); then
     result=ok
   else
     result="CRASH (exit $status): $(grep -oE "$crashes/[^ ]+" "$log" | tail -1), log $log"
     failed=1
   fi
-  printf '%-16s %8s %12s %8s  %s\n' "$name" "$elapsed" "${execs:-?}" "$size" "$result"
+  printf '%-16s %8s %12s %8s %8s %8s  %s\n' "$name" "$elapsed" "${execs:-?}" "${rate:-?}" "$size" \
+    "${rss:-?}" "$result"
 done
 exit "$failed"
