@@ -28,13 +28,16 @@ std::vector<std::string> StageIds(const PipelineSpec& spec) {
 }
 
 // The text of a node where the pipeline wants a name, key or path. YAML allows a list or mapping
-// there too, which as<std::string>() would reject with yaml-cpp's own exception.
+// there too, which as<std::string>() would reject with yaml-cpp's own exception; names and paths
+// go into summary.json, so they must be UTF-8.
 std::string ScalarText(const YAML::Node& node, const std::string& path, const std::string& what) {
   if (node.IsMap() || node.IsSequence()) {
     ThrowInput(path, YamlLine(node),
                what + " must be a single value, not a " + (node.IsMap() ? "mapping" : "list"));
   }
-  return node.as<std::string>();
+  std::string text = node.as<std::string>();
+  RequireUtf8(text, path, YamlLine(node), what);
+  return text;
 }
 
 // "prior.level_deg" -> "level_deg=4"; a path value -> its last component.
