@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -229,6 +230,23 @@ std::vector<hsize_t> Dims(const Context& c, hid_t set, const std::string& what) 
   return dims;
 }
 
+size_t ElementCount(const Context& c, hid_t set, const std::string& what,
+                    const std::vector<hsize_t>& dims) {
+  hsize_t count = 1;
+  for (hsize_t d : dims) {
+    if (d != 0 && count > std::numeric_limits<size_t>::max() / d) c.Fail(what + " is too large");
+    count *= d;
+  }
+  if (count == 0) return 0;
+  H5D_space_status_t status;
+  c.Check(H5Dget_space_status(set, &status), what);
+  if (status != H5D_SPACE_STATUS_ALLOCATED) {
+    c.Fail(what + " has " + std::to_string(count) +
+           " elements but its data was never written (truncated or corrupt?)");
+  }
+  return static_cast<size_t>(count);
+}
+
 std::vector<std::string> ReadStrings(const Context& c, hid_t loc, const std::string& name,
                                      int64_t size) {
   const std::string what = Join(ObjectName(loc), name);
@@ -240,7 +258,7 @@ std::vector<std::string> ReadStrings(const Context& c, hid_t loc, const std::str
   }
   const std::vector<hsize_t> dims = Dims(c, set.get(), what);
   CheckShape(c, what, dims, {size});
-  std::vector<char*> pointers(dims[0], nullptr);
+  std::vector<char*> pointers(ElementCount(c, set.get(), what, dims), nullptr);
   std::vector<std::string> out;
   if (pointers.empty()) return out;
   const Id type = VlenStringType();
@@ -260,6 +278,9 @@ std::string ReadStringScalar(const Context& c, hid_t loc, const std::string& nam
   const std::string what = Join(ObjectName(loc), name);
   if (!HasLink(loc, name)) c.Fail("missing dataset " + what);
   Id set(c.Check(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), what), H5Dclose);
+  // H5S_ALL reads every element, and the buffer holds one string.
+  Id space(c.Check(H5Dget_space(set.get()), what), H5Sclose);
+  if (H5Sget_simple_extent_npoints(space.get()) != 1) c.Fail(what + " is not a single string");
   Id type(c.Check(H5Dget_type(set.get()), what), H5Tclose);
   return ReadStringValue(c, what, type.get(), [&](hid_t memory_type, void* buf) {
     return H5Dread(set.get(), memory_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);

@@ -168,6 +168,13 @@ struct Array {
 void CheckShape(const Context& c, const std::string& what, const std::vector<hsize_t>& dims,
                 const std::vector<int64_t>& shape);
 std::vector<hsize_t> Dims(const Context& c, hid_t set, const std::string& what);
+// The number of elements of a dataset of extent `dims`, checked before anything is allocated for
+// them: fails when the count overflows size_t or when a non-empty dataset's data was never written
+// (storage not or only partly allocated: fill values). Every raytime writer writes all of a
+// dataset's elements, so that means a foreign or damaged file; left unchecked, a small file could
+// declare an extent far beyond memory.
+size_t ElementCount(const Context& c, hid_t set, const std::string& what,
+                    const std::vector<hsize_t>& dims);
 
 // A numeric dataset of `shape` (CheckShape); fails when missing or of another element class.
 template <typename T>
@@ -184,8 +191,7 @@ Array<T> ReadArray(const Context& c, hid_t loc, const std::string& name,
   Array<T> out;
   out.dims = Dims(c, set.get(), what);
   CheckShape(c, what, out.dims, shape);
-  size_t count = 1;
-  for (hsize_t d : out.dims) count *= d;
+  const size_t count = ElementCount(c, set.get(), what, out.dims);
   out.data.resize(count);
   if (count > 0) {
     c.Check(H5Dread(set.get(), ElementType<T>::Memory(), H5S_ALL, H5S_ALL, H5P_DEFAULT,

@@ -42,7 +42,7 @@ void WriteProvenance(const hdf5::Context& c, hid_t loc, const Provenance& p) {
 nlohmann::json ParseJson(const hdf5::Context& c, const std::string& what, const std::string& text) {
   try {
     return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse_error, or out_of_range for 1e999
     c.Fail(what + " is not valid JSON: " + e.what());
   }
 }

@@ -49,6 +49,15 @@ std::string UnknownKeyMessage(const std::string& what, const std::string& key,
 // 1-based line of a YAML node, 0 when the node has no mark.
 int YamlLine(const YAML::Node& node);
 
+// The offset of the first byte of `text` outside a well-formed UTF-8 sequence (RFC 3629: no
+// overlong forms, surrogates or code points beyond U+10FFFF), or std::string::npos.
+size_t InvalidUtf8Offset(const std::string& text);
+// InputError at `path`:`line` unless `text` is UTF-8: options, names and paths from YAML end up
+// in JSON (provenance, content hashes, summary.json), which holds nothing else. The message
+// names the offending byte without repeating it.
+void RequireUtf8(const std::string& text, const std::string& path, int line,
+                 const std::string& what);
+
 // A rule on an option's value: what it expects, in words ("positive", "one of a, b"), and the
 // test for numbers, for strings and for a list's length (those a rule does not test pass).
 // Numeric rules also refuse NaN and infinities: no option means anything at either.
@@ -119,6 +128,13 @@ void ReadYamlField(const YAML::Node& node, T& field, const std::string& path,
     ThrowInput(
         path, YamlLine(node),
         "option '" + key + "' must be " + TypeName<T>() + ", got '" + YAML::Dump(node) + "'");
+  }
+  if constexpr (std::is_same_v<T, std::string>) {
+    RequireUtf8(field, path, YamlLine(node), "option '" + key + "'");
+  } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+    for (const std::string& element : field) {
+      RequireUtf8(element, path, YamlLine(node), "option '" + key + "'");
+    }
   }
 }
 
@@ -254,6 +270,9 @@ void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
   if (!map.IsMap()) ThrowInput(path, YamlLine(map), what + " options must be a mapping");
   const std::vector<std::string> keys = OptionKeys(options);
   for (const auto& entry : map) {
+    if (entry.first.IsMap() || entry.first.IsSequence()) {
+      ThrowInput(path, YamlLine(entry.first), what + ": an option key must be a name");
+    }
     const std::string key = entry.first.as<std::string>();
     if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
       ThrowInput(path, YamlLine(entry.first), UnknownKeyMessage(what, key, keys));

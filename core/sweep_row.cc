@@ -205,6 +205,10 @@ std::vector<SweepRow> ReadSweepRows(const std::string& path) {
     ThrowInput(path, line,
                "not valid JSON (expected the sweep.json `raytime run` writes for a sweep): " +
                    std::string(e.what()));
+  } catch (const json::exception& e) {  // out_of_range for a number beyond double (1e999)
+    ThrowInput(path, 0,
+               "not valid JSON (expected the sweep.json `raytime run` writes for a sweep): " +
+                   std::string(e.what()));
   }
   if (!rows.is_array()) {
     ThrowInput(path, 0,

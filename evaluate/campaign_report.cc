@@ -16,9 +16,6 @@ namespace raytime {
 
 namespace {
 
-// Alignments a sweep row may carry (PoseErrorOptions::alignment); the report reads sim3 and none.
-const char* const kAlignmentNames[] = {"sim3", "se3", "none"};
-
 // The errors one run reports for one arm under one alignment; NaN where a field is absent (a
 // NaN metric is written to JSON as null).
 struct RunArmErrors {

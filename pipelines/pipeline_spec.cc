@@ -27,6 +27,19 @@ std::vector<std::string> StageIds(const PipelineSpec& spec) {
   return ids;
 }
 
+// The text of a node where the pipeline wants a name, key or path. YAML allows a list or mapping
+// there too, which as<std::string>() would reject with yaml-cpp's own exception; names and paths
+// go into summary.json, so they must be UTF-8.
+std::string ScalarText(const YAML::Node& node, const std::string& path, const std::string& what) {
+  if (node.IsMap() || node.IsSequence()) {
+    ThrowInput(path, YamlLine(node),
+               what + " must be a single value, not a " + (node.IsMap() ? "mapping" : "list"));
+  }
+  std::string text = node.as<std::string>();
+  RequireUtf8(text, path, YamlLine(node), what);
+  return text;
+}
+
 // "prior.level_deg" -> "level_deg=4"; a path value -> its last component.
 std::string RunLabelPart(const std::string& key, const YAML::Node& value) {
   std::string text = value.IsScalar() ? value.Scalar() : YAML::Dump(value);
@@ -48,7 +61,7 @@ PipelineStageSpec ParseStageEntry(const YAML::Node& entry, const std::string& pa
     stage.id = entry.as<std::string>();
     stage.options = YAML::Node(YAML::NodeType::Map);
   } else if (entry.IsMap() && entry.size() == 1) {
-    stage.id = entry.begin()->first.as<std::string>();
+    stage.id = ScalarText(entry.begin()->first, path, "a stage name");
     stage.options = entry.begin()->second;
   } else {
     ThrowInput(path, stage.line,
@@ -113,7 +126,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   }
   if (!root.IsMap()) ThrowInput(path, 0, "a pipeline file must be a YAML mapping");
   for (const auto& entry : root) {
-    const std::string key = entry.first.as<std::string>();
+    const std::string key = ScalarText(entry.first, path, "a top-level key");
     if (std::find(kTopLevelKeys.begin(), kTopLevelKeys.end(), key) == kTopLevelKeys.end()) {
       ThrowInput(path, YamlLine(entry.first),
                  UnknownKeyMessage("the pipeline's top level", key, kTopLevelKeys));
@@ -121,8 +134,9 @@ PipelineSpec LoadPipeline(const std::string& path) {
   }
   PipelineSpec spec;
   spec.path = path;
-  spec.name = root["name"] ? root["name"].as<std::string>() : fs::path(path).stem().string();
-  spec.workdir = root["workdir"] ? root["workdir"].as<std::string>() : "";
+  spec.name =
+      root["name"] ? ScalarText(root["name"], path, "'name'") : fs::path(path).stem().string();
+  spec.workdir = root["workdir"] ? ScalarText(root["workdir"], path, "'workdir'") : "";
   if (!root["dataset"]) ThrowInput(path, 0, "the pipeline has no 'dataset' section");
   spec.stages.push_back({"dataset", "dataset", root["dataset"], YamlLine(root["dataset"])});
 
@@ -146,7 +160,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   if (const YAML::Node sweep = root["sweep"]) {
     if (!sweep.IsMap()) ThrowInput(path, YamlLine(sweep), "'sweep' must map STAGE.KEY to lists");
     for (const auto& axis : sweep) {
-      const std::string key = axis.first.as<std::string>();
+      const std::string key = ScalarText(axis.first, path, "a sweep key");
       if (!axis.second.IsSequence() || axis.second.size() == 0) {
         ThrowInput(path, YamlLine(axis.second), "sweep." + key + " must be a non-empty list");
       }

@@ -84,6 +84,38 @@ TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
   EXPECT_EQ(runs[1].swept, (std::vector<std::pair<std::string, std::string>>{{"prior.path", "b"}}));
 }
 
+// Options, names and paths end up in JSON (provenance, content hashes, summary.json), which holds
+// only UTF-8: other bytes are refused where they are read, naming the file, line and byte.
+TEST(PipelineOptionsTest, TextThatIsNotUtf8IsRefusedWhereItIsRead) {
+  TempDir dir("options");
+  const std::string latin1_option = WritePipeline(dir, "  - prior: {format: colm\xe4p}\n");
+  std::string message = ErrorOf([&] { LoadPipeline(latin1_option); });
+  EXPECT_NE(message.find(latin1_option + ":4:"), std::string::npos) << message;
+  EXPECT_NE(message.find("option 'format' must be UTF-8 text (byte 0xE4 at offset 4 is not)"),
+            std::string::npos)
+      << message;
+
+  const std::string list_element =
+      WritePipeline(dir, "  - evaluate: {poses: [prior, \xc0\xaf]}\n");  // an overlong '/'
+  message = ErrorOf([&] { LoadPipeline(list_element); });
+  EXPECT_NE(message.find("option 'poses' must be UTF-8 text (byte 0xC0 at offset 0"),
+            std::string::npos)
+      << message;
+
+  std::ofstream(latin1_option) << "name: d\xe9mo\ndataset: {format: strecha, root: r}\n";
+  message = ErrorOf([&] { LoadPipeline(latin1_option); });
+  EXPECT_NE(message.find(latin1_option + ":1: 'name' must be UTF-8 text"), std::string::npos)
+      << message;
+
+  // Well-formed multi-byte text passes.
+  std::ofstream(latin1_option) << "name: d\xc3\xa9mo \xe2\x82\xac \xf0\x9f\x93\xb7\n"
+                               << "dataset: {format: strecha, root: r\xc3\xa9}\n";
+  EXPECT_EQ(LoadPipeline(latin1_option).name, "d\xc3\xa9mo \xe2\x82\xac \xf0\x9f\x93\xb7");
+  EXPECT_EQ(InvalidUtf8Offset("\xed\xa0\x80"), 0u);      // a surrogate
+  EXPECT_EQ(InvalidUtf8Offset("ab\xf4\x90\x80\x80"), 2u);  // beyond U+10FFFF
+  EXPECT_EQ(InvalidUtf8Offset("abc\xe2\x82"), 3u);         // cut short
+}
+
 TEST(PipelineOptionsTest, ExplicitKeysBeatThePresetWhateverTheirValue) {
   // The basin preset turns the trust region off; true is also the built-in default.
   std::unique_ptr<Stage> refine = CreateStage("refine");

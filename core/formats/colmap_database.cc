@@ -201,12 +201,16 @@ Matrix ReadMatrixBlob(const Sqlite& db, const Statement& stmt, int rows_col,
         where + ": shape " + std::to_string(rows) + " x " + std::to_string(cols) + " is invalid" +
             (kFixedCols > 0 ? " (expected " + std::to_string(kFixedCols) + " columns)" : ""));
   }
-  const uint64_t expected = uint64_t(rows) * uint64_t(cols) * sizeof(Scalar);
-  if (blob.size() != expected) {
+  // A shape whose byte count wraps around 2^64 could otherwise match the blob and size the matrix.
+  const bool too_large = cols != 0 && uint64_t(rows) > std::numeric_limits<uint64_t>::max() /
+                                                           sizeof(Scalar) / uint64_t(cols);
+  const uint64_t expected = too_large ? 0 : uint64_t(rows) * uint64_t(cols) * sizeof(Scalar);
+  if (too_large || blob.size() != expected) {
     ThrowInput(db.path(), 0,
                where + ": data holds " + std::to_string(blob.size()) + " bytes, but rows " +
                    std::to_string(rows) + " x cols " + std::to_string(cols) + " x " +
-                   std::to_string(sizeof(Scalar)) + " bytes = " + std::to_string(expected) +
+                   std::to_string(sizeof(Scalar)) +
+                   " bytes = " + (too_large ? "more than 2^64" : std::to_string(expected)) +
                    " (corrupt database?)");
   }
   Matrix m(rows, kFixedCols > 0 ? kFixedCols : cols);
@@ -510,7 +514,8 @@ ColmapDatabase ReadColmapDatabase(const std::string& path) {
   // Match rows index keypoints of COLMAP's image_id1 (left) and image_id2 (right).
   const auto check_and_orient = [&](MatchMatrix m, const PairMatches& pair, bool swapped,
                                     const std::string& where) {
-    if (swapped) m.col(0).swap(m.col(1));
+    // Columns of an empty matrix would be offsets from its null data pointer (undefined).
+    if (swapped && m.rows() > 0) m.col(0).swap(m.col(1));
     const Eigen::Index n1 = out.features[pair.image1].keypoints.rows();
     const Eigen::Index n2 = out.features[pair.image2].keypoints.rows();
     for (Eigen::Index r = 0; r < m.rows(); ++r) {

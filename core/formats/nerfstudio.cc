@@ -166,7 +166,7 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
   json top;
   try {
     top = json::parse(ReadTextFile(path));
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     ThrowInput(path, 0, std::string("not valid JSON: ") + e.what());
   }
   if (!top.is_object()) ThrowInput(path, 0, "expected a JSON object with a \"frames\" array");

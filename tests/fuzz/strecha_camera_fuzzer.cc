@@ -1,0 +1,19 @@
+// libFuzzer target: Strecha `.camera` files (core/formats/strecha.h, ReadStrechaCamera). The
+// input is the file.
+#include <string>
+#include <string_view>
+
+#include "core/error.h"
+#include "core/formats/strecha.h"
+#include "tests/fuzz/fuzz_util.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace raytime;
+  const std::string path = fuzz::ScratchPath("0000.jpg.camera");
+  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
+  try {
+    ReadStrechaCamera(path);
+  } catch (const InputError&) {
+  }
+  return 0;
+}
