@@ -1,9 +1,41 @@
 #include "refine/gnc_solver.h"
 
+#include <ceres/iteration_callback.h>
 #include <ceres/solver.h>
 #include <spdlog/spdlog.h>
 
+#include <chrono>
+
 namespace raytime {
+namespace {
+
+// A long solve (hundreds of cameras, millions of residuals: minutes per GNC stage) says it is
+// alive: one log line per iteration, at most every `kProgressInterval`. It only reads the
+// iteration summary, so results do not depend on it.
+class ProgressLog : public ceres::IterationCallback {
+ public:
+  ProgressLog(int stage, int num_stages, double scale)
+      : stage_(stage), num_stages_(num_stages), scale_(scale) {}
+
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - last_ >= kProgressInterval) {
+      last_ = now;
+      spdlog::info("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
+                   stage_, num_stages_, scale_, summary.iteration, summary.cost,
+                   summary.cumulative_time_in_seconds);
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  static constexpr std::chrono::seconds kProgressInterval{15};
+  int stage_, num_stages_;
+  double scale_;
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
+
+}  // namespace
 
 std::vector<GncStageSummary> SolveGnc(RayTimeProblem* problem, const GncSolverSettings& settings,
                                       int* elimination_group_size) {
@@ -27,6 +59,8 @@ std::vector<GncStageSummary> SolveGnc(RayTimeProblem* problem, const GncSolverSe
   for (size_t s = 0; s < settings.scales.size(); ++s) {
     const double scale = settings.scales[s];
     problem->SetLossScale(scale);
+    ProgressLog progress(static_cast<int>(s) + 1, static_cast<int>(settings.scales.size()), scale);
+    options.callbacks = {&progress};
     ceres::Solver::Summary ceres_summary;
     ceres::Solve(options, &problem->problem(), &ceres_summary);
 
