@@ -18,11 +18,14 @@ class ProgressLog : public ceres::IterationCallback {
       : stage_(stage), num_stages_(num_stages), scale_(scale) {}
 
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    // A rejected step's summary carries the candidate's (higher) cost; the solve is at the last
+    // accepted one.
+    if (summary.iteration == 0 || summary.step_is_successful) accepted_cost_ = summary.cost;
     const auto now = std::chrono::steady_clock::now();
     if (now - last_ >= kProgressInterval) {
       last_ = now;
       spdlog::info("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
-                   stage_, num_stages_, scale_, summary.iteration, summary.cost,
+                   stage_, num_stages_, scale_, summary.iteration, accepted_cost_,
                    summary.cumulative_time_in_seconds);
     }
     return ceres::SOLVER_CONTINUE;
@@ -32,6 +35,7 @@ class ProgressLog : public ceres::IterationCallback {
   static constexpr std::chrono::seconds kProgressInterval{15};
   int stage_, num_stages_;
   double scale_;
+  double accepted_cost_ = 0.0;
   std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
 };
 
