@@ -429,13 +429,23 @@ void WriteLamar(const Capture& capture, const std::string& root, const Rigid3& a
 }
 
 bool WriteStray(const Capture& capture, const std::string& root, double fps, double odometry_hz,
-                double capture_scale, std::vector<OdometryRow>* rows) {
+                double capture_scale, std::vector<OdometryRow>* rows, const std::string& fourcc) {
+  if (fourcc.size() != 4) throw std::invalid_argument("fourcc '" + fourcc + "': 4 characters");
   fs::create_directories(root);
   {
-    cv::VideoWriter writer(root + "/rgb.mp4", cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps,
+    cv::VideoWriter writer(root + "/rgb.mp4",
+                           cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), fps,
                            cv::Size(capture.width, capture.height));
     if (!writer.isOpened()) return false;
-    for (const Frame& frame : capture.frames) writer.write(cv::imread(frame.image));
+    for (const Frame& frame : capture.frames) {
+      const cv::Mat image = cv::imread(frame.image);
+      // VideoWriter drops frames of another size without a word.
+      if (image.cols != capture.width || image.rows != capture.height) {
+        throw std::runtime_error(frame.image + ": not " + std::to_string(capture.width) + "x" +
+                                 std::to_string(capture.height));
+      }
+      writer.write(image);
+    }
   }
   const Eigen::Matrix3d K = ArkitK(capture.frames.front().K);  // ARKit's: scales as is
   const double s = capture_scale;

@@ -87,13 +87,16 @@ std::string LamarName(double time_s);
 // frame's K at `capture_scale` times the video's size) and odometry.csv at `odometry_hz` from the
 // first frame's time to the last's, each pose interpolated (SLERP + linear) between the two
 // frames it lies between, its `frame` column the nearest video frame. Returns the odometry rows
-// (time and pose) it wrote. false when this OpenCV cannot write an MPEG-4 video.
+// (time and pose) it wrote. `fourcc` is the video codec (OpenCV's VideoWriter::fourcc code:
+// "mp4v" MPEG-4 Part 2, "avc1" H.264, as the apps write). false when this OpenCV cannot write
+// that codec.
 struct OdometryRow {
   double time_s;
   int frame;
   Rigid3 world_from_cam;
 };
 bool WriteStray(const Capture& capture, const std::string& root, double fps, double odometry_hz,
-                double capture_scale, std::vector<OdometryRow>* rows);
+                double capture_scale, std::vector<OdometryRow>* rows,
+                const std::string& fourcc = "mp4v");
 
 }  // namespace raytime::fixtures
