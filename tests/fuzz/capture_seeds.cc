@@ -1,4 +1,4 @@
-// Writes the seed corpus of the capture_* fuzz targets (capture_fuzzer.cc): a fixture of
+// Writes the seed corpus of the capture_* fuzz targets (capture_fuzzer.cc) and npz: a fixture of
 // each format written by the test-only writers (tests/capture_fixtures.h) and packed into the
 // targets' input form ("@@FILE <path>@@" before each file's bytes).
 //
@@ -151,6 +151,7 @@ int main(int argc, char** argv) {
   });
   seed("capture_mobilebrick", "arkit-npz", [&](const fs::path& root) {
     fixtures::WriteMobileBrick(capture, root.string(), &arkit_from_world);
+    WriteBytes(corpus / "npz" / "cameras_arkit.npz", ReadBytes(root / "cameras_arkit.npz"));
   });
   seed("capture_scannetpp", "opencv-axes", [&](const fs::path& root) {
     fixtures::WriteScanNetPP(capture, root.string(), arkit_from_world, false);
