@@ -16,9 +16,15 @@
 // separated integers: count, stride, frames per second, width, height, capture_width (defaults
 // 6 1 30 64 48 0).
 //
+// Besides crashes and escaping exceptions, the target stops on a value that is not finite in what
+// a reader returns (a pose, an intrinsic, a timestamp): the readers reject NaN and infinity in
+// their files (core/formats/text_util.h, PoseFromCameraToWorld), so one that appears anyway came
+// from arithmetic on valid-looking values (an overflow) and would reach the stages unnoticed.
+//
 // With RAYTIME_FUZZ_VERBOSE set in the environment (replay executables, when checking that seeds
 // load), each step prints what it read or why it rejected the input.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -54,6 +60,33 @@ bool Verbose() {
 
 void Report(const char* step, const char* what) {
   if (Verbose()) std::fprintf(stderr, "  %s %s: %s\n", kFormat, step, what);
+}
+
+[[noreturn]] void NotFinite(const std::string& what) {
+  std::fprintf(stderr, "%s reader returned a value that is not finite: %s\n", kFormat,
+               what.c_str());
+  std::abort();
+}
+
+void RequireFinite(const raytime::PoseSet& poses, const char* set) {
+  for (const auto& [name, pose] : poses.world_from_cam) {
+    if (!pose.rotation.coeffs().allFinite() || !pose.translation.allFinite()) {
+      NotFinite(std::string(set) + " pose of " + name);
+    }
+  }
+}
+
+void RequireFinite(const raytime::Dataset& dataset) {
+  for (const raytime::CameraIntrinsics& camera : dataset.images.cameras) {
+    for (const double value : camera.params) {
+      if (!std::isfinite(value)) NotFinite("camera intrinsics");
+    }
+  }
+  if (dataset.capture) RequireFinite(*dataset.capture, "capture");
+  if (dataset.ground_truth) RequireFinite(*dataset.ground_truth, "ground truth");
+  for (const auto& [name, time] : dataset.timestamps) {
+    if (!std::isfinite(time)) NotFinite("timestamp of " + name);
+  }
 }
 
 // A relative path that stays inside the root: no leading '/', no ".." component, no NUL.
@@ -138,6 +171,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
     const PoseSet poses = ReadPoseFile(kFormat, root);
     poses_read = true;
+    RequireFinite(poses, "pose file");
     Report("pose file", (std::to_string(poses.size()) + " poses").c_str());
   } catch (const InputError& e) {
     Report("pose file", e.what());
@@ -151,6 +185,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     options.root = root;
     Dataset dataset = LoadDataset(options);
     if (dataset.video) AttachDecodedFrames(video, &dataset);
+    RequireFinite(dataset);
     // The dataset stage's summary holds the warnings; summary.json must be writable.
     const std::string warnings = WarningsToJson(dataset.warnings).dump();
     Report("dataset", (std::to_string(dataset.images.images.size()) + " images, " +
