@@ -332,6 +332,11 @@ TEST(CaptureFormatsBadInput, Record3dMalformedMetadata) {
                    {metadata, "frameTimestamps", "one entry per pose (1)"});
   std::ofstream(metadata) << "{\"w\": 1440,";
   ExpectInputError([&] { Load("record3d", dir.path().string()); }, {metadata, "not valid JSON"});
+  // A number beyond double: nlohmann's out_of_range, not its parse_error (capture_record3d fuzzer;
+  // every JSON capture reader goes through ReadJsonFile).
+  std::ofstream(metadata) << "{\"w\": 1e999, \"h\": 1920}";
+  ExpectInputError([&] { Load("record3d", dir.path().string()); },
+                   {metadata, "not valid JSON", "1e999"});
 }
 
 TEST(CaptureFormatsBadInput, Scanner3dMalformedFrame) {

@@ -108,7 +108,7 @@ json ReadJsonFile(const std::string& path) {
   if (!fs::is_regular_file(path)) ThrowInput(path, 0, "file not found");
   try {
     return json::parse(ReadTextFile(path));
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     ThrowInput(path, 0, std::string("not valid JSON: ") + e.what());
   }
 }
