@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/formats/capture.h"
 #include "core/formats/dataset.h"
+#include "core/formats/npz.h"
 #include "tests/capture_fixtures.h"
 #include "tests/temp_dir.h"
 
@@ -359,6 +360,27 @@ TEST(CaptureFormatsBadInput, PolycamCameraWithoutTransformRow) {
   std::ofstream(camera) << "{\"fx\": 1, \"fy\": 1, \"cx\": 0, \"cy\": 0, \"width\": 4, "
                            "\"height\": 3, \"t_00\": 1, \"t_01\": 0, \"t_02\": 0, \"t_03\": 0}";
   ExpectInputError([&] { Load("polycam", dir.path().string()); }, {camera, "missing \"t_10\""});
+}
+
+// The npz fuzzer's reproducers (tests/fuzz/corpus/npz/crash-*): each an InputError naming the
+// entry, not an overflowing read, an escaping std::invalid_argument (std::stol), a negative or
+// overflowing allocation.
+TEST(CaptureFormatsBadInput, NpzDamagedArchivesNameTheEntry) {
+  const std::string corpus = std::string(RAYTIME_SOURCE_DIR) + "/tests/fuzz/corpus/npz/";
+  const auto read = [&](const std::string& file) { return [=] { ReadNpz(corpus + file); }; };
+  ExpectInputError(read("crash-name-past-end.npz"), {"runs past the end of the file"});
+  ExpectInputError(read("crash-shape-not-a-number.npz"),
+                   {"entry world_mat_0", "shape (4, x) is not 1-D or 2-D"});
+  ExpectInputError(read("crash-shape-unclosed.npz"), {"entry world_mat_0", "no 'shape'"});
+  ExpectInputError(read("crash-shape-negative.npz"), {"entry world_mat_0", "shape (-1, -1)"});
+  ExpectInputError(read("crash-shape-overflow.npz"), {"entry world_mat_0", "is too large"});
+  ExpectInputError(read("header-length-past-entry.npz"),
+                   {"entry world_mat_0", "truncated .npy header"});
+  // The fixture's archive still reads: a 4x4 per world_mat and scale_mat.
+  const auto arrays = ReadNpz(corpus + "cameras_arkit.npz");
+  ASSERT_EQ(arrays.count("world_mat_2"), 1u);
+  EXPECT_EQ(arrays.at("world_mat_2").rows(), 4);
+  EXPECT_EQ(arrays.at("world_mat_2").cols(), 4);
 }
 
 TEST(CaptureFormatsBadInput, DatasetFormatNamesTheValidOnes) {
