@@ -362,6 +362,41 @@ TEST(CaptureFormatsBadInput, PolycamCameraWithoutTransformRow) {
   ExpectInputError([&] { Load("polycam", dir.path().string()); }, {camera, "missing \"t_10\""});
 }
 
+// A width or height beyond an int was cast to int (undefined behaviour; lamar and arkitscenes also
+// took negative and fractional sizes): found by capture_lamar, the same cast fixed in every reader.
+TEST(CaptureFormatsBadInput, ImageSizesBeyondAnIntNameTheFile) {
+  const fixtures::Capture capture = fixtures::SampleCapture();
+  TempDir dir("sizes_bad");
+  const auto replace = [](const std::string& path, const std::string& from, const std::string& to) {
+    std::ifstream in(path);
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    const size_t at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from << " not in " << path;
+    text.replace(at, from.size(), to);
+    std::ofstream(path) << text;
+  };
+  fixtures::WriteRecord3d(capture, dir / "record3d");
+  replace(dir / "record3d/metadata.json", "\"w\":768", "\"w\":10000000000");
+  ExpectInputError([&] { Load("record3d", dir / "record3d"); },
+                   {dir / "record3d/metadata.json",
+                    "\"w\" must be a positive whole number of pixels (at most 1e9), got 1e+10"});
+
+  fixtures::WriteLamar(capture, dir / "lamar", Rigid3(), Rigid3());
+  replace(dir / "lamar/sensors.txt", "768, 512,", "768, 760505595060751,");
+  ExpectInputError(
+      [&] { Load("lamar", dir / "lamar"); },
+      {dir / "lamar/sensors.txt:2", "height (field 6) must be a positive whole number"});
+  replace(dir / "lamar/sensors.txt", "768, 760505595060751,", "768, -512,");
+  ExpectInputError([&] { Load("lamar", dir / "lamar"); },
+                   {dir / "lamar/sensors.txt:2", "height (field 6)", "got -512"});
+
+  fixtures::WriteArkitScenes(capture, dir / "arkitscenes", "41069021");
+  const std::string pincam = dir / "arkitscenes/lowres_wide_intrinsics/41069021_100.000.pincam";
+  replace(pincam, "768 512", "768.5 512");
+  ExpectInputError([&] { Load("arkitscenes", dir / "arkitscenes"); },
+                   {pincam, "width (the first number) must be a positive whole number"});
+}
+
 // The npz fuzzer's reproducers (tests/fuzz/corpus/npz/crash-*): each an InputError naming the
 // entry, not an overflowing read, an escaping std::invalid_argument (std::stol), a negative or
 // overflowing allocation.

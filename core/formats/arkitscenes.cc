@@ -122,8 +122,8 @@ CaptureRecording ReadArkitScenes(const std::string& path, const TimestampJoinOpt
     Eigen::Matrix3d K;
     K << v[2], 0, v[4], 0, v[3], v[5], 0, 0, 1;
     frame.K = K;
-    frame.width = static_cast<int>(v[0]);
-    frame.height = static_cast<int>(v[1]);
+    frame.width = PixelSize(v[0], pincam, 0, "width (the first number)");
+    frame.height = PixelSize(v[1], pincam, 0, "height (the second number)");
     frame.time_s = frame_times[name];
     recording.frames.push_back(std::move(frame));
   }

@@ -152,6 +152,15 @@ std::vector<double> JsonNumbers(const json& object, const std::string& key, int 
   return numbers;
 }
 
+int PixelSize(double value, const std::string& path, int line, const std::string& what) {
+  if (!(value >= 1 && value <= 1e9 && value == std::floor(value))) {
+    ThrowInput(
+        path, line,
+        what + " must be a positive whole number of pixels (at most 1e9), got " + Short(value));
+  }
+  return static_cast<int>(value);
+}
+
 std::vector<double> ReadNumbersFile(const std::string& path) {
   if (!fs::is_regular_file(path)) ThrowInput(path, 0, "file not found");
   const std::string contents = ReadTextFile(path);

@@ -111,8 +111,10 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     if (row.fields.size() < 3 || row.fields[2] != "camera") continue;
     const std::string& id = row.fields[0];
     const std::string model = row.fields.size() > 3 ? row.fields[3] : "";
-    const double width = Number(sensors_path, row, 4, "width");
-    const double height = Number(sensors_path, row, 5, "height");
+    const int width =
+        PixelSize(Number(sensors_path, row, 4, "width"), sensors_path, row.line, "width (field 5)");
+    const int height = PixelSize(Number(sensors_path, row, 5, "height"), sensors_path, row.line,
+                                 "height (field 6)");
     Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
     if (model == "PINHOLE") {
       K(0, 0) = Number(sensors_path, row, 6, "fx");
@@ -131,7 +133,7 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     // COLMAP's pixel convention (top-left pixel centre at 0.5) to OpenCV's.
     K(0, 2) -= 0.5;
     K(1, 2) -= 0.5;
-    cameras[id] = {K, {static_cast<int>(width), static_cast<int>(height)}};
+    cameras[id] = {K, {width, height}};
   }
 
   // Rigs: sensor -> (rig, rig_from_sensor).
