@@ -397,6 +397,21 @@ TEST(CaptureFormatsBadInput, ImageSizesBeyondAnIntNameTheFile) {
                    {pincam, "width (the first number) must be a positive whole number"});
 }
 
+// An axis-angle whose norm overflows made a NaN ground-truth pose without an error (found by
+// capture_arkitscenes, which stops on non-finite poses).
+TEST(CaptureFormatsBadInput, ArkitScenesPoseThatOverflowsNamesTheLine) {
+  fixtures::Capture capture = fixtures::SampleCapture();
+  capture.frames.resize(2);
+  TempDir dir("arkitscenes_overflow");
+  fixtures::WriteArkitScenes(capture, dir.path().string(), "41069021");
+  std::ofstream(dir / "lowres_wide.traj")
+      << "100 0 0 0 0 0 0\n100.05 1e200 0 0 0 0 0\n100.1 0 0 0 0 0 0\n";
+  ExpectInputError([&] { Load("arkitscenes", dir.path().string()); },
+                   {dir / "lowres_wide.traj:2", "not finite once converted"});
+  ExpectInputError([&] { ReadPoseFile("arkitscenes", dir.path().string()); },
+                   {dir / "lowres_wide.traj:2", "not finite once converted"});
+}
+
 // The npz fuzzer's reproducers (tests/fuzz/corpus/npz/crash-*): each an InputError naming the
 // entry, not an overflowing read, an escaping std::invalid_argument (std::stol), a negative or
 // overflowing allocation.
