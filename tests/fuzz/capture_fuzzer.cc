@@ -135,7 +135,10 @@ void AttachDecodedFrames(std::string_view description, raytime::Dataset* dataset
   using namespace raytime;
   int values[6] = {6, 1, 30, 64, 48, 0};
   const auto tokens = text::SplitWhitespace(description);
-  for (size_t i = 0; i < tokens.size() && i < 6; ++i) text::ParseInt(tokens[i], &values[i]);
+  for (size_t i = 0; i < tokens.size() && i < 6; ++i) {
+    int value = 0;  // from_chars writes a leading number even when the token has more after it
+    if (text::ParseInt(tokens[i], &value)) values[i] = value;
+  }
   const int count = std::clamp(values[0], 1, 64), stride = std::clamp(values[1], 1, 1000);
   const int fps = std::clamp(values[2], 1, 240);
   const int width = std::clamp(values[3], 1, 8192), height = std::clamp(values[4], 1, 8192);
@@ -188,13 +191,13 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     RequireFinite(dataset);
     // The dataset stage's summary holds the warnings; summary.json must be writable.
     const std::string warnings = WarningsToJson(dataset.warnings).dump();
-    Report("dataset", (std::to_string(dataset.images.images.size()) + " images, " +
-                       std::to_string(dataset.images.cameras.size()) + " cameras, capture " +
-                       std::to_string(dataset.capture ? dataset.capture->size() : 0) +
-                       ", ground truth " +
-                       std::to_string(dataset.ground_truth ? dataset.ground_truth->size() : 0) +
-                       ", warnings " + warnings)
-                          .c_str());
+    Report("dataset",
+           (std::to_string(dataset.images.images.size()) + " images, " +
+            std::to_string(dataset.images.cameras.size()) + " cameras, capture " +
+            std::to_string(dataset.capture ? dataset.capture->size() : 0) + ", ground truth " +
+            std::to_string(dataset.ground_truth ? dataset.ground_truth->size() : 0) +
+            ", warnings " + warnings)
+               .c_str());
   } catch (const InputError& e) {
     Report("dataset", e.what());
   }
