@@ -412,6 +412,19 @@ TEST(CaptureFormatsBadInput, ArkitScenesPoseThatOverflowsNamesTheLine) {
                    {dir / "lowres_wide.traj:2", "not finite once converted"});
 }
 
+// Two microsecond timestamps beyond 2^53 that are the same double in seconds reached the join by
+// time, whose std::invalid_argument ("two trajectory poses at time ...") escaped.
+TEST(CaptureFormatsBadInput, LamarTimestampsBeyond2To52MicrosecondsNameTheLine) {
+  fixtures::Capture capture = fixtures::SampleCapture();
+  TempDir dir("lamar_timestamps");
+  fixtures::WriteLamar(capture, dir.path().string(), Rigid3(), Rigid3());
+  std::ofstream(dir / "trajectories.txt") << "# timestamp, device_id, qw, qx, qy, qz, tx, ty, tz\n"
+                                             "9007199254740992000, rig0, 1, 0, 0, 0, 0, 0, 0\n"
+                                             "9007199254740992001, rig0, 1, 0, 0, 0, 0, 0, 0\n";
+  ExpectInputError([&] { Load("lamar", dir.path().string()); },
+                   {dir / "trajectories.txt:2", "beyond 2^52 microseconds"});
+}
+
 // The npz fuzzer's reproducers (tests/fuzz/corpus/npz/crash-*): each an InputError naming the
 // entry, not an overflowing read, an escaping std::invalid_argument (std::stol), a negative or
 // overflowing allocation.

@@ -52,10 +52,21 @@ double Number(const std::string& path, const Row& row, size_t index, const char*
   return value;
 }
 
+// Microseconds whose seconds (t * 1e-6, what the join by time compares) are distinct doubles for
+// distinct integers: the spacing of doubles below 2^52 * 1e-6 s is at most 2^-20 s < 1 us. Unix
+// time in microseconds is 1.7e15 today; 2^52 is 4.5e15 (the year 2112).
+constexpr int64_t kMaxTimestampUs = int64_t{1} << 52;
+
 int64_t Timestamp(const std::string& path, const Row& row) {
   int64_t value = 0;
   if (row.fields.empty() || !text::ParseInt(row.fields[0], &value)) {
     ThrowInput(path, row.line, "the timestamp (field 1) must be an integer (microseconds)");
+  }
+  if (value > kMaxTimestampUs || value < -kMaxTimestampUs) {
+    ThrowInput(path, row.line,
+               "the timestamp (field 1) " + row.fields[0] +
+                   " is beyond 2^52 microseconds (4503599627370496), where two microseconds "
+                   "become the same time in seconds");
   }
   return value;
 }
