@@ -4,14 +4,15 @@
 # 19, the lowest CPU priority), printing seconds, executions, executions per second, corpus size,
 # peak RSS and result per target. Exits non-zero when any target crashed.
 #
-#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET ...]     (targets: tests/fuzz/*_fuzzer.cc)
+#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET ...]     (targets: tests/fuzz/corpus/*/)
 #   FUZZ_NICE=10 scripts/fuzz.sh 600 tum
 #   scripts/fuzz.sh 0                                      (only build)
 #
 # Each run starts from the committed seeds (tests/fuzz/corpus/TARGET) and keeps what it finds in
 # build-fuzz/fuzz/corpus/TARGET, so a rerun continues where the last one stopped. A crashing input
 # is saved as build-fuzz/fuzz/crashes/TARGET/crash-<sha1> (also leak-, timeout-, oom-), with the
-# fuzzer's log beside it in build-fuzz/fuzz/logs/TARGET.log. To reproduce one:
+# fuzzer's log beside it in build-fuzz/fuzz/logs/TARGET.log (the previous run's log is kept as
+# TARGET.<date>.log). To reproduce one:
 #   build-fuzz/tests/fuzz/TARGET_fuzzer build-fuzz/fuzz/crashes/TARGET/crash-...
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,10 +33,9 @@ nice ninja -C "$build" -j "${RAYTIME_JOBS:-2}" fuzzers
 if (($# > 0)); then
   targets=("$@")
 else
-  targets=()
-  for source in tests/fuzz/*_fuzzer.cc; do
-    name=$(basename "$source" _fuzzer.cc)
-    targets+=("$name")
+  targets=()  # every target has its corpus folder (some share a source: capture_fuzzer.cc)
+  for folder in tests/fuzz/corpus/*/; do
+    targets+=("$(basename "$folder")")
   done
 fi
 
@@ -48,7 +48,7 @@ export TMPDIR="$scratch"
 export ASAN_OPTIONS="${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}"
 export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
 
-printf '%-16s %8s %12s %8s %8s %8s  %s\n' target seconds executions exec/s corpus rss_mb result
+printf '%-20s %8s %12s %8s %8s %8s  %s\n' target seconds executions exec/s corpus rss_mb result
 failed=0
 for name in "${targets[@]}"; do
   fuzzer="$build/tests/fuzz/${name}_fuzzer"
@@ -57,6 +57,8 @@ for name in "${targets[@]}"; do
   crashes="$build/fuzz/crashes/$name"
   log="$build/fuzz/logs/$name.log"
   mkdir -p "$corpus" "$crashes" "$(dirname "$log")"
+  # A rerun keeps the previous run's log (a crash's, say) as TARGET.<its end time>.log.
+  [ ! -f "$log" ] || mv "$log" "${log%.log}.$(date -r "$log" +%Y%m%d-%H%M%S).log"
   dict=()
   [ -f "tests/fuzz/dict/$name.dict" ] && dict=("-dict=tests/fuzz/dict/$name.dict")
   start=$(date +%s)
@@ -83,7 +85,7 @@ for name in "${targets[@]}"; do
     result="CRASH (exit $status): $(grep -oE "$crashes/[^ ]+" "$log" | tail -1), log $log"
     failed=1
   fi
-  printf '%-16s %8s %12s %8s %8s %8s  %s\n' "$name" "$elapsed" "${execs:-?}" "${rate:-?}" "$size" \
+  printf '%-20s %8s %12s %8s %8s %8s  %s\n' "$name" "$elapsed" "${execs:-?}" "${rate:-?}" "$size" \
     "${rss:-?}" "$result"
 done
 exit "$failed"

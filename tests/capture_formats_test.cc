@@ -12,6 +12,7 @@
 #include "core/error.h"
 #include "core/formats/capture.h"
 #include "core/formats/dataset.h"
+#include "core/formats/npz.h"
 #include "tests/capture_fixtures.h"
 #include "tests/temp_dir.h"
 
@@ -332,6 +333,11 @@ TEST(CaptureFormatsBadInput, Record3dMalformedMetadata) {
                    {metadata, "frameTimestamps", "one entry per pose (1)"});
   std::ofstream(metadata) << "{\"w\": 1440,";
   ExpectInputError([&] { Load("record3d", dir.path().string()); }, {metadata, "not valid JSON"});
+  // A number beyond double: nlohmann's out_of_range, not its parse_error (capture_record3d fuzzer;
+  // every JSON capture reader goes through ReadJsonFile).
+  std::ofstream(metadata) << "{\"w\": 1e999, \"h\": 1920}";
+  ExpectInputError([&] { Load("record3d", dir.path().string()); },
+                   {metadata, "not valid JSON", "1e999"});
 }
 
 TEST(CaptureFormatsBadInput, Scanner3dMalformedFrame) {
@@ -354,6 +360,90 @@ TEST(CaptureFormatsBadInput, PolycamCameraWithoutTransformRow) {
   std::ofstream(camera) << "{\"fx\": 1, \"fy\": 1, \"cx\": 0, \"cy\": 0, \"width\": 4, "
                            "\"height\": 3, \"t_00\": 1, \"t_01\": 0, \"t_02\": 0, \"t_03\": 0}";
   ExpectInputError([&] { Load("polycam", dir.path().string()); }, {camera, "missing \"t_10\""});
+}
+
+// A width or height beyond an int was cast to int (undefined behaviour; lamar and arkitscenes also
+// took negative and fractional sizes): found by capture_lamar, the same cast fixed in every reader.
+TEST(CaptureFormatsBadInput, ImageSizesBeyondAnIntNameTheFile) {
+  const fixtures::Capture capture = fixtures::SampleCapture();
+  TempDir dir("sizes_bad");
+  const auto replace = [](const std::string& path, const std::string& from, const std::string& to) {
+    std::ifstream in(path);
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    const size_t at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from << " not in " << path;
+    text.replace(at, from.size(), to);
+    std::ofstream(path) << text;
+  };
+  fixtures::WriteRecord3d(capture, dir / "record3d");
+  replace(dir / "record3d/metadata.json", "\"w\":768", "\"w\":10000000000");
+  ExpectInputError([&] { Load("record3d", dir / "record3d"); },
+                   {dir / "record3d/metadata.json",
+                    "\"w\" must be a positive whole number of pixels (at most 1e9), got 1e+10"});
+
+  fixtures::WriteLamar(capture, dir / "lamar", Rigid3(), Rigid3());
+  replace(dir / "lamar/sensors.txt", "768, 512,", "768, 760505595060751,");
+  ExpectInputError(
+      [&] { Load("lamar", dir / "lamar"); },
+      {dir / "lamar/sensors.txt:2", "height (field 6) must be a positive whole number"});
+  replace(dir / "lamar/sensors.txt", "768, 760505595060751,", "768, -512,");
+  ExpectInputError([&] { Load("lamar", dir / "lamar"); },
+                   {dir / "lamar/sensors.txt:2", "height (field 6)", "got -512"});
+
+  fixtures::WriteArkitScenes(capture, dir / "arkitscenes", "41069021");
+  const std::string pincam = dir / "arkitscenes/lowres_wide_intrinsics/41069021_100.000.pincam";
+  replace(pincam, "768 512", "768.5 512");
+  ExpectInputError([&] { Load("arkitscenes", dir / "arkitscenes"); },
+                   {pincam, "width (the first number) must be a positive whole number"});
+}
+
+// An axis-angle whose norm overflows made a NaN ground-truth pose without an error (found by
+// capture_arkitscenes, which stops on non-finite poses).
+TEST(CaptureFormatsBadInput, ArkitScenesPoseThatOverflowsNamesTheLine) {
+  fixtures::Capture capture = fixtures::SampleCapture();
+  capture.frames.resize(2);
+  TempDir dir("arkitscenes_overflow");
+  fixtures::WriteArkitScenes(capture, dir.path().string(), "41069021");
+  std::ofstream(dir / "lowres_wide.traj")
+      << "100 0 0 0 0 0 0\n100.05 1e200 0 0 0 0 0\n100.1 0 0 0 0 0 0\n";
+  ExpectInputError([&] { Load("arkitscenes", dir.path().string()); },
+                   {dir / "lowres_wide.traj:2", "not finite once converted"});
+  ExpectInputError([&] { ReadPoseFile("arkitscenes", dir.path().string()); },
+                   {dir / "lowres_wide.traj:2", "not finite once converted"});
+}
+
+// Two microsecond timestamps beyond 2^53 that are the same double in seconds reached the join by
+// time, whose std::invalid_argument ("two trajectory poses at time ...") escaped.
+TEST(CaptureFormatsBadInput, LamarTimestampsBeyond2To52MicrosecondsNameTheLine) {
+  fixtures::Capture capture = fixtures::SampleCapture();
+  TempDir dir("lamar_timestamps");
+  fixtures::WriteLamar(capture, dir.path().string(), Rigid3(), Rigid3());
+  std::ofstream(dir / "trajectories.txt") << "# timestamp, device_id, qw, qx, qy, qz, tx, ty, tz\n"
+                                             "9007199254740992000, rig0, 1, 0, 0, 0, 0, 0, 0\n"
+                                             "9007199254740992001, rig0, 1, 0, 0, 0, 0, 0, 0\n";
+  ExpectInputError([&] { Load("lamar", dir.path().string()); },
+                   {dir / "trajectories.txt:2", "beyond 2^52 microseconds"});
+}
+
+// The npz fuzzer's reproducers (tests/fuzz/corpus/npz/crash-*): each an InputError naming the
+// entry, not an overflowing read, an escaping std::invalid_argument (std::stol), a negative or
+// overflowing allocation.
+TEST(CaptureFormatsBadInput, NpzDamagedArchivesNameTheEntry) {
+  const std::string corpus = std::string(RAYTIME_SOURCE_DIR) + "/tests/fuzz/corpus/npz/";
+  const auto read = [&](const std::string& file) { return [=] { ReadNpz(corpus + file); }; };
+  ExpectInputError(read("crash-name-past-end.npz"), {"runs past the end of the file"});
+  ExpectInputError(read("crash-shape-not-a-number.npz"),
+                   {"entry world_mat_0", "shape (4, x) is not 1-D or 2-D"});
+  ExpectInputError(read("crash-shape-unclosed.npz"), {"entry world_mat_0", "no 'shape'"});
+  ExpectInputError(read("crash-shape-negative.npz"), {"entry world_mat_0", "shape (-1, -1)"});
+  ExpectInputError(read("crash-shape-overflow.npz"), {"entry world_mat_0", "is too large"});
+  ExpectInputError(read("header-length-past-entry.npz"),
+                   {"entry world_mat_0", "truncated .npy header"});
+  // The fixture's archive still reads: a 4x4 per world_mat and scale_mat.
+  const auto arrays = ReadNpz(corpus + "cameras_arkit.npz");
+  ASSERT_EQ(arrays.count("world_mat_2"), 1u);
+  EXPECT_EQ(arrays.at("world_mat_2").rows(), 4);
+  EXPECT_EQ(arrays.at("world_mat_2").cols(), 4);
 }
 
 TEST(CaptureFormatsBadInput, DatasetFormatNamesTheValidOnes) {

@@ -165,6 +165,63 @@ TEST(CaptureVideo, OdometryErrorsNameTheLine) {
   }
 }
 
+// Decoded frames without a video (AttachVideoFrames only needs their names, size and times):
+// `count` frames of width x height at 10 fps, frame k at k / 10 s.
+void AttachFrames(int count, int width, int height, int capture_width, Dataset* dataset) {
+  ImageSet frames;
+  frames.image_root = "frames";
+  CameraIntrinsics camera;
+  camera.width = width;
+  camera.height = height;
+  frames.cameras.push_back(camera);
+  std::vector<DecodedFrame> decoded;
+  for (int k = 0; k < count; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "frame_%06d.jpg", k);
+    frames.images.push_back({name, width, height, 0});
+    decoded.push_back({k, 0.1 * k});
+  }
+  AttachVideoFrames(frames, decoded, capture_width, TimestampJoinOptions(), dataset);
+}
+
+// The rescale went through the capture size rounded to whole pixels, which could round to 0 and
+// divide by it; and a principal point in the corner (rx = ry = 0) passed the aspect check as NaN
+// and made the scale infinite. Both gave non-finite intrinsics without an error (capture_stray).
+TEST(CaptureVideo, StrayRescaleStaysFiniteOrNamesTheFile) {
+  TempDir dir("stray_rescale");
+  fs::create_directories(dir / "stray");
+  std::ofstream(dir / "stray/rgb.mp4") << "not a video";
+  std::ofstream(dir / "stray/odometry.csv")
+      << "timestamp, frame, x, y, z, qx, qy, qz, qw\n0.0, 0, 0, 0, 0, 0, 0, 0, 1\n"
+         "0.1, 1, 0, 0, 1, 0, 0, 0, 1\n0.2, 2, 0, 0, 2, 0, 0, 0, 1\n";
+  DatasetOptions options;
+  options.format = "stray";
+  options.root = dir / "stray";
+  // capture_width 1 for 640x1 frames: the capture's height, 1 / 640 px, rounded to 0.
+  std::ofstream(dir / "stray/camera_matrix.csv") << "2, 0, 0.5\n0, 2, 0.25\n0, 0, 1\n";
+  Dataset dataset = LoadDataset(options);
+  AttachFrames(3, 640, 1, 1, &dataset);
+  ASSERT_EQ(dataset.images.cameras.size(), 1u);
+  const CameraIntrinsics& camera = dataset.images.cameras[0];
+  EXPECT_DOUBLE_EQ(camera.fx(), 2 * 640.0);
+  EXPECT_DOUBLE_EQ(camera.fy(), 2 * 640.0);
+  EXPECT_DOUBLE_EQ(camera.cx(), 0.5 * 640 - 0.5);  // ARKit's 0.5 from the corner, scaled
+  EXPECT_DOUBLE_EQ(camera.cy(), 0.25 * 640 - 0.5);
+  ASSERT_EQ(dataset.warnings.size(), 1u);
+  EXPECT_EQ(dataset.warnings[0].code, "intrinsics_rescaled");
+
+  std::ofstream(dir / "stray/camera_matrix.csv") << "689.87, 0, 0\n0, 691.04, 0\n0, 0, 1\n";
+  dataset = LoadDataset(options);
+  try {
+    AttachFrames(3, 768, 512, 0, &dataset);
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("camera_matrix.csv"), std::string::npos) << message;
+    EXPECT_NE(message.find("is not near the centre"), std::string::npos) << message;
+  }
+}
+
 // ---- The dataset and prior stages. ----
 
 nlohmann::json RunStage(const std::string& type, const std::string& options, const TempDir& dir,

@@ -48,9 +48,15 @@ std::vector<StampedPose> ReadTraj(const std::string& path) {
     }
     // World-to-camera: x_cam = R x_world + t.
     const Eigen::Matrix3d cam_from_world = ExpSO3(Eigen::Vector3d(v[1], v[2], v[3]));
-    const Eigen::Vector3d t(v[4], v[5], v[6]);
-    trajectory.push_back({v[0], Rigid3(Eigen::Quaterniond(cam_from_world.transpose()),
-                                       -(cam_from_world.transpose() * t))});
+    const Eigen::Vector3d centre =
+        -(cam_from_world.transpose() * Eigen::Vector3d(v[4], v[5], v[6]));
+    // Finite numbers can still overflow: the angle of an axis-angle of 1e200 is infinite.
+    if (!cam_from_world.allFinite() || !centre.allFinite()) {
+      ThrowInput(path, line,
+                 "the pose is not finite once converted (an axis-angle or translation too large "
+                 "for a double)");
+    }
+    trajectory.push_back({v[0], Rigid3(Eigen::Quaterniond(cam_from_world.transpose()), centre)});
   }
   if (trajectory.empty()) ThrowInput(path, 0, "no poses");
   return trajectory;
@@ -122,8 +128,8 @@ CaptureRecording ReadArkitScenes(const std::string& path, const TimestampJoinOpt
     Eigen::Matrix3d K;
     K << v[2], 0, v[4], 0, v[3], v[5], 0, 0, 1;
     frame.K = K;
-    frame.width = static_cast<int>(v[0]);
-    frame.height = static_cast<int>(v[1]);
+    frame.width = PixelSize(v[0], pincam, 0, "width (the first number)");
+    frame.height = PixelSize(v[1], pincam, 0, "height (the second number)");
     frame.time_s = frame_times[name];
     recording.frames.push_back(std::move(frame));
   }

@@ -108,7 +108,7 @@ json ReadJsonFile(const std::string& path) {
   if (!fs::is_regular_file(path)) ThrowInput(path, 0, "file not found");
   try {
     return json::parse(ReadTextFile(path));
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     ThrowInput(path, 0, std::string("not valid JSON: ") + e.what());
   }
 }
@@ -150,6 +150,15 @@ std::vector<double> JsonNumbers(const json& object, const std::string& key, int 
     numbers.push_back(value[i].get<double>());
   }
   return numbers;
+}
+
+int PixelSize(double value, const std::string& path, int line, const std::string& what) {
+  if (!(value >= 1 && value <= 1e9 && value == std::floor(value))) {
+    ThrowInput(
+        path, line,
+        what + " must be a positive whole number of pixels (at most 1e9), got " + Short(value));
+  }
+  return static_cast<int>(value);
 }
 
 std::vector<double> ReadNumbersFile(const std::string& path) {

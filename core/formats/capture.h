@@ -59,6 +59,10 @@ double JsonNumber(const nlohmann::json& object, const std::string& key, const st
 std::vector<double> JsonNumbers(const nlohmann::json& object, const std::string& key, int count,
                                 const std::string& path, const std::string& where);
 
+// A width or height read from a file: a whole number of pixels from 1 to 1e9 (what an int holds,
+// with room). InputError naming `path`, `line` (0: none) and `what` (e.g. "\"w\"") otherwise.
+int PixelSize(double value, const std::string& path, int line, const std::string& what);
+
 // Every whitespace-separated number of a text file, in order (a 3x3 or 4x4 matrix file, a .pincam
 // line). InputError naming the file and line of a token that is not a finite number.
 std::vector<double> ReadNumbersFile(const std::string& path);

@@ -52,10 +52,21 @@ double Number(const std::string& path, const Row& row, size_t index, const char*
   return value;
 }
 
+// Microseconds whose seconds (t * 1e-6, what the join by time compares) are distinct doubles for
+// distinct integers: the spacing of doubles below 2^52 * 1e-6 s is at most 2^-20 s < 1 us. Unix
+// time in microseconds is 1.7e15 today; 2^52 is 4.5e15 (the year 2112).
+constexpr int64_t kMaxTimestampUs = int64_t{1} << 52;
+
 int64_t Timestamp(const std::string& path, const Row& row) {
   int64_t value = 0;
   if (row.fields.empty() || !text::ParseInt(row.fields[0], &value)) {
     ThrowInput(path, row.line, "the timestamp (field 1) must be an integer (microseconds)");
+  }
+  if (value > kMaxTimestampUs || value < -kMaxTimestampUs) {
+    ThrowInput(path, row.line,
+               "the timestamp (field 1) " + row.fields[0] +
+                   " is beyond 2^52 microseconds (4503599627370496), where two microseconds "
+                   "become the same time in seconds");
   }
   return value;
 }
@@ -111,8 +122,10 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     if (row.fields.size() < 3 || row.fields[2] != "camera") continue;
     const std::string& id = row.fields[0];
     const std::string model = row.fields.size() > 3 ? row.fields[3] : "";
-    const double width = Number(sensors_path, row, 4, "width");
-    const double height = Number(sensors_path, row, 5, "height");
+    const int width =
+        PixelSize(Number(sensors_path, row, 4, "width"), sensors_path, row.line, "width (field 5)");
+    const int height = PixelSize(Number(sensors_path, row, 5, "height"), sensors_path, row.line,
+                                 "height (field 6)");
     Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
     if (model == "PINHOLE") {
       K(0, 0) = Number(sensors_path, row, 6, "fx");
@@ -131,7 +144,7 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     // COLMAP's pixel convention (top-left pixel centre at 0.5) to OpenCV's.
     K(0, 2) -= 0.5;
     K(1, 2) -= 0.5;
-    cameras[id] = {K, {static_cast<int>(width), static_cast<int>(height)}};
+    cameras[id] = {K, {width, height}};
   }
 
   // Rigs: sensor -> (rig, rig_from_sensor).

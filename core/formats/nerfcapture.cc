@@ -89,13 +89,8 @@ CaptureRecording ReadNerfCapture(const std::string& path) {
     K(0, 2) = FrameNumber(top, entry, "cx", path, where);
     K(1, 2) = FrameNumber(top, entry, "cy", path, where);
     frame.K = FromArkitIntrinsics(K);
-    const double w = FrameNumber(top, entry, "w", path, where);
-    const double h = FrameNumber(top, entry, "h", path, where);
-    if (w < 1 || h < 1 || w != std::floor(w) || h != std::floor(h)) {
-      ThrowInput(path, 0, where + ": \"w\" and \"h\" must be positive whole numbers of pixels");
-    }
-    frame.width = static_cast<int>(w);
-    frame.height = static_cast<int>(h);
+    frame.width = PixelSize(FrameNumber(top, entry, "w", path, where), path, 0, where + ": \"w\"");
+    frame.height = PixelSize(FrameNumber(top, entry, "h", path, where), path, 0, where + ": \"h\"");
     if (entry.contains("timestamp")) frame.time_s = JsonNumber(entry, "timestamp", path, where);
     recording.frames.push_back(std::move(frame));
   }

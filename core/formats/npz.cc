@@ -3,13 +3,18 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <string_view>
 #include <vector>
 
 #include "core/error.h"
+#include "core/formats/text_util.h"
 
 namespace raytime {
 
 namespace {
+
+// Larger than any camera file's array; keeps rows and columns within Eigen's index type.
+constexpr uint64_t kMaxDimension = uint64_t{1} << 31;
 
 uint32_t Little(const std::vector<char>& bytes, size_t at, int n) {
   uint32_t value = 0;
@@ -17,7 +22,8 @@ uint32_t Little(const std::vector<char>& bytes, size_t at, int n) {
   return value;
 }
 
-// The value text of `key` in a .npy header dict, e.g. "'<f8'" or "(4, 4)".
+// The value text of `key` in a .npy header dict, e.g. "'<f8'" or "(4, 4)"; "" when absent (or a
+// tuple without its closing parenthesis).
 std::string HeaderValue(const std::string& header, const std::string& key) {
   const size_t at = header.find("'" + key + "'");
   if (at == std::string::npos) return "";
@@ -26,12 +32,37 @@ std::string HeaderValue(const std::string& header, const std::string& key) {
   ++start;
   while (start < header.size() && header[start] == ' ') ++start;
   size_t end = start;
-  if (header[start] == '(') {
-    end = header.find(')', start) + 1;
+  if (start < header.size() && header[start] == '(') {
+    end = header.find(')', start);
+    if (end == std::string::npos) return "";
+    ++end;
   } else {
     while (end < header.size() && header[end] != ',' && header[end] != '}') ++end;
   }
   return header.substr(start, end - start);
+}
+
+// The dimensions of a shape tuple such as "(4, 4)", "(4,)" or "()"; false unless every one is a
+// whole number >= 0.
+bool ParseShape(const std::string& tuple, std::vector<uint64_t>* shape) {
+  if (tuple.size() < 2 || tuple.front() != '(' || tuple.back() != ')') return false;
+  const std::string inside = tuple.substr(1, tuple.size() - 2);
+  size_t start = 0;
+  while (start <= inside.size()) {
+    size_t comma = inside.find(',', start);
+    if (comma == std::string::npos) comma = inside.size();
+    const std::string_view field =
+        text::Trim(std::string_view(inside).substr(start, comma - start));
+    if (!field.empty()) {
+      uint64_t dimension = 0;
+      if (!text::ParseInt(field, &dimension)) return false;
+      shape->push_back(dimension);
+    } else if (comma < inside.size()) {
+      return false;  // "(,4)" or "(4,,4)"; only a trailing comma may be empty ("(4,)")
+    }
+    start = comma + 1;
+  }
+  return true;
 }
 
 Eigen::MatrixXd ParseNpy(const std::string& path, const std::string& entry,
@@ -40,32 +71,35 @@ Eigen::MatrixXd ParseNpy(const std::string& path, const std::string& entry,
     ThrowInput(path, 0, "entry " + entry + ": " + message);
   };
   if (size < 10 || std::memcmp(&bytes[begin], "\x93NUMPY", 6) != 0) fail("not a .npy array");
+  // Format 1.0 has a 2-byte header length, 2.0 and 3.0 a 4-byte one.
   const int major = static_cast<uint8_t>(bytes[begin + 6]);
-  const size_t header_length =
-      major == 1 ? Little(bytes, begin + 8, 2) : Little(bytes, begin + 8, 4);
-  const size_t header_start = begin + (major == 1 ? 10 : 12);
-  if (header_start + header_length > begin + size) fail("truncated .npy header");
-  const std::string header(&bytes[header_start], header_length);
+  if (major < 1 || major > 3) fail(".npy format version " + std::to_string(major) + " unknown");
+  const size_t length_bytes = major == 1 ? 2 : 4;
+  if (size < 8 + length_bytes) fail("truncated .npy header");
+  const size_t header_length = Little(bytes, begin + 8, static_cast<int>(length_bytes));
+  const size_t header_offset = 8 + length_bytes;
+  if (header_length > size - header_offset) fail("truncated .npy header");
+  const std::string header(&bytes[begin + header_offset], header_length);
   const std::string descr = HeaderValue(header, "descr");
   const bool fortran = HeaderValue(header, "fortran_order") == "True";
   int item = 0;
   if (descr == "'<f8'") item = 8;
   if (descr == "'<f4'") item = 4;
   if (item == 0) fail("dtype " + descr + " is not little-endian float32 or float64");
-  std::vector<long> shape;
+  std::vector<uint64_t> shape;
   const std::string dims = HeaderValue(header, "shape");
-  for (size_t i = 1; i + 1 < dims.size();) {
-    size_t end = dims.find_first_of(",)", i);
-    const std::string number = dims.substr(i, end - i);
-    if (number.find_first_not_of(' ') != std::string::npos) shape.push_back(std::stol(number));
-    i = end + 1;
+  if (dims.empty()) fail("no 'shape': (...) in the .npy header");
+  if (!ParseShape(dims, &shape) || shape.empty() || shape.size() > 2) {
+    fail("shape " + dims + " is not 1-D or 2-D (whole numbers >= 0)");
   }
-  if (shape.empty() || shape.size() > 2) fail("shape " + dims + " is not 1-D or 2-D");
-  const long rows = shape[0], cols = shape.size() == 2 ? shape[1] : 1;
-  const size_t data = header_start + header_length;
-  if (data + static_cast<size_t>(rows * cols * item) > begin + size) fail("truncated data");
-  Eigen::MatrixXd matrix(rows, cols);
-  for (long k = 0; k < rows * cols; ++k) {
+  const uint64_t rows = shape[0], cols = shape.size() == 2 ? shape[1] : 1;
+  if (rows > kMaxDimension || cols > kMaxDimension) fail("shape " + dims + " is too large");
+  // Within the entry's bytes, without overflowing rows * cols * item.
+  const uint64_t available = (size - header_offset - header_length) / item;
+  if (cols != 0 && rows > available / cols) fail("truncated data");
+  const size_t data = begin + header_offset + header_length;
+  Eigen::MatrixXd matrix(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(cols));
+  for (uint64_t k = 0; k < rows * cols; ++k) {
     double value;
     if (item == 8) {
       std::memcpy(&value, &bytes[data + 8 * k], 8);
@@ -74,8 +108,8 @@ Eigen::MatrixXd ParseNpy(const std::string& path, const std::string& entry,
       std::memcpy(&single, &bytes[data + 4 * k], 4);
       value = single;
     }
-    const long r = fortran ? k % rows : k / cols, c = fortran ? k / rows : k % cols;
-    matrix(r, c) = value;
+    const uint64_t r = fortran ? k % rows : k / cols, c = fortran ? k / rows : k % cols;
+    matrix(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) = value;
   }
   return matrix;
 }
@@ -102,7 +136,7 @@ std::map<std::string, Eigen::MatrixXd> ReadNpz(const std::string& path) {
   size_t at = Little(bytes, eocd + 16, 4);
   std::map<std::string, Eigen::MatrixXd> arrays;
   for (uint32_t e = 0; e < entries; ++e) {
-    if (at + 46 > bytes.size() || Little(bytes, at, 4) != 0x02014b50) {
+    if (at > bytes.size() || bytes.size() - at < 46 || Little(bytes, at, 4) != 0x02014b50) {
       ThrowInput(path, 0, "damaged ZIP central directory");
     }
     const uint32_t method = Little(bytes, at + 10, 2);
@@ -111,6 +145,9 @@ std::map<std::string, Eigen::MatrixXd> ReadNpz(const std::string& path) {
     const uint32_t extra_length = Little(bytes, at + 30, 2);
     const uint32_t comment_length = Little(bytes, at + 32, 2);
     const uint32_t local = Little(bytes, at + 42, 4);
+    if (bytes.size() - at - 46 < size_t{name_length} + extra_length + comment_length) {
+      ThrowInput(path, 0, "damaged ZIP central directory (an entry runs past the end of the file)");
+    }
     std::string name(&bytes[at + 46], name_length);
     at += 46 + name_length + extra_length + comment_length;
     if (method != 0) {
@@ -119,11 +156,14 @@ std::map<std::string, Eigen::MatrixXd> ReadNpz(const std::string& path) {
                      " is compressed; raytime reads .npz archives written by np.savez (stored), "
                      "not np.savez_compressed");
     }
-    if (local + 30 > bytes.size() || Little(bytes, local, 4) != 0x04034b50) {
+    if (size_t{local} + 30 > bytes.size() || Little(bytes, local, 4) != 0x04034b50) {
       ThrowInput(path, 0, "entry " + name + ": damaged ZIP local header");
     }
-    const size_t data = local + 30 + Little(bytes, local + 26, 2) + Little(bytes, local + 28, 2);
-    if (data + compressed > bytes.size()) ThrowInput(path, 0, "entry " + name + " is truncated");
+    const size_t data =
+        size_t{local} + 30 + Little(bytes, local + 26, 2) + Little(bytes, local + 28, 2);
+    if (data > bytes.size() || compressed > bytes.size() - data) {
+      ThrowInput(path, 0, "entry " + name + " is truncated");
+    }
     if (name.size() > 4 && name.compare(name.size() - 4, 4, ".npy") == 0) {
       name.erase(name.size() - 4);
     }

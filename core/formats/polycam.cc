@@ -66,13 +66,8 @@ CaptureRecording ReadPolycam(const std::string& path) {
     K(0, 2) = JsonNumber(camera, "cx", source, "");
     K(1, 2) = JsonNumber(camera, "cy", source, "");
     frame.K = FromArkitIntrinsics(K);
-    const double width = JsonNumber(camera, "width", source, "");
-    const double height = JsonNumber(camera, "height", source, "");
-    if (width < 1 || height < 1 || width != std::floor(width) || height != std::floor(height)) {
-      ThrowInput(source, 0, "\"width\" and \"height\" must be positive whole numbers of pixels");
-    }
-    frame.width = static_cast<int>(width);
-    frame.height = static_cast<int>(height);
+    frame.width = PixelSize(JsonNumber(camera, "width", source, ""), source, 0, "\"width\"");
+    frame.height = PixelSize(JsonNumber(camera, "height", source, ""), source, 0, "\"height\"");
     // The file name is the timestamp in microseconds (PolyCam/polyform README).
     int64_t microseconds = 0;
     if (camera.contains("timestamp") && camera["timestamp"].is_number()) {

@@ -22,11 +22,10 @@ CaptureRecording ReadRecord3d(const std::string& path) {
   recording.image_root = (root / "rgb").string();
   recording.files.push_back(metadata_path);
 
-  const double width = JsonNumber(metadata, "w", metadata_path, "");
-  const double height = JsonNumber(metadata, "h", metadata_path, "");
-  if (width < 1 || height < 1 || width != std::floor(width) || height != std::floor(height)) {
-    ThrowInput(metadata_path, 0, "\"w\" and \"h\" must be positive whole numbers of pixels");
-  }
+  const int width =
+      PixelSize(JsonNumber(metadata, "w", metadata_path, ""), metadata_path, 0, "\"w\"");
+  const int height =
+      PixelSize(JsonNumber(metadata, "h", metadata_path, ""), metadata_path, 0, "\"h\"");
   const std::vector<double> k = JsonNumbers(metadata, "K", 9, metadata_path, "");
   const Eigen::Matrix3d shared_K = Eigen::Map<const Eigen::Matrix3d>(k.data());  // column-major
 
@@ -83,8 +82,8 @@ CaptureRecording ReadRecord3d(const std::string& path) {
       K(1, 2) = c[3];
     }
     frame.K = FromArkitIntrinsics(K);
-    frame.width = static_cast<int>(width);
-    frame.height = static_cast<int>(height);
+    frame.width = width;
+    frame.height = height;
     if (timestamps) {
       const json entry = {{"t", (*timestamps)[i]}};
       frame.time_s =

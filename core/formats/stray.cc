@@ -170,7 +170,8 @@ void AttachVideoFrames(const ImageSet& frames, const std::vector<DecodedFrame>& 
   if (capture_width > 0) {
     scale = double(width) / capture_width;
   } else if (std::abs(rx - 1.0) > 0.1 || std::abs(ry - 1.0) > 0.1) {
-    if (std::abs(rx / ry - 1.0) > 0.05) {
+    // The principal point of a rescaled copy lies at the same fraction of both sides (rx = ry > 0).
+    if (!(rx > 0 && ry > 0 && std::abs(rx / ry - 1.0) <= 0.05)) {
       ThrowInput(video.intrinsics_file, 0,
                  "the principal point (" + text::FormatDouble(K(0, 2)) + ", " +
                      text::FormatDouble(K(1, 2)) + ") is not near the centre of the decoded " +
@@ -181,14 +182,26 @@ void AttachVideoFrames(const ImageSet& frames, const std::vector<DecodedFrame>& 
     estimated = true;
   }
   if (scale != 1.0) {
-    const int from_w = static_cast<int>(std::lround(width / scale));
-    const int from_h = static_cast<int>(std::lround(height / scale));
-    K = ScaleK(K, from_w, from_h, width, height);
+    // One scale for both axes (the capture's frames have the decoded frames' aspect): focal lengths
+    // multiply, the principal point keeps its place measured from the image's corner. Not through
+    // ScaleK with the capture size rounded to whole pixels: a size that rounds to 0 divided by 0.
+    K(0, 0) *= scale;
+    K(0, 1) *= scale;
+    K(1, 1) *= scale;
+    K(0, 2) = (K(0, 2) + 0.5) * scale - 0.5;
+    K(1, 2) = (K(1, 2) + 0.5) * scale - 0.5;
+    char from[64];
+    std::snprintf(from, sizeof(from), "%.0fx%.0f", width / scale, height / scale);
+    if (!K.allFinite()) {
+      ThrowInput(video.intrinsics_file, 0,
+                 "the intrinsics scaled by " + text::FormatDouble(scale) + " from about " + from +
+                     " pixels to the decoded " + std::to_string(width) + "x" +
+                     std::to_string(height) + " frames are not finite");
+    }
     Warning warning{"intrinsics_rescaled",
-                    video.intrinsics_file + " is for about " + std::to_string(from_w) + "x" +
-                        std::to_string(from_h) + " pixels but the video decodes to " +
-                        std::to_string(width) + "x" + std::to_string(height) +
-                        ": focal lengths and principal point scaled by " +
+                    video.intrinsics_file + " is for about " + from +
+                        " pixels but the video decodes to " + std::to_string(width) + "x" +
+                        std::to_string(height) + ": focal lengths and principal point scaled by " +
                         text::FormatDouble(scale) +
                         (estimated ? " (estimated from the principal point; set "
                                      "dataset.capture_width for the exact ratio)"

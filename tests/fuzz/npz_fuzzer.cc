@@ -1,0 +1,22 @@
+// libFuzzer target: NumPy .npz archives (core/formats/npz.h, ReadNpz), the one binary format of the
+// capture readers (MobileBrick's cameras_arkit.npz; capture_mobilebrick reaches it only behind a
+// valid sequence folder).
+//
+// The input is the .npz file.
+#include <string>
+#include <string_view>
+
+#include "core/error.h"
+#include "core/formats/npz.h"
+#include "tests/fuzz/fuzz_util.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace raytime;
+  const std::string path = fuzz::ScratchPath("cameras.npz");
+  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
+  try {
+    ReadNpz(path);
+  } catch (const InputError&) {
+  }
+  return 0;
+}
