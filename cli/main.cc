@@ -14,8 +14,8 @@
 #include "core/formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
-#include "core/sweep_row.h"
 #include "core/process.h"
+#include "core/sweep_row.h"
 #include "core/version.h"
 #include "evaluate/campaign_report.h"
 #include "evaluate/pose_errors.h"
@@ -76,10 +76,12 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   }
   std::printf(
       "alignment %s, %d frames: rotation mean %.5f median %.5f deg; centre mean %.5f "
-      "median %.5f m; success (< %.2f deg): %s\n",
+      "median %.5f m; success (< %.2f deg): %s\n"
+      "relative rotation (no alignment), %d pairs: mean %.5f median %.5f deg\n",
       errors.alignment.c_str(), errors.num_frames, errors.mean_rotation_deg,
       errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m, success_deg,
-      errors.success ? "yes" : "no");
+      errors.success ? "yes" : "no", errors.num_relative_pairs, errors.mean_relative_rotation_deg,
+      errors.median_relative_rotation_deg);
   for (const auto& name : errors.only_in_estimate) {
     std::printf("not scored: %s has no ground truth\n", name.c_str());
   }

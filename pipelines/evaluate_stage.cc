@@ -48,9 +48,8 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
       Hdf5Writer writer(context.output_path);
       writer.WriteJson("metrics", metrics);
       writer.Commit();
-      return {{"metrics", metrics},
-              {"scored", false},
-              {"reason", "the dataset has no ground truth"}};
+      return {
+          {"metrics", metrics}, {"scored", false}, {"reason", "the dataset has no ground truth"}};
     }
     const PoseSet ground_truth =
         Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
@@ -63,9 +62,9 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
         const PoseErrorSummary errors = ComputePoseErrors(estimate, ground_truth, error_options);
         spdlog::info(
             "evaluate: {} ({}): rotation mean {:.4f}° median {:.4f}°, centre mean "
-            "{:.4f} m median {:.4f} m{}",
+            "{:.4f} m median {:.4f} m, relative rotation median {:.4f}°{}",
             name, alignment, errors.mean_rotation_deg, errors.median_rotation_deg,
-            errors.mean_centre_m, errors.median_centre_m,
+            errors.mean_centre_m, errors.median_centre_m, errors.median_relative_rotation_deg,
             errors.only_in_estimate.empty() && errors.only_in_ground_truth.empty()
                 ? ""
                 : " (some names did not join: see summary)");

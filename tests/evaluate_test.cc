@@ -110,6 +110,30 @@ TEST(PoseErrorsTest, Sim3AlignmentRecoversAKnownSimilarity) {
   EXPECT_EQ(se3.gt_from_estimate.scale, 1.0);
   EXPECT_LT(se3.mean_rotation_deg, 1e-9);
   EXPECT_GT(se3.mean_centre_m, 1.0);
+
+  // Relative rotations need no alignment: the similarity's 0.8 rad cancels in every one.
+  for (const PoseErrorSummary* errors : {&sim3, &none, &se3}) {
+    EXPECT_EQ(errors->num_relative_pairs, 55);
+    EXPECT_LT(errors->mean_relative_rotation_deg, 1e-9);
+  }
+}
+
+TEST(PoseErrorsTest, RelativeRotationErrorCountsOnlyThePairsOfATurnedFrame) {
+  const PoseSet gt = ArcScene(5);
+  PoseSet estimate = gt;
+  // One camera turned by 2° about its own axes: of the 10 pairs the 4 that include it are off by
+  // exactly 2°, the 6 others by nothing, so the mean is 0.8° and the median 0.
+  Rigid3& turned = estimate.world_from_cam.at(FrameName(2));
+  turned.rotation =
+      turned.rotation * Eigen::Quaterniond(Eigen::AngleAxisd(
+                            RadiansFromDegrees(2.0), Eigen::Vector3d(1, 2, 3).normalized()));
+  PoseErrorOptions options;
+  options.alignment = "none";
+  const PoseErrorSummary errors = ComputePoseErrors(estimate, gt, options);
+  EXPECT_EQ(errors.num_relative_pairs, 10);
+  EXPECT_NEAR(errors.mean_relative_rotation_deg, 0.8, 1e-9);
+  EXPECT_NEAR(errors.median_relative_rotation_deg, 0.0, 1e-9);
+  EXPECT_NEAR(errors.mean_rotation_deg, 2.0 / 5.0, 1e-9);
 }
 
 TEST(PoseErrorsTest, IidPerturbationErrorsEqualTheInjectedMagnitudes) {
@@ -189,6 +213,7 @@ TEST(PoseErrorsTest, StatisticsAndSceneScale) {
   for (const char* key :
        {"alignment", "num_frames", "mean_rotation_deg", "median_rotation_deg", "mean_centre_m",
         "median_centre_m", "scene_scale_m", "mean_centre_relative", "median_centre_relative",
+        "num_relative_pairs", "mean_relative_rotation_deg", "median_relative_rotation_deg",
         "success", "gt_from_estimate", "only_in_estimate", "only_in_ground_truth"}) {
     EXPECT_TRUE(json.contains(key)) << key;
   }
