@@ -7,10 +7,21 @@
 
 namespace raytime {
 
-// Bad user input: a file that does not parse, a missing image, an unknown option key.
+// The offset of the first byte of `text` outside a well-formed UTF-8 sequence (RFC 3629: no
+// overlong forms, surrogates or code points beyond U+10FFFF), or std::string::npos.
+size_t InvalidUtf8Offset(const std::string& text);
+
+// `text` with every byte outside a well-formed UTF-8 sequence written as \xHH. Messages quote file
+// names and file contents, which on Linux are bytes; summary.json, HDF5 string attributes and the
+// JSON on stdout hold only UTF-8, and a message must survive into them.
+std::string EscapeInvalidUtf8(const std::string& text);
+
+// Bad user input: a file that does not parse, a missing image, an unknown option key. The message
+// is escaped (EscapeInvalidUtf8) so that reporting it never fails.
 class InputError : public std::runtime_error {
  public:
-  using std::runtime_error::runtime_error;
+  explicit InputError(const std::string& message)
+      : std::runtime_error(EscapeInvalidUtf8(message)) {}
 };
 
 // "path:line: message" (line omitted when 0).

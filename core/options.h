@@ -49,9 +49,6 @@ std::string UnknownKeyMessage(const std::string& what, const std::string& key,
 // 1-based line of a YAML node, 0 when the node has no mark.
 int YamlLine(const YAML::Node& node);
 
-// The offset of the first byte of `text` outside a well-formed UTF-8 sequence (RFC 3629: no
-// overlong forms, surrogates or code points beyond U+10FFFF), or std::string::npos.
-size_t InvalidUtf8Offset(const std::string& text);
 // InputError at `path`:`line` unless `text` is UTF-8: options, names and paths from YAML end up
 // in JSON (provenance, content hashes, summary.json), which holds nothing else. The message
 // names the offending byte without repeating it.

@@ -1,13 +1,22 @@
 #include "core/warnings.h"
 
+#include "core/error.h"
+
 namespace raytime {
 
+// Messages and names may quote file names and contents that are not UTF-8 (EscapeInvalidUtf8);
+// summary.json must still be written.
 nlohmann::json Warning::ToJson() const {
-  nlohmann::json out = {{"code", code}, {"message", message}};
-  if (!images.empty()) out["images"] = images;
+  nlohmann::json out = {{"code", code}, {"message", EscapeInvalidUtf8(message)}};
+  if (!images.empty()) {
+    out["images"] = nlohmann::json::array();
+    for (const std::string& image : images) out["images"].push_back(EscapeInvalidUtf8(image));
+  }
   if (!pairs.empty()) {
     out["pairs"] = nlohmann::json::array();
-    for (const auto& [a, b] : pairs) out["pairs"].push_back({a, b});
+    for (const auto& [a, b] : pairs) {
+      out["pairs"].push_back({EscapeInvalidUtf8(a), EscapeInvalidUtf8(b)});
+    }
   }
   if (!details.empty()) out["details"] = details;
   return out;

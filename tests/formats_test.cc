@@ -16,6 +16,7 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/formats/colmap_model.h"
+#include "core/formats/dataset.h"
 #include "core/formats/nerfstudio.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
@@ -286,6 +287,23 @@ TEST(Formats, TumRoundTrip) {
   const std::string count =
       InputErrorOf([&] { ReadTumTrajectory(tmp / "timed.txt", {"only_one.jpg"}); });
   EXPECT_NE(count.find("1 names"), std::string::npos) << count;
+}
+
+TEST(Formats, ImageNamesThatAreNotUtf8AreRefusedWithAPrintableMessage) {
+  // A Linux file name is bytes; summary.json, COLMAP models and transforms.json hold UTF-8 names.
+  TempDir tmp("formats");
+  fs::create_directories(tmp / "model");
+  WriteFile(tmp / "model/cameras.txt", "1 PINHOLE 100 80 90 90 50 40\n");
+  WriteFile(tmp / "model/images.txt", "1 1 0 0 0 0 0 0 1 a\xff.jpg\n\n");
+  WriteFile(tmp / "model/points3D.txt", "");
+  const std::string message = InputErrorOf([&] { ReadPoseFile("colmap", tmp / "model"); });
+  EXPECT_NE(message.find("image name 'a\\xFF.jpg' is not UTF-8 text (byte 0xFF at offset 1)"),
+            std::string::npos)
+      << message;
+  EXPECT_EQ(InvalidUtf8Offset(message), std::string::npos);  // the message itself is printable
+
+  EXPECT_EQ(EscapeInvalidUtf8("d\xe9mo \xc3\xa9 \xe2\x82"), "d\\xE9mo \xc3\xa9 \\xE2\\x82");
+  EXPECT_EQ(std::string(InputError("x\xff").what()), "x\\xFF");
 }
 
 std::string SharedData(const std::string& relative) {

@@ -1,6 +1,7 @@
 #include "core/formats/dataset.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 
 #include "core/error.h"
@@ -76,6 +77,27 @@ std::string TransformsPath(const std::string& path, const std::string& file) {
   return fs::is_directory(path) ? (fs::path(path) / file).string() : path;
 }
 
+// Image names end up in COLMAP models, transforms.json, HDF5 and summary.json, all UTF-8; a file
+// name is bytes on Linux. Refused here, once, rather than written back altered.
+void RequireUtf8Names(const std::vector<std::string>& names, const std::string& source) {
+  for (const std::string& name : names) {
+    const size_t offset = InvalidUtf8Offset(name);
+    if (offset == std::string::npos) continue;
+    char hex[8];
+    std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(name[offset]));
+    ThrowInput(source, 0,
+               "image name '" + name + "' is not UTF-8 text (byte " + hex + " at offset " +
+                   std::to_string(offset) +
+                   "); rename it: COLMAP models, transforms.json and summary.json hold names as "
+                   "UTF-8");
+  }
+}
+
+void RequireUtf8Names(const Dataset& dataset, const std::string& source) {
+  RequireUtf8Names(Names(dataset.images), source);
+  if (dataset.capture) RequireUtf8Names(Names(*dataset.capture), source);
+}
+
 }  // namespace
 
 Dataset LoadDataset(const DatasetOptions& options) {
@@ -116,6 +138,7 @@ Dataset LoadDataset(const DatasetOptions& options) {
     // The frames are decoded by the caller (AttachVideoFrames); nothing more to check here.
     dataset = ReadStray(options.root);
     std::sort(dataset.files.begin(), dataset.files.end());
+    RequireUtf8Names(dataset, options.root);
     return dataset;
   } else {
     throw InputError(
@@ -131,6 +154,8 @@ Dataset LoadDataset(const DatasetOptions& options) {
   }
   std::sort(dataset.files.begin(), dataset.files.end());
   if (poses.size() > 0) dataset.ground_truth = std::move(poses);
+  RequireUtf8Names(dataset, options.root);
+  if (dataset.ground_truth) RequireUtf8Names(Names(*dataset.ground_truth), options.root);
   return dataset;
 }
 
@@ -166,6 +191,7 @@ PoseSet ReadPoseFile(const std::string& format, const std::string& path, const I
   } else {
     throw InputError(UnknownKeyMessage("pose files", format, kPoseFileFormats, "format"));
   }
+  RequireUtf8Names(Names(poses), path);
   return poses;
 }
 
