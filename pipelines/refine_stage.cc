@@ -191,13 +191,21 @@ nlohmann::json RefinedIntrinsicsJson(const ImageSet& images, const PoseSet& refi
 void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
                           Warnings* warnings) {
   if (summary.returned_prior) {
-    warnings->push_back({"returned_prior",
-                         "guardrail " + summary.guardrails_fired.front() +
-                             " fired: the refined poses of these images are the prior's, "
-                             "unrefined",
-                         names,
-                         {},
-                         {{"fired", summary.guardrails_fired}}});
+    // The trust region fires when the matches pull the solution far from the prior: most often a
+    // prior several degrees off, which the basin configuration is for (§4.8).
+    const bool trust_region = summary.guardrails_fired.front() == "trust_region";
+    warnings->push_back(
+        {"returned_prior",
+         "guardrail " + summary.guardrails_fired.front() +
+             " fired: the refined poses of these images are the prior's, "
+             "unrefined" +
+             (trust_region ? std::string("; for a prior more than ~2° off, refine with "
+                                         "preset basin (no orientation prior, no trust "
+                                         "region)")
+                           : std::string()),
+         names,
+         {},
+         {{"fired", summary.guardrails_fired}}});
   }
   const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
   if (pairs.fired) {
