@@ -8,6 +8,7 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 
 #include "core/error.h"
 #include "core/formats/colmap_model.h"
@@ -187,6 +188,19 @@ TEST(RefineStageTest, DisconnectedGraphIsRefinedPerComponentAndSaidSo) {
   EXPECT_EQ((*warning)["details"]["component_sizes"], nlohmann::json::array({5, 3}));
   EXPECT_EQ((*warning)["images"], nlohmann::json::array({"0005.jpg", "0006.jpg", "0007.jpg"}));
   ASSERT_EQ(summary["components"].size(), 2u);
+  // Both solves' observations, their images renumbered into one list.
+  const RayTimeObservations rays = Hdf5Reader(dir / "refine.h5").ReadRayTimes("refined");
+  EXPECT_EQ(rays.image_names.size(), 8u);
+  ASSERT_GT(rays.matches.rows(), 0);
+  std::set<bool> components_matched;
+  for (Eigen::Index m = 0; m < rays.matches.rows(); ++m) {
+    const std::string& a = rays.image_names[rays.observations(rays.matches(m, 0), 0)];
+    const std::string& b = rays.image_names[rays.observations(rays.matches(m, 1), 0)];
+    EXPECT_NE(a, b);
+    EXPECT_EQ(a < "0005.jpg", b < "0005.jpg") << "a match across the components: " << a << b;
+    components_matched.insert(a < "0005.jpg");
+  }
+  EXPECT_EQ(components_matched.size(), 2u);
   // Each piece, in its own gauge, recovers its poses from the 1° prior.
   for (const auto& [begin, end] : {std::pair<int, int>{0, 5}, std::pair<int, int>{5, 8}}) {
     PoseSet estimate, truth;
@@ -337,6 +351,11 @@ TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   const nlohmann::json* returned = FindWarning(summary, "returned_prior");
   ASSERT_NE(returned, nullptr) << summary["warnings"].dump();
   EXPECT_EQ((*returned)["images"].size(), 5u);
+  // Only the returned solve's observations are kept for the export's points.
+  const RayTimeObservations rays = Hdf5Reader(dir / "refine.h5").ReadRayTimes("refined");
+  EXPECT_EQ(rays.image_names, (std::vector<std::string>{"0005.jpg", "0006.jpg", "0007.jpg"}));
+  EXPECT_GT(rays.observations.rows(), 0);
+  EXPECT_GT(rays.matches.rows(), 0);
   const nlohmann::json exported = RunExport(dir);
   const nlohmann::json* left_out = FindWarning(exported, "unrefined_not_exported");
   ASSERT_NE(left_out, nullptr) << exported.dump();
