@@ -411,7 +411,11 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
   for (const std::string& name : split.test) extras["test_filenames"].push_back("images/" + name);
   if (!tracks.empty()) extras["ply_file_path"] = "sparse_pc.ply";
 
-  for (const auto& [name, set] : poses) {
+  for (const auto& [name, all_poses] : poses) {
+    PoseSet set;  // the exported images' poses only
+    for (const ImageInfo* info : ordered) {
+      set.world_from_cam[info->name] = all_poses.world_from_cam.at(info->name);
+    }
     // The points in this pose set's frame.
     Sim3 to_set;
     std::string frame = "none";

@@ -149,7 +149,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrainerExportSummary, pose_sets, directories,
                                    seconds)
 
 // Writes <root>/<pose set>/ for each of `poses` (name -> poses), each folder atomically. `images`
-// lists exactly the images to export (each with a pose in every set; the caller decides which),
+// lists exactly the images to export (each with a pose in every set, which may hold more; the
+// caller decides which),
 // with their distorted cameras; the files are read from images.image_root. `source`, when given,
 // supplies the points: in the source's own pose set as solved, in any other through the Sim(3)
 // that maps the source's camera centres onto that set's (Umeyama, over the exported images);
