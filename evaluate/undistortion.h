@@ -30,13 +30,16 @@ struct UndistortionOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("undistort_blank_pixels", blank_pixels,
-      "Undistorted image: 0 = no black borders (crop), 1 = keep every distorted pixel (as colmap "
+      "3dgs: undistorted image: 0 = no black borders (crop), 1 = keep every distorted pixel (as "
+      "colmap "
       "image_undistorter --blank_pixels)",
       NonNegative(), AtMost(1.0));
     v("undistort_min_scale", min_scale,
-      "Smallest change of the undistorted image's size, factor (colmap --min_scale)", Positive());
+      "3dgs: smallest change of the undistorted image's size, factor (colmap --min_scale)",
+      Positive());
     v("undistort_max_scale", max_scale,
-      "Largest change of the undistorted image's size, factor (colmap --max_scale)", Positive());
+      "3dgs: largest change of the undistorted image's size, factor (colmap --max_scale)",
+      Positive());
   }
   void CheckRelations(const Requirement& require) const {
     require(min_scale <= max_scale, "undistort_min_scale must not exceed undistort_max_scale");
