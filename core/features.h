@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "core/geometry.h"
 
@@ -50,6 +52,22 @@ struct PairMatches {
   int image2 = 0;
   Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
   TwoViewGeometry geometry;
+};
+
+// The observations of a ray-time solve and where along its ray the solve put each (SPEC §3 "Ray
+// point": X = O + t·D), stored beside the pose set it solved for (/ray_times/<pose set>,
+// docs/hdf5_schema.md). The 3DGS export places its initial points there without triangulating.
+struct RayTimeObservations {
+  std::vector<std::string> image_names;  // the solve's images
+  // Rows: row of image_names, keypoint row in that image's /features.
+  Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> observations;
+  // Rows: the keypoint, pixels (OpenCV convention, distorted as observed).
+  Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor> pixels;
+  // Per observation: distance from the camera centre along the unit ray, length units of the
+  // pose set; NaN for an observation that owns no ray time (the anchored variant's non-anchors).
+  Eigen::VectorXd ray_times;
+  // The solve's used matches, as rows of `observations`.
+  Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
 };
 
 }  // namespace raytime

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <ctime>
 #include <filesystem>
 #include <stdexcept>
@@ -188,6 +189,37 @@ void Hdf5Writer::WritePoseSet(const std::string& name, const PoseSet& poses, Pos
   hdf5::WriteMatrix(c, group.get(), "centre", centre);
   hdf5::WriteStringAttribute(c, group.get(), "role", PoseRoleName(role));
   WriteProvenance(c, group.get(), provenance);
+}
+
+void Hdf5Writer::WriteRayTimes(const std::string& pose_set, const RayTimeObservations& rays) {
+  hdf5::CheckLinkName("pose set", pose_set);
+  const auto n = rays.observations.rows();
+  if (rays.pixels.rows() != n || rays.ray_times.size() != n) {
+    throw std::invalid_argument("ray times of '" + pose_set + "': " + std::to_string(n) +
+                                " observations, " + std::to_string(rays.pixels.rows()) +
+                                " pixels, " + std::to_string(rays.ray_times.size()) + " ray times");
+  }
+  for (Eigen::Index o = 0; o < n; ++o) {
+    if (rays.observations(o, 0) >= rays.image_names.size()) {
+      throw std::invalid_argument("ray times of '" + pose_set + "': observation " +
+                                  std::to_string(o) + " names image row " +
+                                  std::to_string(rays.observations(o, 0)) + " of " +
+                                  std::to_string(rays.image_names.size()));
+    }
+  }
+  if (rays.matches.size() > 0 && rays.matches.maxCoeff() >= n) {
+    throw std::invalid_argument("ray times of '" + pose_set + "': a match names observation " +
+                                std::to_string(rays.matches.maxCoeff()) + " of " +
+                                std::to_string(n));
+  }
+  const hdf5::Context& c = impl_->context;
+  const hdf5::Id parent = impl_->OpenOrCreate("ray_times");
+  const hdf5::Id group = hdf5::CreateGroup(c, parent.get(), pose_set);
+  hdf5::WriteStrings(c, group.get(), "image_names", rays.image_names);
+  hdf5::WriteMatrix(c, group.get(), "observations", rays.observations);
+  hdf5::WriteMatrix(c, group.get(), "pixels", rays.pixels);
+  hdf5::WriteArray(c, group.get(), "ray_time", rays.ray_times.data(), {static_cast<hsize_t>(n)});
+  hdf5::WriteMatrix(c, group.get(), "matches", rays.matches);
 }
 
 void Hdf5Writer::WriteFeatures(const std::vector<ImageFeatures>& features,
@@ -460,6 +492,52 @@ std::vector<PairMatches> Hdf5Reader::ReadMatches(Provenance* provenance) const {
   std::sort(out.begin(), out.end(), [](const PairMatches& a, const PairMatches& b) {
     return std::make_pair(a.image1, a.image2) < std::make_pair(b.image1, b.image2);
   });
+  return out;
+}
+
+bool Hdf5Reader::HasRayTimes(const std::string& pose_set) const {
+  if (!hdf5::HasLink(impl_->file.get(), "ray_times")) return false;
+  const hdf5::Id group = hdf5::OpenGroup(impl_->context, impl_->file.get(), "ray_times");
+  return hdf5::HasLink(group.get(), pose_set);
+}
+
+RayTimeObservations Hdf5Reader::ReadRayTimes(const std::string& pose_set) const {
+  const hdf5::Context& c = impl_->context;
+  if (!HasRayTimes(pose_set)) {
+    c.Fail("no ray times of pose set '" + pose_set + "' (/ray_times/" + pose_set +
+           "; a refine stage writes them beside its pose set)");
+  }
+  const hdf5::Id parent = hdf5::OpenGroup(c, impl_->file.get(), "ray_times");
+  const hdf5::Id group = hdf5::OpenGroup(c, parent.get(), pose_set);
+  RayTimeObservations out;
+  out.image_names = hdf5::ReadStrings(c, group.get(), "image_names", -1);
+  out.observations =
+      hdf5::ReadMatrix<decltype(out.observations)>(c, group.get(), "observations", -1, 2);
+  const int64_t n = out.observations.rows();
+  out.pixels = hdf5::ReadMatrix<decltype(out.pixels)>(c, group.get(), "pixels", n, 2);
+  const auto ray_time = hdf5::ReadArray<double>(c, group.get(), "ray_time", {n});
+  out.ray_times = Eigen::Map<const Eigen::VectorXd>(ray_time.data.data(), n);
+  out.matches = hdf5::ReadMatrix<decltype(out.matches)>(c, group.get(), "matches", -1, 2);
+  const std::string what = "/ray_times/" + pose_set;
+  for (int64_t o = 0; o < n; ++o) {
+    if (out.observations(o, 0) >= out.image_names.size()) {
+      c.Fail(what + ": observation " + std::to_string(o) + " names image row " +
+             std::to_string(out.observations(o, 0)) + " but there are " +
+             std::to_string(out.image_names.size()) + " images");
+    }
+    const double t = out.ray_times(o);
+    if (!std::isnan(t) && !(t > 0 && std::isfinite(t))) {
+      c.Fail(what + ": observation " + std::to_string(o) + " has ray time " + std::to_string(t) +
+             " (expected a positive number, or NaN for none)");
+    }
+    if (!out.pixels.row(o).allFinite()) {
+      c.Fail(what + ": observation " + std::to_string(o) + " has a pixel that is not finite");
+    }
+  }
+  if (out.matches.size() > 0 && out.matches.maxCoeff() >= n) {
+    c.Fail(what + ": a match names observation " + std::to_string(out.matches.maxCoeff()) +
+           " but there are " + std::to_string(n) + " observations");
+  }
   return out;
 }
 

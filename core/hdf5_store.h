@@ -37,6 +37,9 @@ class Hdf5Writer {
   // features[i] belongs to image i of the image list written with WriteImages.
   void WriteFeatures(const std::vector<ImageFeatures>& features, const Provenance& provenance);
   void WriteMatches(const std::vector<PairMatches>& pairs, const Provenance& provenance);
+  // Group /ray_times/<pose_set>: a ray-time solve's observations beside the pose set it solved
+  // for. Throws std::invalid_argument on inconsistent sizes or indices out of range.
+  void WriteRayTimes(const std::string& pose_set, const RayTimeObservations& rays);
   // Free-form JSON document (stage summaries, metrics) stored as a string dataset /json/<name>.
   void WriteJson(const std::string& name, const nlohmann::json& value);
 
@@ -73,6 +76,11 @@ class Hdf5Reader {
 
   bool HasMatches() const;
   std::vector<PairMatches> ReadMatches(Provenance* provenance = nullptr) const;
+
+  bool HasRayTimes(const std::string& pose_set) const;
+  // Fails (InputError naming the file) on inconsistent sizes, indices out of range or a ray time
+  // that is neither positive nor NaN.
+  RayTimeObservations ReadRayTimes(const std::string& pose_set) const;
 
   bool HasJson(const std::string& name) const;
   nlohmann::json ReadJson(const std::string& name) const;

@@ -1,15 +1,21 @@
 // The `export` stage: pose sets out of the work directory in the formats users train on
-// (COLMAP model for 3DGS, nerfstudio transforms.json, TUM trajectory; SPEC §7).
+// (COLMAP model for 3DGS, nerfstudio transforms.json, TUM trajectory; SPEC §7), and the
+// trainer-ready 3DGS folders (format 3dgs: undistorted images, PINHOLE model, initial points from
+// the ray times, split; evaluate/trainer_export.h).
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <map>
+#include <optional>
 
+#include "core/error.h"
 #include "core/formats/colmap_model.h"
 #include "core/formats/nerfstudio.h"
 #include "core/formats/tum.h"
-#include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
+#include "evaluate/trainer_export.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;
@@ -18,21 +24,38 @@ namespace raytime {
 namespace {
 
 const std::vector<std::string> kExportFormats = {"colmap_text", "colmap_binary", "transforms_json",
-                                                 "tum"};
+                                                 "tum", "3dgs"};
 
 struct ExportStageOptions {
   std::vector<std::string> poses = {"prior"};
   // colmap_text -> WORKDIR/<poses>/ ; colmap_binary -> WORKDIR/<poses>_bin/ ;
-  // transforms_json -> WORKDIR/<poses>_transforms.json ; tum -> WORKDIR/<poses>_tum.txt
+  // transforms_json -> WORKDIR/<poses>_transforms.json ; tum -> WORKDIR/<poses>_tum.txt ;
+  // 3dgs -> WORKDIR/3dgs/<poses>/ (trainer-ready: images, sparse/0, transforms.json, test.txt)
   std::vector<std::string> formats = {"colmap_text", "transforms_json"};
+  // 3dgs: whose ray times become the initial points. "auto": the first of `poses` a refine stage
+  // wrote them for (none: no points, with a warning); "none": no points (the paper's Table 4
+  // protocol initializes every source from the same random points, §4.5); else a pose set name.
+  std::string points_from = "auto";
+  TrainerExportOptions trainer;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("poses", poses, "Pose sets to write (e.g. refined)", NonEmpty());
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
-      "<poses>_transforms.json, tum -> <poses>_tum.txt",
+      "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
+      "images, PINHOLE model, points, split)",
       OneOf(kExportFormats));
+    v("points_from", points_from,
+      "3dgs: pose set whose refine ray times give the initial points3D; auto = the first listed "
+      "pose set that has them, none = no points",
+      NonEmpty());
+    trainer.VisitFields(v);  // flat keys: undistort_blank_pixels, test_every, ...
+  }
+  void CheckRelations(const Requirement& require) const { trainer.CheckRelations(require); }
+
+  bool Has3dgs() const {
+    return std::find(formats.begin(), formats.end(), "3dgs") != formats.end();
   }
 };
 
@@ -40,6 +63,7 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
   if (format == "colmap_text") return poses;
   if (format == "colmap_binary") return poses + "_bin";
   if (format == "transforms_json") return poses + "_transforms.json";
+  if (format == "3dgs") return "3dgs/" + poses;
   return poses + "_tum.txt";
 }
 
@@ -47,8 +71,7 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
 // images a guardrail returned unrefined: users train on these files, and a prior pose under the
 // name "refined" is a quiet wrong answer. Each left-out image is named in a warning; a set with
 // nothing left is an error, so the run fails instead of writing an empty model.
-PoseSet ExportablePoses(const StageContext& context, const std::string& name,
-                        Warnings* warnings) {
+PoseSet ExportablePoses(const StageContext& context, const std::string& name, Warnings* warnings) {
   const Hdf5Reader reader(context.Require(PoseArtifact(name)));
   PoseRole role = PoseRole::kPrior;
   PoseSet poses = reader.ReadPoseSet(name, &role);
@@ -79,11 +102,19 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
  public:
   std::string type() const override { return "export"; }
   std::string description() const override {
-    return "Write pose sets as COLMAP models, transforms.json or TUM trajectories";
+    return "Write pose sets as COLMAP models, transforms.json, TUM trajectories or trainer-ready "
+           "3DGS "
+           "folders";
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
     for (const auto& name : options_.poses) inputs.push_back(PoseArtifact(name));
+    // A named source of points outside `poses` (its ray times live beside its pose set).
+    const std::string& source = options_.points_from;
+    if (options_.Has3dgs() && source != "auto" && source != "none" &&
+        std::find(options_.poses.begin(), options_.poses.end(), source) == options_.poses.end()) {
+      inputs.push_back(PoseArtifact(source));
+    }
     return inputs;
   }
   std::vector<std::string> ExtraOutputs() const override {
@@ -98,9 +129,12 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     const ImageSet images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
     nlohmann::json written = nlohmann::json::array();
     Warnings warnings;
+    std::map<std::string, PoseSet> exportable;
     for (const auto& name : options_.poses) {
       const PoseSet poses = ExportablePoses(context, name, &warnings);
+      exportable[name] = poses;
       for (const auto& format : options_.formats) {
+        if (format == "3dgs") continue;  // all pose sets at once, below
         const std::string path = (fs::path(context.workdir) / ExportPath(name, format)).string();
         if (format == "colmap_text") {
           WriteColmapModelText(ToColmapModel(images, poses), path);
@@ -115,11 +149,102 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
         written.push_back(path);
       }
     }
+    nlohmann::json result = {{"written", written}};
+    if (options_.Has3dgs()) {
+      const TrainerExportSummary summary = Export3dgs(context, images, exportable, &warnings);
+      for (const std::string& dir : summary.directories) written.push_back(dir);
+      result["written"] = written;
+      result["3dgs"] = summary;
+    }
     // The HDF5 output records what was exported, so a skipped rerun can report it.
     Hdf5Writer writer(context.output_path);
     writer.WriteJson("exported", written);
     writer.Commit();
-    return {{"written", written}, {"warnings", WarningsToJson(warnings)}};
+    result["warnings"] = WarningsToJson(warnings);
+    return result;
+  }
+
+ private:
+  // The trainer-ready folders of every listed pose set at once: one image list (the images with a
+  // pose in every set, so that the sets differ only in their poses; the others are named in a
+  // warning), one split, one set of tracks.
+  TrainerExportSummary Export3dgs(const StageContext& context, const ImageSet& images,
+                                  const std::map<std::string, PoseSet>& poses,
+                                  Warnings* warnings) const {
+    ImageSet common = images;
+    common.images.clear();
+    Warning left_out{
+        "not_in_every_pose_set", "", {}, {}, {{"missing_from", nlohmann::json::object()}}};
+    for (const ImageInfo& image : images.images) {
+      bool everywhere = true;
+      for (const auto& [name, set] : poses) {
+        if (set.Has(image.name)) continue;
+        everywhere = false;
+        left_out.details["missing_from"][name].push_back(image.name);
+      }
+      if (everywhere) {
+        common.images.push_back(image);
+      } else {
+        left_out.images.push_back(image.name);
+      }
+    }
+    if (common.images.empty()) {
+      throw InputError("export (3dgs): no image has a pose in every listed pose set (" +
+                       std::to_string(images.images.size()) +
+                       " images); the exports of the pose sets must share their images");
+    }
+    if (!left_out.images.empty()) {
+      left_out.message = std::to_string(left_out.images.size()) +
+                         " image(s) lack a pose in some listed pose set and are left out of "
+                         "every 3dgs export, so that all pose sets share images and split";
+      warnings->push_back(left_out);
+      spdlog::warn("export (3dgs): {}", left_out.message);
+    }
+
+    std::optional<RayTimeSource> source;
+    std::string from = options_.points_from;
+    if (from == "auto") {
+      from = "none";
+      for (const std::string& name : options_.poses) {
+        if (Hdf5Reader(context.Require(PoseArtifact(name))).HasRayTimes(name)) {
+          from = name;
+          break;
+        }
+      }
+    }
+    if (from != "none") {
+      const Hdf5Reader reader(context.Require(PoseArtifact(from)));
+      if (reader.HasRayTimes(from)) {
+        const auto listed = poses.find(from);
+        source =
+            RayTimeSource{from, listed != poses.end() ? listed->second : reader.ReadPoseSet(from),
+                          reader.ReadRayTimes(from)};
+      } else {
+        warnings->push_back(
+            {"no_initial_points",
+             "pose set '" + from + "' (export.points_from) has no ray times in " + reader.path() +
+                 " (a refine stage writes them beside its pose set); the 3dgs exports have no "
+                 "initial points",
+             {},
+             {},
+             {{"points_from", from}}});
+        spdlog::warn("export (3dgs): {}", warnings->back().message);
+      }
+    }
+    // ExportForTrainers warns when it has no source; a stated reason above says it once.
+    Warnings export_warnings;
+    const TrainerExportSummary summary =
+        ExportForTrainers(common, poses, source, options_.trainer,
+                          (fs::path(context.workdir) / "3dgs").string(), &export_warnings);
+    for (const Warning& warning : export_warnings) {
+      const bool said = warning.code == "no_initial_points" && !source &&
+                        std::any_of(warnings->begin(), warnings->end(),
+                                    [](const Warning& w) { return w.code == "no_initial_points"; });
+      if (!said && !(options_.points_from == "none" && warning.code == "no_initial_points")) {
+        warnings->push_back(warning);
+      }
+    }
+    return summary;
   }
 };
 

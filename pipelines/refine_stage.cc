@@ -1,9 +1,10 @@
 // The `refine` stage: the ray-time refiner (refine/, SPEC §3) on the front end's verified matches
 // from the pose set "prior" (option `prior`), each image with its own camera's intrinsics. Writes
-// the pose set "refined" ("refined@NAME" for a stage id refine@NAME), the run summary as
-// /json/refine_summary and, when self-calibrating, the refined intrinsics per camera (a new
-// /images + /cameras group, so later stages such as export use them, and
-// /json/refined_intrinsics).
+// the pose set "refined" ("refined@NAME" for a stage id refine@NAME), beside it the solved
+// observations and their ray times (/ray_times/<pose set>, for the 3DGS export's initial points;
+// only of solves whose poses are returned), the run summary as /json/refine_summary and, when
+// self-calibrating, the refined intrinsics per camera (a new /images + /cameras group, so later
+// stages such as export use them, and /json/refined_intrinsics).
 //
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
 // in the environment, else the source tree's configs/presets); a key given explicitly in the
@@ -186,6 +187,32 @@ nlohmann::json RefinedIntrinsicsJson(const ImageSet& images, const PoseSet& refi
   return out;
 }
 
+// Appends one solve's observations, ray times and used matches to `rays` (its images by name).
+void AppendRayTimes(const RefineInput& input, const SolvedObservations& solved,
+                    const std::vector<std::string>& names, RayTimeObservations* rays) {
+  const auto image_offset = static_cast<uint32_t>(rays->image_names.size());
+  rays->image_names.insert(rays->image_names.end(), names.begin(), names.end());
+  const Eigen::Index start = rays->observations.rows();
+  const Eigen::Index n = solved.observations.rows();
+  rays->observations.conservativeResize(start + n, 2);
+  rays->pixels.conservativeResize(start + n, 2);
+  rays->ray_times.conservativeResize(start + n);
+  for (Eigen::Index o = 0; o < n; ++o) {
+    const int image = solved.observations(o, 0);
+    const int keypoint = solved.observations(o, 1);
+    rays->observations.row(start + o) << image_offset + static_cast<uint32_t>(image),
+        static_cast<uint32_t>(keypoint);
+    rays->pixels.row(start + o) = input.keypoints[image].row(keypoint);
+    rays->ray_times(start + o) = solved.ray_times(o);
+  }
+  const Eigen::Index match_start = rays->matches.rows();
+  rays->matches.conservativeResize(match_start + solved.matches.rows(), 2);
+  for (Eigen::Index m = 0; m < solved.matches.rows(); ++m) {
+    rays->matches.row(match_start + m) << static_cast<uint32_t>(start + solved.matches(m, 0)),
+        static_cast<uint32_t>(start + solved.matches(m, 1));
+  }
+}
+
 // A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
 // written (the campaign reports score them), but never as if the solve had succeeded quietly.
 void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
@@ -320,6 +347,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // them out of a refined model rather than hand them to a trainer as refined.
     std::vector<std::string> unrefined;
     std::vector<CameraIntrinsics> cameras = images.cameras;
+    // Where each solve put its observations, for the solves whose poses are returned.
+    RayTimeObservations rays;
     for (size_t c = 0; c < num_solved; ++c) {
       std::vector<std::string> names;
       const RefineInput input =
@@ -345,7 +374,11 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       }
       fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
       returned_prior = returned_prior || summary.returned_prior;
-      if (summary.returned_prior) unrefined.insert(unrefined.end(), names.begin(), names.end());
+      if (summary.returned_prior) {
+        unrefined.insert(unrefined.end(), names.begin(), names.end());
+      } else {
+        AppendRayTimes(input, output.solved_observations, names, &rays);
+      }
       if (c == 0) {
         result = summary.ToJson();
         cameras = output.cameras;
@@ -368,6 +401,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     const std::string pose_set = context.OutputPoseSetName("refined");
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(pose_set, refined, PoseRole::kRefined, MakeProvenance(*this));
+    writer.WriteRayTimes(pose_set, rays);
     result["preset"] = options_.preset;
     result["pose_set"] = pose_set;
     result["num_refined"] = refined.size();

@@ -6,12 +6,15 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
+#include <limits>
 #include <string>
 #include <unordered_map>
 
 #include "core/error.h"
 #include "core/options.h"
+#include "core/statistics.h"
 #include "core/timing.h"
 #include "refine/camera_blocks.h"
 #include "refine/gauge_polish.h"
@@ -19,6 +22,7 @@
 #include "refine/guardrails.h"
 #include "refine/pair_consistency.h"
 #include "refine/problem_layout.h"
+#include "refine/ray_geometry.h"
 #include "refine/ray_time_init.h"
 #include "refine/ray_time_problem.h"
 
@@ -53,6 +57,43 @@ void ValidateInput(const RefineInput& input) {
 
 uint64_t KeyOf(const LayoutObservation& obs) {
   return (static_cast<uint64_t>(obs.image) << 32) | static_cast<uint32_t>(obs.keypoint);
+}
+
+// Norms of the cross-projection residuals π_target(X_source) − û_target (paper eqs. rij, rji)
+// at the given poses, intrinsics blocks and ray times (indexed as layout.ray_time_observation),
+// pixels, one per layout residual.
+std::vector<double> ResidualNorms(const RefineInput& input, const ProblemLayout& layout,
+                                  const std::vector<Rigid3>& world_from_cam,
+                                  const CameraBlocks& cameras,
+                                  const std::vector<double>& ray_times) {
+  std::vector<std::array<double, kPoseBlockSize>> poses(world_from_cam.size());
+  for (size_t i = 0; i < world_from_cam.size(); ++i) {
+    const Eigen::Quaterniond q = world_from_cam[i].rotation.normalized();
+    const Eigen::Vector3d& c = world_from_cam[i].translation;
+    poses[i] = {q.x(), q.y(), q.z(), q.w(), c.x(), c.y(), c.z()};
+  }
+  const auto undistorted = [&](const LayoutObservation& obs) {
+    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                             input.keypoints[obs.image](obs.keypoint, 1)};
+    Eigen::Vector2d u;
+    UndistortPixel(cameras.Of(obs.image).params.data(), pixel, u.data());
+    return u;
+  };
+  std::vector<double> norms;
+  norms.reserve(layout.residuals.size());
+  for (const CrossProjection& residual : layout.residuals) {
+    const LayoutObservation& source = layout.observations[residual.source];
+    const LayoutObservation& target = layout.observations[residual.target];
+    const Eigen::Vector2d u_source = undistorted(source);
+    Eigen::Vector3d point;
+    RayPointInWorld(cameras.Of(source.image).params.data(), poses[source.image].data(),
+                    ray_times[source.ray_time], u_source.data(), point.data());
+    Eigen::Vector2d projected;
+    ProjectWorldPoint(cameras.Of(target.image).params.data(), poses[target.image].data(),
+                      point.data(), projected.data());
+    norms.push_back((projected - undistorted(target)).norm());
+  }
+  return norms;
 }
 
 // What differs between the passes of one run.
@@ -145,7 +186,38 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
         solved_ray_times[t];
   }
+  // The polish moves cameras and ray times by one similarity: the residuals are the solve's.
+  std::vector<double> norms =
+      ResidualNorms(input, layout, state->world_from_cam, state->cameras, solved_ray_times);
+  pass.residual_median_px = Median(norms, 0.0);
+  if (!norms.empty()) {
+    const size_t rank = (norms.size() * 9 + 9) / 10 - 1;  // nearest rank: ceil(0.9 n) - 1
+    std::nth_element(norms.begin(), norms.begin() + rank, norms.end());
+    pass.residual_p90_px = norms[rank];
+  }
+  spdlog::info("refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px",
+               pass.name, pass.residual_median_px, pass.residual_p90_px);
   return pass;
+}
+
+// The last pass's observations, their solved ray times and its used matches (RefineOutput).
+SolvedObservations SolvedObservationsOf(const PassState& state) {
+  const ProblemLayout& layout = state.layout;
+  SolvedObservations out;
+  const auto n = static_cast<Eigen::Index>(layout.observations.size());
+  out.observations.resize(n, 2);
+  out.ray_times.setConstant(n, std::numeric_limits<double>::quiet_NaN());
+  for (Eigen::Index o = 0; o < n; ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    out.observations.row(o) << obs.image, obs.keypoint;
+    if (obs.ray_time >= 0) out.ray_times(o) = state.ray_time_by_observation.at(KeyOf(obs));
+  }
+  out.matches.resize(static_cast<Eigen::Index>(layout.matches.size()), 2);
+  for (size_t m = 0; m < layout.matches.size(); ++m) {
+    out.matches.row(static_cast<Eigen::Index>(m)) << layout.matches[m].observation1,
+        layout.matches[m].observation2;
+  }
+  return out;
 }
 
 // Per image pair with used matches, its median positive-ray epipolar distance at the last pass's
@@ -309,6 +381,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
 
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);
+  output->solved_observations = SolvedObservationsOf(state);
   output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
   output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
   summary.total_seconds = SecondsSince(start);

@@ -44,6 +44,18 @@ struct RefineInput {
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
 };
 
+// The last pass's observations and where the solve put them (paper §3.2, X = O + t·D): what an
+// export turns into initial 3D points without triangulating (evaluate/trainer_export.h).
+struct SolvedObservations {
+  // Rows: image (index into RefineInput's images), keypoint (row of its keypoints); sorted.
+  Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> observations;
+  // Per observation: its ray time at the solve, along the unit ray from the camera centre (length
+  // units of the prior); NaN for an observation that owns none (anchored: the non-anchors).
+  Eigen::VectorXd ray_times;
+  // The used matches (after the cap), as rows of `observations`.
+  Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
+};
+
 struct RefineOutput {
   std::vector<Rigid3> world_from_cam;  // the solution, or the prior when a guardrail fired
   // Per camera of the input: refined when self-calibrating (with intrinsics_sharing 'shared',
@@ -53,6 +65,8 @@ struct RefineOutput {
   // The solve's own result even when the prior was returned (for diagnostics).
   std::vector<Rigid3> solved_world_from_cam;
   std::vector<CameraIntrinsics> solved_cameras;
+  // At solved_world_from_cam and solved_cameras (so not the returned poses when a guardrail fired).
+  SolvedObservations solved_observations;
 };
 
 // One Ceres solve of the GNC schedule (§3.5).
@@ -104,6 +118,10 @@ struct RefinePassSummary {
   RayTimeInitSummary ray_time_init;
   std::vector<GncStageSummary> stages;
   GaugePolishSummary gauge_polish;  // after the last stage (gauge_polish.h)
+  // Norms of the cross-projection residuals (paper eqs. rij, rji, no loss) at the pass's solution,
+  // pixels: the median and the 90th percentile (nearest rank) over the residuals.
+  double residual_median_px = 0.0;
+  double residual_p90_px = 0.0;
   double build_seconds = 0.0;
   double solve_seconds = 0.0;
 };
@@ -111,7 +129,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefinePassSummary, name, num_cameras, num_obs
                                    num_ray_times, num_tracks, num_matches_input, num_matches_used,
                                    num_residuals, elimination_group_size, orientation_weight,
                                    self_calibration, ray_time_init, stages, gauge_polish,
-                                   build_seconds, solve_seconds)
+                                   residual_median_px, residual_p90_px, build_seconds,
+                                   solve_seconds)
 
 // Prior trust region (§3.6): per-frame motion of the solution from the prior, prior's frame.
 struct TrustRegionVerdict {

@@ -4,9 +4,11 @@
 #include <hdf5.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <random>
 
 #include "core/error.h"
@@ -378,6 +380,58 @@ TEST_F(Hdf5StoreTest, CommitReplacesExistingFile) {
   }
   EXPECT_EQ(Hdf5Reader(path).ReadJson("run")["attempt"], 2);
   EXPECT_EQ(DirectoryEntries(), std::vector<std::string>{"out.h5"});
+}
+
+// /ray_times/<pose set> (the refine stage's solved observations, read by the 3DGS export):
+// values round-trip bit-exactly, NaN included; inconsistent groups are refused on both sides.
+TEST_F(Hdf5StoreTest, RayTimesRoundTripAndAreChecked) {
+  RayTimeObservations rays;
+  rays.image_names = {"0000.jpg", "0001.jpg"};
+  rays.observations.resize(3, 2);
+  rays.observations << 0, 5, 1, 7, 1, 9;
+  rays.pixels.resize(3, 2);
+  rays.pixels << 1.25, 2.5, 100.125, 200.0625, 3.0, 4.0;
+  rays.ray_times.resize(3);
+  rays.ray_times << 12.5, std::numeric_limits<double>::quiet_NaN(), 0.1;
+  rays.matches.resize(2, 2);
+  rays.matches << 0, 1, 0, 2;
+  const std::string path = Path("refine.h5");
+  {
+    Hdf5Writer writer(path);
+    writer.WriteRayTimes("refined@gnc", rays);
+    writer.Commit();
+  }
+  {
+    Hdf5Reader reader(path);
+    EXPECT_TRUE(reader.HasRayTimes("refined@gnc"));
+    EXPECT_FALSE(reader.HasRayTimes("refined"));
+    const RayTimeObservations back = reader.ReadRayTimes("refined@gnc");
+    EXPECT_EQ(back.image_names, rays.image_names);
+    EXPECT_EQ(back.observations, rays.observations);
+    EXPECT_EQ(back.pixels, rays.pixels);
+    EXPECT_EQ(back.ray_times(0), 12.5);
+    EXPECT_TRUE(std::isnan(back.ray_times(1)));
+    EXPECT_EQ(back.ray_times(2), 0.1);
+    EXPECT_EQ(back.matches, rays.matches);
+    const std::string missing = InputErrorMessage([&] { reader.ReadRayTimes("refined"); });
+    EXPECT_NE(missing.find("no ray times of pose set 'refined'"), std::string::npos) << missing;
+  }
+
+  RayTimeObservations bad = rays;
+  bad.matches(1, 1) = 3;  // no observation 3
+  EXPECT_THROW(Hdf5Writer(Path("bad.h5")).WriteRayTimes("refined", bad), std::invalid_argument);
+  bad = rays;
+  bad.observations(2, 0) = 2;  // no image row 2
+  EXPECT_THROW(Hdf5Writer(Path("bad.h5")).WriteRayTimes("refined", bad), std::invalid_argument);
+  bad = rays;
+  bad.ray_times(0) = -1.0;  // the writer stores it; the reader refuses it
+  {
+    Hdf5Writer writer(path);
+    writer.WriteRayTimes("refined", bad);
+    writer.Commit();
+  }
+  const std::string negative = InputErrorMessage([&] { Hdf5Reader(path).ReadRayTimes("refined"); });
+  EXPECT_NE(negative.find("observation 0 has ray time -1"), std::string::npos) << negative;
 }
 
 TEST_F(Hdf5StoreTest, WriterRejectsDuplicatesAndBadNames) {

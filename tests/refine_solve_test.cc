@@ -4,6 +4,8 @@
 // and the staged room recipe recover the intrinsics, and runs are deterministic.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -379,6 +381,60 @@ void CollectKeyPaths(const nlohmann::json& value, const std::string& path,
   }
 }
 
+// RefineOutput::solved_observations (the export's initial 3D points, evaluate/trainer_export.h):
+// from an exact prior on noise-free keypoints, every observation's ray point O + t·R·ray(û) is
+// the scene point it sees, the used matches are listed, the anchored variant leaves its
+// non-anchors without a ray time, and the residual statistics of the pass are ~0 px.
+TEST(RefineSolveTest, SolvedObservationsPutEachRayPointOnItsScenePoint) {
+  SyntheticSceneOptions scene_options = SmallNoisyScene();
+  scene_options.pixel_noise = 0.0;
+  scene_options.outlier_fraction = 0.0;
+  scene_options.distortion = true;
+  SyntheticScene scene = MakeSyntheticScene(scene_options);
+  scene.input.prior_world_from_cam = scene.ground_truth;
+  for (const std::string parameterization : {"per_observation", "anchored"}) {
+    SCOPED_TRACE(parameterization);
+    RefineOptions options;
+    options.parameterization = parameterization;
+    options.num_threads = 2;
+    RefineOutput output;
+    const RefineSummary summary = RefinePoses(scene.input, options, &output);
+    const SolvedObservations& solved = output.solved_observations;
+    const RefinePassSummary& pass = summary.passes.back();
+    ASSERT_EQ(solved.observations.rows(), pass.num_observations);
+    ASSERT_EQ(solved.ray_times.size(), pass.num_observations);
+    EXPECT_EQ(solved.matches.rows(), pass.num_matches_used);
+    EXPECT_LT(pass.residual_median_px, 1e-3);
+    EXPECT_LT(pass.residual_p90_px, 1e-3);
+    EXPECT_LE(pass.residual_median_px, pass.residual_p90_px);
+    int with_ray_time = 0;
+    for (Eigen::Index o = 0; o < solved.observations.rows(); ++o) {
+      const int image = solved.observations(o, 0);
+      const int keypoint = solved.observations(o, 1);
+      if (!std::isfinite(solved.ray_times(o))) continue;
+      ++with_ray_time;
+      const CameraIntrinsics& camera = output.solved_cameras[scene.input.camera_index[image]];
+      Eigen::Vector2d pixel = scene.input.keypoints[image].row(keypoint).transpose(), u;
+      UndistortPixel(camera.params.data(), pixel.data(), u.data());
+      Eigen::Vector3d ray;
+      PixelToUnitRay(camera.params.data(), u.data(), ray.data());
+      const Rigid3& pose = output.solved_world_from_cam[image];
+      const Eigen::Vector3d point = pose.translation + solved.ray_times(o) * (pose.rotation * ray);
+      const std::vector<int>& map = scene.keypoint_of_point[image];
+      const auto it = std::find(map.begin(), map.end(), keypoint);
+      ASSERT_NE(it, map.end());
+      EXPECT_LT((point - scene.points[it - map.begin()]).norm(), 1e-3);
+    }
+    EXPECT_EQ(with_ray_time, pass.num_ray_times);
+    for (Eigen::Index m = 0; m < solved.matches.rows(); ++m) {
+      const int a = solved.matches(m, 0), b = solved.matches(m, 1);
+      ASSERT_TRUE(a >= 0 && a < solved.observations.rows() && b >= 0 &&
+                  b < solved.observations.rows());
+      EXPECT_NE(solved.observations(a, 0), solved.observations(b, 0));
+    }
+  }
+}
+
 // summary.json, sweep tables and campaign reports read RefineSummary::ToJson by these keys
 // (e.g. timings.total_seconds, guardrails.inconsistent_pairs, passes[].stages[]): a tiny solve
 // with every guardrail on and every pair flagged fills each of them.
@@ -430,6 +486,8 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].gauge_polish.rotation_deg",
       "passes[].gauge_polish.translation",
       "passes[].gauge_polish.scale",
+      "passes[].residual_median_px",
+      "passes[].residual_p90_px",
       "passes[].build_seconds",
       "passes[].solve_seconds",
       "passes[].stages",

@@ -8,7 +8,10 @@
 
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/formats/colmap_model.h"
 #include "core/hdf5_store.h"
@@ -187,6 +190,19 @@ TEST(RefineStageTest, DisconnectedGraphIsRefinedPerComponentAndSaidSo) {
   EXPECT_EQ((*warning)["details"]["component_sizes"], nlohmann::json::array({5, 3}));
   EXPECT_EQ((*warning)["images"], nlohmann::json::array({"0005.jpg", "0006.jpg", "0007.jpg"}));
   ASSERT_EQ(summary["components"].size(), 2u);
+  // Both solves' observations, their images renumbered into one list.
+  const RayTimeObservations rays = Hdf5Reader(dir / "refine.h5").ReadRayTimes("refined");
+  EXPECT_EQ(rays.image_names.size(), 8u);
+  ASSERT_GT(rays.matches.rows(), 0);
+  std::set<bool> components_matched;
+  for (Eigen::Index m = 0; m < rays.matches.rows(); ++m) {
+    const std::string& a = rays.image_names[rays.observations(rays.matches(m, 0), 0)];
+    const std::string& b = rays.image_names[rays.observations(rays.matches(m, 1), 0)];
+    EXPECT_NE(a, b);
+    EXPECT_EQ(a < "0005.jpg", b < "0005.jpg") << "a match across the components: " << a << b;
+    components_matched.insert(a < "0005.jpg");
+  }
+  EXPECT_EQ(components_matched.size(), 2u);
   // Each piece, in its own gauge, recovers its poses from the 1° prior.
   for (const auto& [begin, end] : {std::pair<int, int>{0, 5}, std::pair<int, int>{5, 8}}) {
     PoseSet estimate, truth;
@@ -337,6 +353,11 @@ TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   const nlohmann::json* returned = FindWarning(summary, "returned_prior");
   ASSERT_NE(returned, nullptr) << summary["warnings"].dump();
   EXPECT_EQ((*returned)["images"].size(), 5u);
+  // Only the returned solve's observations are kept for the export's points.
+  const RayTimeObservations rays = Hdf5Reader(dir / "refine.h5").ReadRayTimes("refined");
+  EXPECT_EQ(rays.image_names, (std::vector<std::string>{"0005.jpg", "0006.jpg", "0007.jpg"}));
+  EXPECT_GT(rays.observations.rows(), 0);
+  EXPECT_GT(rays.matches.rows(), 0);
   const nlohmann::json exported = RunExport(dir);
   const nlohmann::json* left_out = FindWarning(exported, "unrefined_not_exported");
   ASSERT_NE(left_out, nullptr) << exported.dump();
@@ -345,6 +366,52 @@ TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   ASSERT_EQ(model.images.size(), 3u);
   for (const auto& [id, image] : model.images) {
     EXPECT_GE(image.name, "0005.jpg") << "a prior pose exported as refined";
+  }
+}
+
+// Format 3dgs of the same run, with the prior beside the refined set: the five images a guardrail
+// left unrefined are in no 3dgs export (the refined set lacks them, not_in_every_pose_set), so both
+// folders hold the same three images and split, and the points come from the refined solve's ray
+// times (each 3D point reprojecting onto its observations in the refined folder).
+TEST(RefineStageTest, TrainerExportsShareImagesAcrossPoseSetsAndLeaveOutUnrefinedOnes) {
+  TempDir dir("refine_stage");
+  SceneInputs scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
+  scene.images.image_root = dir / "images";
+  std::filesystem::create_directories(scene.images.image_root);
+  for (const ImageInfo& info : scene.images.images) {
+    cv::Mat pixels(info.height, info.width, CV_8UC3, cv::Scalar(40, 80, 120));
+    ASSERT_TRUE(cv::imwrite(dir / ("images/" + info.name), pixels));
+  }
+  PoseSet refined;
+  RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  std::unique_ptr<Stage> stage = CreateStage("export");
+  stage->Configure(YAML::Load("{poses: [prior, refined], formats: [3dgs]}"), "test");
+  StageContext context;
+  context.stage_id = "export";
+  context.workdir = dir.path().string();
+  context.output_path = dir / "export.h5";
+  context.artifacts["images"] = dir / "inputs.h5";
+  context.artifacts["poses/prior"] = dir / "inputs.h5";
+  context.artifacts["poses/refined"] = dir / "refine.h5";
+  const nlohmann::json summary = stage->Run(context);
+  const nlohmann::json* unrefined = FindWarning(summary, "unrefined_not_exported");
+  const nlohmann::json* left_out = FindWarning(summary, "not_in_every_pose_set");
+  ASSERT_NE(unrefined, nullptr) << summary.dump();
+  ASSERT_NE(left_out, nullptr) << summary.dump();
+  EXPECT_EQ((*left_out)["images"], (*unrefined)["images"]);
+  EXPECT_EQ((*left_out)["details"]["missing_from"]["refined"], (*unrefined)["images"]);
+  EXPECT_EQ(FindWarning(summary, "no_initial_points"), nullptr);
+  const nlohmann::json& exported = summary["3dgs"];
+  EXPECT_EQ(exported["num_images"], 3);
+  EXPECT_EQ(exported["num_test"], 1);
+  EXPECT_EQ(exported["points_from"], "refined");
+  EXPECT_GT(exported["num_points"].get<int>(), 50);
+  EXPECT_LT(exported["reprojection_median_px"]["refined"].get<double>(), 0.1);
+  for (const std::string set : {"prior", "refined"}) {
+    const ColmapModel model = ReadColmapModel(dir / ("3dgs/" + set + "/sparse/0"));
+    ASSERT_EQ(model.images.size(), 3u) << set;
+    for (const auto& [id, image] : model.images) EXPECT_GE(image.name, "0005.jpg") << set;
+    EXPECT_EQ(ReadTextFile(dir / ("3dgs/" + set + "/test.txt")), "0005.jpg\n");
   }
 }
 

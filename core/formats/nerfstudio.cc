@@ -213,7 +213,7 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
 }
 
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
-                         const std::string& image_prefix) {
+                         const std::string& image_prefix, const json& extra_fields) {
   const NameJoin join = JoinNames(Names(images), Names(poses));
   if (!join.only_right.empty()) {
     throw InputError("poses without an image: " + join.Describe("images", "poses"));
@@ -251,6 +251,7 @@ void WriteTransformsJson(const std::string& path, const ImageSet& images, const 
     frames.push_back(frame);
   }
   top["frames"] = frames;
+  for (const auto& [key, value] : extra_fields.items()) top[key] = value;
   WriteTextFileAtomically(path, top.dump(2) + "\n");
 }
 

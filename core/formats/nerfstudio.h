@@ -7,6 +7,7 @@
 // (typically "images/") removed; that directory, relative to the JSON file, is the image root.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "core/types.h"
@@ -18,8 +19,10 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
 
 // Writes shared intrinsics at the top level when every image uses the same camera, per-frame
 // otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Images
-// without a pose are left out; a pose without an image is an InputError. Atomic.
+// without a pose are left out; a pose without an image is an InputError. `extra_fields` are added
+// at the top level (e.g. ply_file_path, train_filenames, test_filenames). Atomic.
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
-                         const std::string& image_prefix = "images/");
+                         const std::string& image_prefix = "images/",
+                         const nlohmann::json& extra_fields = nlohmann::json::object());
 
 }  // namespace raytime

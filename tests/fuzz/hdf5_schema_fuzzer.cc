@@ -15,7 +15,9 @@
 // decodes an input as clang's fuzzer did):
 //   root attributes schema, schema_version; then until the input ends, one op byte choosing
 //   images, cameras, a pose set, features, matches, a JSON document, a stray entry or an
-//   attribute, each followed by its own choices (see the functions below).
+//   attribute (op byte modulo 9), each followed by its own choices (see the functions below); the
+//   op byte 255 (added later, so that the older seeds and reproducers decode as before) chooses
+//   the ray times of a pose set.
 #include <hdf5.h>
 
 #include <algorithm>
@@ -375,6 +377,21 @@ void Matches(ByteReader& in, hid_t root) {
   }
 }
 
+void RayTimes(ByteReader& in, hid_t root, Built* built) {
+  const Handle parent = Group(root, "ray_times");
+  if (!parent.ok()) return;
+  const std::string name = Name(in, kPoseSetNames);
+  const Handle group = Group(parent.get(), name);
+  if (!group.ok()) return;
+  built->pose_sets.push_back(name);
+  const hsize_t n = in.Pick(5);
+  Dataset(in, group.get(), "image_names", Kind::kVlenString, {in.Pick(4)});
+  Dataset(in, group.get(), "observations", Kind::kInt, {n, 2});
+  Dataset(in, group.get(), "pixels", Kind::kFloat, {n, 2});
+  Dataset(in, group.get(), "ray_time", Kind::kFloat, {n});
+  Dataset(in, group.get(), "matches", Kind::kInt, {in.Pick(5), 2});
+}
+
 void Json(ByteReader& in, hid_t root, Built* built) {
   const Handle group = Group(root, "json");
   if (!group.ok()) return;
@@ -433,7 +450,12 @@ Built Build(ByteReader& in, hid_t file) {
   Attribute(in, file, "schema", Kind::kVlenString, {"raytime", "other", ""});
   Attribute(in, file, "schema_version", Kind::kInt, {}, {1, 0, 2, -1});
   while (!in.empty()) {
-    switch (in.Pick(9)) {
+    const uint8_t op = in.Byte();
+    if (op == 255) {
+      RayTimes(in, file, &built);
+      continue;
+    }
+    switch (op % 9) {
       case 0:
         Images(in, file);
         break;
@@ -502,6 +524,8 @@ void ReadAll(const std::string& path, std::vector<std::string> pose_sets,
       Provenance provenance;
       r.ReadPoseSet(name, &role, &provenance);
     });
+    ExpectInputError([&] { r.HasRayTimes(name); });
+    ExpectInputError([&] { r.ReadRayTimes(name); });
   }
   ExpectInputError([&] { r.HasFeatures(); });
   ExpectInputError([&] { r.ReadFeatures(); });

@@ -1,0 +1,536 @@
+#include "evaluate/trainer_export.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <stdexcept>
+
+#include "core/atomic_file.h"
+#include "core/error.h"
+#include "core/formats/colmap_model.h"
+#include "core/formats/nerfstudio.h"
+#include "core/graph.h"
+#include "core/statistics.h"
+#include "core/timing.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// Seconds between progress lines on long work.
+constexpr double kProgressSeconds = 5.0;
+
+// The pixel of `projection` a world point lands on, and its depth (z in the camera).
+Eigen::Vector2d Project(const Eigen::Matrix<double, 3, 4>& projection, const Eigen::Vector3d& x,
+                        double* depth) {
+  const Eigen::Vector3d p = projection.leftCols<3>() * x + projection.col(3);
+  *depth = p.z();
+  return p.head<2>() / p.z();
+}
+
+// K [R | t] of a pinhole camera at `world_from_cam`.
+Eigen::Matrix<double, 3, 4> ProjectionOf(const CameraIntrinsics& pinhole,
+                                         const Rigid3& world_from_cam) {
+  Eigen::Matrix3d K;
+  K << pinhole.fx(), 0.0, pinhole.cx(), 0.0, pinhole.fy(), pinhole.cy(), 0.0, 0.0, 1.0;
+  return K * world_from_cam.Inverse().Matrix3x4();
+}
+
+// Bilinear RGB of an 8-bit BGR image at an OpenCV pixel position (clamped to the image).
+Eigen::Vector3d ColourAt(const cv::Mat& bgr, const Eigen::Vector2d& pixel) {
+  const double x = std::clamp(pixel.x(), 0.0, bgr.cols - 1.0);
+  const double y = std::clamp(pixel.y(), 0.0, bgr.rows - 1.0);
+  const int x0 = std::min(static_cast<int>(x), bgr.cols - 1),
+            y0 = std::min(static_cast<int>(y), bgr.rows - 1);
+  const int x1 = std::min(x0 + 1, bgr.cols - 1), y1 = std::min(y0 + 1, bgr.rows - 1);
+  const double dx = x - x0, dy = y - y0;
+  Eigen::Vector3d rgb;
+  for (int c = 0; c < 3; ++c) {
+    const auto at = [&](int row, int col) { return double(bgr.at<cv::Vec3b>(row, col)[2 - c]); };
+    rgb[c] = (1 - dy) * ((1 - dx) * at(y0, x0) + dx * at(y0, x1)) +
+             dy * ((1 - dx) * at(y1, x0) + dx * at(y1, x1));
+  }
+  return rgb;
+}
+
+void WriteLines(const std::string& path, const std::vector<std::string>& lines) {
+  std::string text;
+  for (const std::string& line : lines) text += line + "\n";
+  WriteTextFileAtomically(path, text);
+}
+
+// Binary little-endian PLY: double x, y, z; uchar red, green, blue (read by nerfstudio's
+// ply_file_path loader, open3d).
+void WritePointsPly(const std::string& path, const std::vector<Eigen::Vector3d>& xyz,
+                    const std::vector<std::array<uint8_t, 3>>& rgb) {
+  std::string bytes = "ply\nformat binary_little_endian 1.0\nelement vertex " +
+                      std::to_string(xyz.size()) +
+                      "\nproperty double x\nproperty double y\nproperty double z\n"
+                      "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                      "end_header\n";
+  static_assert(sizeof(double) == 8, "PLY doubles are 8 bytes");
+  for (size_t i = 0; i < xyz.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const double v = xyz[i][k];
+      char raw[8];
+      std::memcpy(raw, &v, 8);  // x86-64 and aarch64 are little-endian, as the header says
+      bytes.append(raw, 8);
+    }
+    bytes.append(reinterpret_cast<const char*>(rgb[i].data()), 3);
+  }
+  WriteTextFileAtomically(path, bytes);
+}
+
+void CreateHardLinkOrCopy(const fs::path& from, const fs::path& to) {
+  fs::create_directories(to.parent_path());
+  std::error_code error;
+  fs::create_hard_link(from, to, error);
+  if (error) fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+}
+
+// Moves the files of `from` into `to` (created) and removes `from`.
+void MoveFilesInto(const fs::path& from, const fs::path& to) {
+  fs::create_directories(to);
+  for (const auto& entry : fs::directory_iterator(from)) {
+    fs::rename(entry.path(), to / entry.path().filename());
+  }
+  fs::remove(from);
+}
+
+}  // namespace
+
+TrainTestSplit SplitEveryNth(std::vector<std::string> names, int every) {
+  if (every < 1) throw std::invalid_argument("SplitEveryNth: every must be >= 1");
+  std::sort(names.begin(), names.end());
+  TrainTestSplit split;
+  for (size_t i = 0; i < names.size(); ++i) {
+    (i % static_cast<size_t>(every) == 0 ? split.test : split.train).push_back(names[i]);
+  }
+  return split;
+}
+
+std::vector<MergedTrack> MergeTracks(const TrackObservations& obs,
+                                     const std::vector<Eigen::Matrix<double, 3, 4>>& projections,
+                                     double max_error_px, TrackMergeSummary* summary) {
+  const int n = static_cast<int>(obs.image.size());
+  if (obs.points.rows() != n || obs.pixels.rows() != n || obs.colours.rows() != n) {
+    throw std::invalid_argument("MergeTracks: observation arrays of different lengths");
+  }
+  UnionFind sets(n);
+  for (Eigen::Index m = 0; m < obs.matches.rows(); ++m) {
+    const int a = obs.matches(m, 0), b = obs.matches(m, 1);
+    if (a < 0 || a >= n || b < 0 || b >= n) {
+      throw std::invalid_argument("MergeTracks: match " + std::to_string(m) +
+                                  " names an observation out of range");
+    }
+    sets.Union(a, b);
+  }
+  // Members per root, in ascending order; a root is its set's smallest element (UnionFind), so
+  // tracks come out in order of their first observation.
+  std::vector<std::vector<int>> members(n);
+  for (int o = 0; o < n; ++o) members[sets.Find(o)].push_back(o);
+
+  *summary = TrackMergeSummary();
+  std::vector<MergedTrack> tracks;
+  for (int root = 0; root < n; ++root) {
+    const std::vector<int>& track = members[root];
+    if (track.size() < 2) continue;
+    ++summary->num_tracks;
+    std::vector<double> coordinates[3];
+    Eigen::Vector3d rgb = Eigen::Vector3d::Zero();
+    for (const int o : track) {
+      if (obs.points.row(o).allFinite()) {
+        for (int k = 0; k < 3; ++k) coordinates[k].push_back(obs.points(o, k));
+      }
+      rgb += obs.colours.row(o).transpose();
+    }
+    if (coordinates[0].empty()) {
+      ++summary->num_without_ray_time;
+      continue;
+    }
+    MergedTrack merged;
+    for (int k = 0; k < 3; ++k) merged.xyz[k] = Median(coordinates[k], kNaN);
+    merged.rgb = rgb / static_cast<double>(track.size());
+    bool behind = false, disagrees = false;
+    double error_sum = 0.0;
+    for (const int o : track) {
+      const int image = obs.image(o);
+      if (image < 0 || image >= static_cast<int>(projections.size())) {
+        throw std::invalid_argument("MergeTracks: observation " + std::to_string(o) +
+                                    " names image " + std::to_string(image) + " of " +
+                                    std::to_string(projections.size()));
+      }
+      double depth = 0.0;
+      const Eigen::Vector2d projected = Project(projections[image], merged.xyz, &depth);
+      const double error = (projected - obs.pixels.row(o).transpose()).norm();
+      behind = behind || !(depth > 0);
+      disagrees = disagrees || !(error <= max_error_px);
+      error_sum += error;
+    }
+    if (behind) {
+      ++summary->num_behind_camera;
+      continue;
+    }
+    if (disagrees) {
+      ++summary->num_disagreeing;
+      continue;
+    }
+    merged.mean_error_px = error_sum / static_cast<double>(track.size());
+    merged.observations = track;
+    summary->num_observations_kept += static_cast<int>(track.size());
+    tracks.push_back(std::move(merged));
+  }
+  summary->num_kept = static_cast<int>(tracks.size());
+  return tracks;
+}
+
+TrainerExportSummary ExportForTrainers(const ImageSet& images,
+                                       const std::map<std::string, PoseSet>& poses,
+                                       const std::optional<RayTimeSource>& source,
+                                       const TrainerExportOptions& options, const std::string& root,
+                                       Warnings* warnings) {
+  const auto start = std::chrono::steady_clock::now();
+  ValidateOptions(options, "export (3dgs)");
+  if (images.images.empty()) throw InputError("export (3dgs): no image to export");
+  TrainerExportSummary summary;
+
+  // The exported images in name order; ids and the split follow this order.
+  std::vector<const ImageInfo*> ordered;
+  for (const ImageInfo& info : images.images) ordered.push_back(&info);
+  std::sort(ordered.begin(), ordered.end(),
+            [](const ImageInfo* a, const ImageInfo* b) { return a->name < b->name; });
+  const int num_images = static_cast<int>(ordered.size());
+  std::map<std::string, int> index_of;
+  for (int i = 0; i < num_images; ++i) index_of[ordered[i]->name] = i;
+  for (const auto& [name, set] : poses) {
+    for (const ImageInfo* info : ordered) {
+      if (!set.Has(info->name)) {
+        throw std::invalid_argument("export (3dgs): pose set '" + name + "' has no pose for " +
+                                    info->name);
+      }
+    }
+  }
+  std::vector<std::string> names;
+  for (const ImageInfo* info : ordered) names.push_back(info->name);
+  const TrainTestSplit split = SplitEveryNth(names, options.test_every);
+
+  // The pinhole cameras: one per distorted camera in use, numbered in order of first use.
+  ImageSet pinhole;
+  pinhole.image_root = "images";
+  std::map<int, int> pinhole_of_camera;
+  for (const ImageInfo* info : ordered) {
+    if (info->camera_index < 0 || info->camera_index >= static_cast<int>(images.cameras.size())) {
+      throw std::invalid_argument("image " + info->name + " has camera index " +
+                                  std::to_string(info->camera_index) + " out of range");
+    }
+    auto [it, added] =
+        pinhole_of_camera.emplace(info->camera_index, static_cast<int>(pinhole.cameras.size()));
+    if (added) {
+      const CameraIntrinsics& camera = images.cameras[info->camera_index];
+      pinhole.cameras.push_back(UndistortedCamera(camera, options.undistortion));
+      summary.undistortion_scale_x.push_back(double(pinhole.cameras.back().width) / camera.width);
+      summary.undistortion_scale_y.push_back(double(pinhole.cameras.back().height) / camera.height);
+    }
+    const CameraIntrinsics& camera = pinhole.cameras[it->second];
+    pinhole.images.push_back({info->name, camera.width, camera.height, it->second});
+  }
+
+  // The source's observations in exported images (a match counts when both of its ends do).
+  std::vector<int> observation_rows;  // rows of source->rays kept, in order
+  std::vector<std::vector<int>> observations_of_image(num_images);
+  TrackObservations track_obs;
+  if (source) {
+    const RayTimeObservations& rays = source->rays;
+    std::vector<int> image_of_row(rays.image_names.size(), -1);
+    for (size_t r = 0; r < rays.image_names.size(); ++r) {
+      const auto it = index_of.find(rays.image_names[r]);
+      if (it != index_of.end() && source->poses.Has(rays.image_names[r])) {
+        image_of_row[r] = it->second;
+      }
+    }
+    std::vector<int> kept(rays.observations.rows(), -1);
+    for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
+      const int image = image_of_row[rays.observations(o, 0)];
+      if (image < 0) continue;
+      kept[o] = static_cast<int>(observation_rows.size());
+      observations_of_image[image].push_back(kept[o]);
+      observation_rows.push_back(static_cast<int>(o));
+    }
+    const auto m = static_cast<Eigen::Index>(observation_rows.size());
+    track_obs.image.resize(m);
+    track_obs.points.resize(m, 3);
+    track_obs.pixels.resize(m, 2);
+    track_obs.colours.setZero(m, 3);
+    for (Eigen::Index k = 0; k < m; ++k) {
+      const int o = observation_rows[k];
+      const int image = image_of_row[rays.observations(o, 0)];
+      const ImageInfo& info = *ordered[image];
+      const CameraIntrinsics& distorted = images.cameras[info.camera_index];
+      const CameraIntrinsics& camera = pinhole.cameras[pinhole.images[image].camera_index];
+      track_obs.image(k) = image;
+      const Eigen::Vector2d u = UndistortedPixel(distorted, camera, rays.pixels.row(o).transpose());
+      track_obs.pixels.row(k) = u;
+      // The ray of the undistorted pixel, X = O + t·R·ray (SPEC §3 "Ray point").
+      const double t = rays.ray_times(o);
+      if (std::isfinite(t)) {
+        const Eigen::Vector3d ray = Eigen::Vector3d((u.x() - camera.cx()) / camera.fx(),
+                                                    (u.y() - camera.cy()) / camera.fy(), 1.0)
+                                        .normalized();
+        const Rigid3& pose = source->poses.world_from_cam.at(info.name);
+        track_obs.points.row(k) = (pose.translation + t * (pose.rotation * ray)).transpose();
+      } else {
+        track_obs.points.row(k).setConstant(kNaN);
+      }
+    }
+    std::vector<Eigen::Index> matches;
+    for (Eigen::Index r = 0; r < rays.matches.rows(); ++r) {
+      const int a = kept[rays.matches(r, 0)], b = kept[rays.matches(r, 1)];
+      if (a >= 0 && b >= 0) {
+        matches.push_back(a);
+        matches.push_back(b);
+      }
+    }
+    track_obs.matches.resize(static_cast<Eigen::Index>(matches.size() / 2), 2);
+    for (size_t i = 0; i < matches.size(); ++i) {
+      track_obs.matches(static_cast<Eigen::Index>(i / 2), static_cast<Eigen::Index>(i % 2)) =
+          static_cast<int>(matches[i]);
+    }
+  }
+
+  // The images, once, into a folder every pose set's images/ links to.
+  fs::create_directories(root);
+  const fs::path shared = TemporarySibling((fs::path(root) / "images").string());
+  RegisterTemporary(shared.string());
+  struct SharedFolder {  // removed however this function ends
+    fs::path path;
+    ~SharedFolder() {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
+      ForgetTemporary(path.string());
+    }
+  } shared_folder{shared};
+  fs::create_directories(shared);
+  auto last_progress = std::chrono::steady_clock::now();
+  for (int i = 0; i < num_images; ++i) {
+    const ImageInfo& info = *ordered[i];
+    const CameraIntrinsics& distorted = images.cameras[info.camera_index];
+    const CameraIntrinsics& camera = pinhole.cameras[pinhole.images[i].camera_index];
+    const fs::path path = fs::path(images.image_root) / info.name;
+    const fs::path target = shared / info.name;
+    fs::create_directories(target.parent_path());
+    const bool copy = IsUndistorted(distorted);
+    cv::Mat bgr;
+    if (!copy || !observations_of_image[i].empty()) {
+      bgr = cv::imread(path.string(), cv::IMREAD_COLOR);
+      if (bgr.empty()) ThrowInput(path.string(), 0, "cannot read or decode the image");
+      if (bgr.cols != distorted.width || bgr.rows != distorted.height) {
+        ThrowInput(path.string(), 0,
+                   "image is " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows) +
+                       " but its camera is " + std::to_string(distorted.width) + "x" +
+                       std::to_string(distorted.height));
+      }
+      for (const int k : observations_of_image[i]) {
+        track_obs.colours.row(k) =
+            ColourAt(bgr, source->rays.pixels.row(observation_rows[k]).transpose()).transpose();
+      }
+    }
+    if (copy) {
+      if (!fs::is_regular_file(path)) ThrowInput(path.string(), 0, "image file not found");
+      fs::copy_file(path, target);
+      ++summary.num_images_copied;
+    } else {
+      const cv::Mat undistorted = UndistortImage(bgr, distorted, camera);
+      bool written = false;
+      try {
+        written = cv::imwrite(target.string(), undistorted,
+                              {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality});
+      } catch (const cv::Exception& e) {
+        ThrowInput(target.string(), 0, std::string("cannot encode the image: ") + e.what());
+      }
+      if (!written) {
+        ThrowInput(target.string(), 0, "cannot write the undistorted image (format of its name?)");
+      }
+      ++summary.num_images_undistorted;
+    }
+    if (SecondsSince(last_progress) > kProgressSeconds || i + 1 == num_images) {
+      last_progress = std::chrono::steady_clock::now();
+      spdlog::info("export (3dgs): images {}/{} ({} undistorted, {} copied)", i + 1, num_images,
+                   summary.num_images_undistorted, summary.num_images_copied);
+    }
+  }
+
+  // Tracks, merged once in the source's frame.
+  std::vector<MergedTrack> tracks;
+  if (source) {
+    std::vector<Eigen::Matrix<double, 3, 4>> projections(num_images,
+                                                         Eigen::Matrix<double, 3, 4>::Zero());
+    for (int i = 0; i < num_images; ++i) {
+      const auto pose = source->poses.world_from_cam.find(ordered[i]->name);
+      if (pose == source->poses.world_from_cam.end()) continue;
+      projections[i] = ProjectionOf(pinhole.cameras[pinhole.images[i].camera_index], pose->second);
+    }
+    tracks = MergeTracks(track_obs, projections, options.max_track_error_px, &summary.tracks);
+    summary.points_from = source->pose_set;
+    spdlog::info(
+        "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
+        "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
+        summary.tracks.num_tracks, source->pose_set, track_obs.image.size(),
+        summary.tracks.num_kept, summary.tracks.num_disagreeing, options.max_track_error_px,
+        summary.tracks.num_behind_camera, summary.tracks.num_without_ray_time);
+  }
+
+  // The 2D points, the same for every pose set: per image its tracks' observations.
+  std::vector<std::vector<Eigen::Vector2d>> points2D(num_images);
+  std::vector<std::vector<uint64_t>> point3D_ids(num_images);
+  std::vector<std::vector<ColmapTrackElement>> elements(tracks.size());
+  for (size_t t = 0; t < tracks.size(); ++t) {
+    for (const int o : tracks[t].observations) {
+      const int image = track_obs.image(o);
+      elements[t].push_back(
+          {static_cast<uint32_t>(image + 1), static_cast<uint32_t>(points2D[image].size())});
+      points2D[image].push_back(track_obs.pixels.row(o).transpose() +
+                                Eigen::Vector2d(0.5, 0.5));  // COLMAP convention
+      point3D_ids[image].push_back(t + 1);
+    }
+  }
+
+  nlohmann::json extras = {{"train_filenames", nlohmann::json::array()},
+                           {"test_filenames", nlohmann::json::array()}};
+  for (const std::string& name : split.train) extras["train_filenames"].push_back("images/" + name);
+  for (const std::string& name : split.test) extras["test_filenames"].push_back("images/" + name);
+  if (!tracks.empty()) extras["ply_file_path"] = "sparse_pc.ply";
+
+  for (const auto& [name, all_poses] : poses) {
+    PoseSet set;  // the exported images' poses only
+    for (const ImageInfo* info : ordered) {
+      set.world_from_cam[info->name] = all_poses.world_from_cam.at(info->name);
+    }
+    // The points in this pose set's frame.
+    Sim3 to_set;
+    std::string frame = "none";
+    if (source && !tracks.empty()) {
+      if (name == source->pose_set) {
+        frame = "solve";
+      } else {
+        std::vector<Eigen::Vector3d> from, to;
+        for (const ImageInfo* info : ordered) {
+          const auto pose = source->poses.world_from_cam.find(info->name);
+          if (pose == source->poses.world_from_cam.end()) continue;
+          from.push_back(pose->second.translation);
+          to.push_back(set.world_from_cam.at(info->name).translation);
+        }
+        try {
+          to_set = FitAlignment(from, to, AlignmentKind::kSim3);
+          frame = "sim3";
+        } catch (const std::invalid_argument&) {
+          warnings->push_back(
+              {"no_initial_points",
+               "the 3dgs export of '" + name + "' has no initial points: no Sim(3) maps the " +
+                   std::to_string(from.size()) + " camera centres of '" + source->pose_set +
+                   "' onto its own (fewer than three, or collinear)",
+               {},
+               {},
+               {{"pose_set", name}, {"points_from", source->pose_set}}});
+          spdlog::warn("export (3dgs): {}", warnings->back().message);
+        }
+      }
+    }
+    ColmapModel model = ToColmapModel(pinhole, set);
+    std::vector<Eigen::Matrix<double, 3, 4>> projections;
+    for (int i = 0; i < num_images; ++i) {
+      projections.push_back(ProjectionOf(pinhole.cameras[pinhole.images[i].camera_index],
+                                         set.world_from_cam.at(ordered[i]->name)));
+    }
+    std::vector<Eigen::Vector3d> ply_xyz;
+    std::vector<std::array<uint8_t, 3>> ply_rgb;
+    std::vector<double> errors;
+    if (frame != "none") {
+      for (int i = 0; i < num_images; ++i) {
+        ColmapImage& image = model.images.at(static_cast<uint32_t>(i + 1));
+        image.points2D = points2D[i];
+        image.point3D_ids = point3D_ids[i];
+      }
+      for (size_t t = 0; t < tracks.size(); ++t) {
+        ColmapPoint3D point;
+        point.point3D_id = t + 1;
+        point.xyz = to_set * tracks[t].xyz;
+        std::array<uint8_t, 3> rgb;
+        for (int k = 0; k < 3; ++k) {
+          rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(tracks[t].rgb[k]), 0L, 255L));
+          point.rgb[k] = rgb[k];
+        }
+        double sum = 0.0;
+        for (const int o : tracks[t].observations) {
+          double depth = 0.0;
+          const double error = (Project(projections[track_obs.image(o)], point.xyz, &depth) -
+                                track_obs.pixels.row(o).transpose())
+                                   .norm();
+          errors.push_back(error);
+          sum += error;
+        }
+        point.error = sum / static_cast<double>(tracks[t].observations.size());
+        point.track = elements[t];
+        model.points3D[point.point3D_id] = point;
+        ply_xyz.push_back(point.xyz);
+        ply_rgb.push_back(rgb);
+      }
+    }
+    summary.points_frame[name] = frame;
+    summary.reprojection_median_px[name] = Median(errors, 0.0);
+    nlohmann::json set_extras = extras;
+    if (frame == "none") set_extras.erase("ply_file_path");
+
+    const std::string dir = (fs::path(root) / name).string();
+    WriteDirectoryAtomically(dir, [&](const std::string& tmp) {
+      for (const ImageInfo* info : ordered) {
+        CreateHardLinkOrCopy(shared / info->name, fs::path(tmp) / "images" / info->name);
+      }
+      const fs::path sparse = fs::path(tmp) / "sparse";
+      WriteColmapModelText(model, (sparse / "text").string());
+      WriteColmapModelBinary(model, (sparse / "binary").string());
+      MoveFilesInto(sparse / "text", sparse / "0");
+      MoveFilesInto(sparse / "binary", sparse / "0");
+      WriteTransformsJson((fs::path(tmp) / "transforms.json").string(), pinhole, set, "images/",
+                          set_extras);
+      if (frame != "none")
+        WritePointsPly((fs::path(tmp) / "sparse_pc.ply").string(), ply_xyz, ply_rgb);
+      WriteLines((fs::path(tmp) / "test.txt").string(), split.test);
+      WriteLines((fs::path(tmp) / "train.txt").string(), split.train);
+    });
+    spdlog::info(
+        "export (3dgs): {} -> {}: {} images ({} train, {} test), {} points ({}), median "
+        "reprojection {:.3g} px",
+        name, dir, num_images, split.train.size(), split.test.size(), model.points3D.size(), frame,
+        summary.reprojection_median_px[name]);
+    summary.pose_sets.push_back(name);
+    summary.directories.push_back(dir);
+  }
+  if (!source) {
+    warnings->push_back({"no_initial_points",
+                         "the 3dgs export has no initial points (no refined solve's ray times); "
+                         "trainers start from their own initialization",
+                         {},
+                         {},
+                         {}});
+    spdlog::warn("export (3dgs): {}", warnings->back().message);
+  }
+  summary.num_images = num_images;
+  summary.num_points = static_cast<int>(tracks.size());
+  summary.num_train = static_cast<int>(split.train.size());
+  summary.num_test = static_cast<int>(split.test.size());
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+}  // namespace raytime
