@@ -6,9 +6,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <stdexcept>
+#include <thread>
 
 extern char** environ;
 
@@ -89,10 +92,17 @@ pid_t StartProcess(const std::vector<std::string>& argv, const ProcessOptions& o
   if (!options.working_dir.empty()) {
     posix_spawn_file_actions_addchdir_np(&actions, options.working_dir.c_str());
   }
+  posix_spawnattr_t attributes;
+  posix_spawnattr_init(&attributes);
+  if (options.new_process_group) {
+    posix_spawnattr_setflags(&attributes, POSIX_SPAWN_SETPGROUP);
+    posix_spawnattr_setpgroup(&attributes, 0);  // 0: a group whose id is the child's pid
+  }
   pid_t pid = 0;
   // glibc reports a failed exec or file action here (the child runs vfork-style until exec).
-  const int error = posix_spawnp(&pid, arg_pointers[0], &actions, nullptr, arg_pointers.data(),
+  const int error = posix_spawnp(&pid, arg_pointers[0], &actions, &attributes, arg_pointers.data(),
                                  env_pointers.data());
+  posix_spawnattr_destroy(&attributes);
   posix_spawn_file_actions_destroy(&actions);
   if (error != 0) {
     throw std::runtime_error("cannot run '" + CommandLine(argv) + "': " + std::strerror(error));
@@ -111,6 +121,29 @@ ProcessStatus WaitProcess(pid_t pid) {
   return StatusFromWait(status);
 }
 
+bool WaitProcessFor(pid_t pid, double seconds, ProcessStatus* status) {
+  using Clock = std::chrono::steady_clock;
+  const Clock::time_point deadline =
+      Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                         std::chrono::duration<double>(std::clamp(seconds, 0.0, 1e9)));
+  while (true) {
+    int raw = 0;
+    const pid_t ended = waitpid(pid, &raw, WNOHANG);
+    if (ended == pid) {
+      *status = StatusFromWait(raw);
+      return true;
+    }
+    if (ended < 0 && errno != EINTR) {
+      throw std::runtime_error("waiting for process " + std::to_string(pid) +
+                               " failed: " + std::strerror(errno));
+    }
+    const Clock::time_point now = Clock::now();
+    if (now >= deadline) return false;
+    std::this_thread::sleep_for(
+        std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
+  }
+}
+
 FinishedProcess WaitAnyProcess() {
   int status = 0;
   pid_t pid = 0;
@@ -124,6 +157,8 @@ FinishedProcess WaitAnyProcess() {
 }
 
 bool SignalProcess(pid_t pid, int signal) { return ::kill(pid, signal) == 0; }
+
+bool SignalProcessGroup(pid_t pid, int signal) { return ::kill(-pid, signal) == 0; }
 
 ProcessStatus RunProcess(const std::vector<std::string>& argv, const ProcessOptions& options) {
   return WaitProcess(StartProcess(argv, options));

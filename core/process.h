@@ -25,6 +25,10 @@ struct ProcessOptions {
   // NAME=VALUE entries added to the child's environment unless this process's environment
   // already sets NAME (a default the user can override); the rest is inherited.
   std::vector<std::string> default_environment;
+  // The child leads a new process group (its id = the child's pid), so SignalProcessGroup reaches
+  // whatever it starts (a shell's commands, a trainer's workers) and a terminal's Ctrl-C does not:
+  // the caller decides when it stops.
+  bool new_process_group = false;
 };
 
 // How a child ended: its exit code, or the signal that killed it.
@@ -48,6 +52,10 @@ pid_t StartProcess(const std::vector<std::string>& argv, const ProcessOptions& o
 // Blocks until child `pid` ends.
 ProcessStatus WaitProcess(pid_t pid);
 
+// Waits at most `seconds` for child `pid`: true with `status` set when it ended, false when it is
+// still running (polls every 50 ms, so long children cost nothing while they run; at most 1e9 s).
+bool WaitProcessFor(pid_t pid, double seconds, ProcessStatus* status);
+
 // Blocks until any child of this process ends; throws std::runtime_error when there is none.
 struct FinishedProcess {
   pid_t pid = 0;
@@ -57,6 +65,9 @@ FinishedProcess WaitAnyProcess();
 
 // Sends `signal` (e.g. SIGTERM) to child `pid`; false when there is no such process.
 bool SignalProcess(pid_t pid, int signal);
+// Sends `signal` to every process of the group child `pid` leads (new_process_group); false when
+// the group has no process left.
+bool SignalProcessGroup(pid_t pid, int signal);
 
 // StartProcess, then WaitProcess.
 ProcessStatus RunProcess(const std::vector<std::string>& argv, const ProcessOptions& options = {});

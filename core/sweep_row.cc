@@ -47,6 +47,34 @@ SweepPoseErrors SweepPoseErrors::FromJson(const json& object) {
   return e;
 }
 
+json SweepSplatResult::ToJson() const {
+  return {{"trainer", trainer},
+          {"status", status},
+          {"psnr", Number(psnr)},
+          {"ssim", Number(ssim)},
+          {"lpips", Number(lpips)},
+          {"raytime_psnr", Number(raytime_psnr)},
+          {"raytime_ssim", Number(raytime_ssim)},
+          {"seconds", Number(seconds)}};
+}
+
+SweepSplatResult SweepSplatResult::FromJson(const json& object) {
+  SweepSplatResult r;
+  const auto text = [&](const char* key) {
+    const auto it = object.find(key);
+    return it != object.end() && it->is_string() ? it->get<std::string>() : std::string();
+  };
+  r.trainer = text("trainer");
+  r.status = text("status");
+  r.psnr = NumberOr(object, "psnr");
+  r.ssim = NumberOr(object, "ssim");
+  r.lpips = NumberOr(object, "lpips");
+  r.raytime_psnr = NumberOr(object, "raytime_psnr");
+  r.raytime_ssim = NumberOr(object, "raytime_ssim");
+  r.seconds = NumberOr(object, "seconds");
+  return r;
+}
+
 namespace {
 
 std::string NumberText(double value) {
@@ -85,6 +113,14 @@ json SweepRow::ToJson() const {
   out["pose_set_stage"] = pose_set_stage;
   out["guardrails_fired"] = guardrails_fired;
   out["warnings"] = warnings;
+  if (!splat.empty()) {
+    out["splat"] = json::object();
+    for (const auto& [id, by_pose_set] : splat) {
+      for (const auto& [pose_set, result] : by_pose_set) {
+        out["splat"][id][pose_set] = result.ToJson();
+      }
+    }
+  }
   return out;
 }
 
@@ -123,6 +159,15 @@ SweepRow SweepRow::FromJson(const json& in, const std::string& where) {
           in.at("guardrails_fired").get<std::map<std::string, std::vector<std::string>>>();
     }
     if (in.contains("warnings")) row.warnings = in.at("warnings").get<std::vector<std::string>>();
+    if (in.contains("splat")) {
+      for (const auto& [id, by_pose_set] : in.at("splat").items()) {
+        for (const auto& [pose_set, result] : by_pose_set.items()) {
+          if (!result.is_object())
+            throw InputError(where + ": splat." + id + "." + pose_set + " is not an object");
+          row.splat[id][pose_set] = SweepSplatResult::FromJson(result);
+        }
+      }
+    }
   } catch (const json::exception& e) {
     throw InputError(where + ": malformed sweep row: " + e.what());
   }
@@ -149,6 +194,19 @@ std::vector<std::pair<std::string, std::string>> SweepRow::Columns() const {
       columns.emplace_back(prefix + "mean_centre_relative", NumberText(e.mean_centre_relative));
       columns.emplace_back(prefix + "median_centre_relative", NumberText(e.median_centre_relative));
       columns.emplace_back(prefix + "success", e.success ? "true" : "false");
+    }
+  }
+  for (const auto& [id, by_pose_set] : splat) {
+    for (const auto& [pose_set, r] : by_pose_set) {
+      const std::string prefix = "metrics." + id + "." + pose_set + ".";
+      columns.emplace_back(prefix + "trainer", r.trainer);
+      columns.emplace_back(prefix + "status", r.status);
+      columns.emplace_back(prefix + "psnr", NumberText(r.psnr));
+      columns.emplace_back(prefix + "ssim", NumberText(r.ssim));
+      columns.emplace_back(prefix + "lpips", NumberText(r.lpips));
+      columns.emplace_back(prefix + "raytime_psnr", NumberText(r.raytime_psnr));
+      columns.emplace_back(prefix + "raytime_ssim", NumberText(r.raytime_ssim));
+      columns.emplace_back(prefix + "seconds", NumberText(r.seconds));
     }
   }
   for (const auto& [id, fired] : guardrails_fired) {

@@ -31,6 +31,24 @@ struct SweepPoseErrors {
   static SweepPoseErrors FromJson(const nlohmann::json& json);
 };
 
+// One pose set's 3DGS training in a run (the splat stage's entry metrics.<stage>.<pose set>, SPEC
+// §7); NaN where the run did not report a value (a failed training reports none).
+struct SweepSplatResult {
+  static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  std::string trainer;  // gsplat, inria, nerfstudio
+  std::string status;   // "ok" or "failed"
+  double psnr = kNone;  // the trainer's held-out metrics
+  double ssim = kNone;
+  double lpips = kNone;
+  double raytime_psnr = kNone;  // raytime's own, over the trainer's held-out renders
+  double raytime_ssim = kNone;
+  double seconds = kNone;  // the trainer's wall time
+
+  bool ok() const { return status == "ok"; }
+  nlohmann::json ToJson() const;
+  static SweepSplatResult FromJson(const nlohmann::json& json);
+};
+
 struct SweepRow {
   std::string run;                                         // the run's label
   std::vector<std::pair<std::string, std::string>> swept;  // "prior.level_deg" -> "4"
@@ -44,6 +62,8 @@ struct SweepRow {
   std::map<std::string, std::string> pose_set_stage;  // pose set -> the stage id that wrote it
   std::map<std::string, std::vector<std::string>> guardrails_fired;  // stage id -> checks fired
   std::vector<std::string> warnings;                                 // warning codes, in order
+  // splat stage id -> pose set -> its training (none when the run has no splat stage).
+  std::map<std::string, std::map<std::string, SweepSplatResult>> splat;
 
   // A finished run whose numbers count (warnings included: they are verdicts, not failures).
   bool Succeeded() const { return status == "ok" || status == "ok_with_warnings"; }
@@ -54,7 +74,8 @@ struct SweepRow {
   // InputError naming `where` when the object is not a sweep row.
   static SweepRow FromJson(const nlohmann::json& json, const std::string& where);
   // Flat columns for CSV: run, the swept keys, status, error, seconds, seconds.<stage>,
-  // metrics.<arm>.<alignment>.<field>, guardrails.<stage>, warnings.
+  // metrics.<arm>.<alignment>.<field>, metrics.<splat stage>.<pose set>.<field>,
+  // guardrails.<stage>, warnings.
   std::vector<std::pair<std::string, std::string>> Columns() const;
 };
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <map>
 #include <set>
+#include <tuple>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -31,6 +32,8 @@ struct RunRecord {
   std::map<std::string, std::map<std::string, RunArmErrors>> errors;  // arm -> alignment -> ...
   std::map<std::string, double> stage_seconds;                        // stage id -> seconds
   std::map<std::string, std::string> arm_stage;  // pose set -> the stage id that wrote it
+  // splat stage id -> pose set -> training (Table 4).
+  std::map<std::string, std::map<std::string, SweepSplatResult>> splat;
 };
 
 std::string ArmBase(const std::string& arm) { return arm.substr(0, arm.find('@')); }
@@ -156,6 +159,115 @@ CampaignCell MakeCell(const std::string& scene, double level_deg, const std::str
   cell.stage_id = stage_id;
   cell.median_seconds = Median(seconds, kNoValue);
   return cell;
+}
+
+// Table 4 rows in report order: the baseline (the prior) first, ground truth last, the arms'
+// order between.
+bool PoseSourceComesFirst(const std::string& a, const std::string& b, const std::string& baseline) {
+  const auto last = [](const std::string& pose_set) { return pose_set == "ground_truth"; };
+  if (last(a) != last(b)) return last(b);
+  return ArmComesFirst(a, b, baseline);
+}
+
+// Mean of the finite values; NaN when there is none.
+double MeanOfFinite(const std::vector<double>& values) {
+  double sum = 0.0;
+  int count = 0;
+  for (const double value : values) {
+    if (!std::isfinite(value)) continue;
+    sum += value;
+    ++count;
+  }
+  return count > 0 ? sum / count : kNoValue;
+}
+
+// Averages `cells` (each a scene's) into one: each metric the mean over the cells that have it.
+void AverageInto(const std::vector<const SplatCell*>& cells, SplatCell* out) {
+  std::vector<double> psnr, ssim, lpips, raytime_psnr, raytime_ssim;
+  for (const SplatCell* cell : cells) {
+    psnr.push_back(cell->psnr);
+    ssim.push_back(cell->ssim);
+    lpips.push_back(cell->lpips);
+    raytime_psnr.push_back(cell->raytime_psnr);
+    raytime_ssim.push_back(cell->raytime_ssim);
+  }
+  out->psnr = MeanOfFinite(psnr);
+  out->ssim = MeanOfFinite(ssim);
+  out->lpips = MeanOfFinite(lpips);
+  out->raytime_psnr = MeanOfFinite(raytime_psnr);
+  out->raytime_ssim = MeanOfFinite(raytime_ssim);
+}
+
+// The Table 4 cells of the scored runs (see SplatCell).
+std::vector<SplatCell> AggregateSplat(const std::vector<RunRecord>& runs,
+                                      const std::vector<std::string>& scenes,
+                                      const std::string& baseline) {
+  // (stage, trainer, level) -> pose sets.
+  std::map<std::tuple<std::string, std::string, double>, std::set<std::string>> groups;
+  for (const RunRecord& run : runs) {
+    for (const auto& [id, by_pose_set] : run.splat) {
+      for (const auto& [pose_set, result] : by_pose_set) {
+        groups[{id, result.trainer, run.level_deg}].insert(pose_set);
+      }
+    }
+  }
+  std::vector<SplatCell> cells;
+  for (const auto& [group, pose_set_names] : groups) {
+    const auto& [id, trainer, level] = group;
+    std::vector<std::string> pose_sets(pose_set_names.begin(), pose_set_names.end());
+    std::sort(pose_sets.begin(), pose_sets.end(), [&](const std::string& a, const std::string& b) {
+      return PoseSourceComesFirst(a, b, baseline);
+    });
+    for (const auto& pose_set : pose_sets) {
+      std::vector<SplatCell> scene_cells;
+      for (const auto& scene : scenes) {
+        SplatCell cell{id, trainer, level, scene, pose_set};
+        std::vector<double> psnr, ssim, lpips, raytime_psnr, raytime_ssim;
+        bool tried = false;
+        for (const RunRecord& run : runs) {
+          if (run.scene != scene || run.level_deg != level) continue;
+          const auto stage = run.splat.find(id);
+          if (stage == run.splat.end()) continue;
+          const auto it = stage->second.find(pose_set);
+          if (it == stage->second.end() || it->second.trainer != trainer) continue;
+          tried = true;
+          const SweepSplatResult& result = it->second;
+          if (!result.ok()) {
+            ++cell.failed;
+            continue;
+          }
+          ++cell.trainings;
+          psnr.push_back(result.psnr);
+          ssim.push_back(result.ssim);
+          lpips.push_back(result.lpips);
+          raytime_psnr.push_back(result.raytime_psnr);
+          raytime_ssim.push_back(result.raytime_ssim);
+        }
+        if (!tried) continue;
+        cell.scenes_tried = 1;
+        cell.scenes = cell.trainings > 0 ? 1 : 0;
+        cell.psnr = MeanOfFinite(psnr);
+        cell.ssim = MeanOfFinite(ssim);
+        cell.lpips = MeanOfFinite(lpips);
+        cell.raytime_psnr = MeanOfFinite(raytime_psnr);
+        cell.raytime_ssim = MeanOfFinite(raytime_ssim);
+        scene_cells.push_back(cell);
+      }
+      SplatCell all{id, trainer, level, CampaignReport::kAllScenes, pose_set};
+      std::vector<const SplatCell*> scored;
+      for (const SplatCell& cell : scene_cells) {
+        all.scenes_tried += cell.scenes_tried;
+        all.scenes += cell.scenes;
+        all.trainings += cell.trainings;
+        all.failed += cell.failed;
+        if (cell.scenes > 0) scored.push_back(&cell);
+      }
+      AverageInto(scored, &all);
+      cells.insert(cells.end(), scene_cells.begin(), scene_cells.end());
+      cells.push_back(all);
+    }
+  }
+  return cells;
 }
 
 // ---- Formatting ----------------------------------------------------------------------------
@@ -366,6 +478,70 @@ std::string HalvingTable(const CampaignReport& report) {
   return table;
 }
 
+// Table 4 shape (§4.5): per splat stage, trainer and level, pose sources x the trainer's PSNR,
+// SSIM, LPIPS and raytime's PSNR, SSIM, mean over scenes; then per-scene PSNR (the appendix's
+// per-scene table) when there are several scenes.
+std::string SplatTables(const CampaignReport& report) {
+  std::vector<std::tuple<std::string, std::string, double>> groups;
+  for (const SplatCell& cell : report.splat_cells) {
+    const auto group = std::make_tuple(cell.stage_id, cell.trainer, cell.level_deg);
+    if (std::find(groups.begin(), groups.end(), group) == groups.end()) groups.push_back(group);
+  }
+  std::string text;
+  for (const auto& [id, trainer, level] : groups) {
+    if (groups.size() > 1 || report.level_swept) {
+      text += "\n### `" + id + "` (" + trainer + ")" +
+              (report.level_swept ? ", level " + LevelText(report, level) : std::string()) + "\n\n";
+    } else {
+      text += "\nStage `" + id + "`, trainer " + trainer + ":\n\n";
+    }
+    text += TableHeader("pose source", {"PSNR ↑", "SSIM ↑", "LPIPS ↓", "raytime PSNR ↑",
+                                        "raytime SSIM ↑", "scenes", "failed"});
+    std::vector<std::string> pose_sets;
+    for (const SplatCell& cell : report.splat_cells) {
+      if (cell.stage_id != id || cell.trainer != trainer || cell.level_deg != level ||
+          cell.scene != CampaignReport::kAllScenes) {
+        continue;
+      }
+      pose_sets.push_back(cell.pose_set);
+      text += TableRow(
+          cell.pose_set,
+          {Format("%.2f", cell.psnr), Format("%.3f", cell.ssim), Format("%.3f", cell.lpips),
+           Format("%.2f", cell.raytime_psnr), Format("%.3f", cell.raytime_ssim),
+           CountText(cell.scenes, cell.scenes_tried), std::to_string(cell.failed)});
+    }
+    if (report.scenes.size() < 2) continue;
+    text += "\nPSNR per scene (dB):\n\n" + TableHeader("scene", pose_sets);
+    for (const auto& scene : report.scenes) {
+      std::vector<std::string> cells;
+      bool any = false;
+      for (const auto& pose_set : pose_sets) {
+        const auto it = std::find_if(
+            report.splat_cells.begin(), report.splat_cells.end(), [&](const SplatCell& cell) {
+              return cell.stage_id == id && cell.trainer == trainer && cell.level_deg == level &&
+                     cell.scene == scene && cell.pose_set == pose_set;
+            });
+        any = any || it != report.splat_cells.end();
+        cells.push_back(it == report.splat_cells.end() ? "–"
+                        : it->scenes == 0              ? "failed"
+                                                       : Format("%.2f", it->psnr));
+      }
+      if (any) text += TableRow(scene, cells);
+    }
+    std::vector<std::string> means;
+    for (const auto& pose_set : pose_sets) {
+      const auto it = std::find_if(
+          report.splat_cells.begin(), report.splat_cells.end(), [&](const SplatCell& cell) {
+            return cell.stage_id == id && cell.trainer == trainer && cell.level_deg == level &&
+                   cell.scene == CampaignReport::kAllScenes && cell.pose_set == pose_set;
+          });
+      means.push_back(Format("%.2f", it->psnr));
+    }
+    text += TableRow("Mean", means);
+  }
+  return text;
+}
+
 std::string CsvText(const std::string& text) {
   if (text.find_first_of(",\"\n") == std::string::npos) return text;
   std::string quoted = "\"";
@@ -467,6 +643,7 @@ CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
     }
     run.stage_seconds = row.stage_seconds;
     run.arm_stage = row.pose_set_stage;
+    run.splat = row.splat;
     runs.push_back(std::move(run));
   }
   report.levels.assign(levels.begin(), levels.end());
@@ -510,6 +687,7 @@ CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
       report.cells.push_back(cell);
     }
   }
+  report.splat_cells = AggregateSplat(runs, report.scenes, options.baseline_arm);
   return report;
 }
 
@@ -564,6 +742,17 @@ std::string CampaignReportMarkdown(const CampaignReport& report, const std::stri
       "` in the same run: `k/n` after Sim(3), `(abs. k/n)` in the absolute "
       "frame.\n\n" +
       HalvingTable(report);
+  if (!report.splat_cells.empty()) {
+    text +=
+        "\n## Downstream 3DGS on held-out views (Table 4 shape)\n\n"
+        "Per pose source, the trainer's own held-out PSNR / SSIM / LPIPS and raytime's PSNR / "
+        "SSIM over the trainer's held-out renders (the same computation for every trainer; `–` "
+        "where the trainer left none), each the mean over scenes of the scene's mean over its "
+        "runs. `scenes`: scenes with a successful training out of those where it was trained; a "
+        "row over fewer scenes than the others is not comparable with them. Failed trainings "
+        "(`splat_failed`) are counted, never scored; trainers are never pooled.\n" +
+        SplatTables(report);
+  }
   if (report.scenes.size() > 1) {
     text += "\n## Per scene\n";
     for (const auto& scene : report.scenes) {
@@ -616,6 +805,22 @@ std::string CampaignCellsCsv(const CampaignReport& report) {
       csv += ",,,,";
     }
     csv += "\n";
+  }
+  return csv;
+}
+
+std::string CampaignSplatCsv(const CampaignReport& report) {
+  if (report.splat_cells.empty()) return "";
+  std::string csv =
+      "stage,trainer,level_deg,scene,pose_set,scenes,scenes_tried,trainings,failed,psnr,ssim,"
+      "lpips,raytime_psnr,raytime_ssim\n";
+  for (const SplatCell& cell : report.splat_cells) {
+    csv += CsvText(cell.stage_id) + "," + CsvText(cell.trainer) + "," + CsvNumber(cell.level_deg) +
+           "," + CsvText(cell.scene) + "," + CsvText(cell.pose_set) + "," +
+           std::to_string(cell.scenes) + "," + std::to_string(cell.scenes_tried) + "," +
+           std::to_string(cell.trainings) + "," + std::to_string(cell.failed) + "," +
+           CsvNumber(cell.psnr) + "," + CsvNumber(cell.ssim) + "," + CsvNumber(cell.lpips) + "," +
+           CsvNumber(cell.raytime_psnr) + "," + CsvNumber(cell.raytime_ssim) + "\n";
   }
   return csv;
 }

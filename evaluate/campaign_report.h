@@ -86,6 +86,27 @@ struct FailedRun {
   std::string error;
 };
 
+// The paper's Table 4 (§4.5, downstream 3DGS on held-out views): one row per pose source of one
+// splat stage, trainer and perturbation level. Each scene's value is the mean over its runs'
+// successful trainings (seeds pooled); the row is the mean over the scenes that have one, so a
+// row with fewer scenes than its table's others is not comparable with them (`scenes` says).
+struct SplatCell {
+  std::string stage_id;  // "splat", "splat@gsplat"
+  std::string trainer;   // gsplat, inria, nerfstudio: never pooled, their numbers differ in kind
+  double level_deg = 0.0;
+  std::string scene;       // display name; CampaignReport::kAllScenes for the mean over scenes
+  std::string pose_set;    // the pose source
+  int scenes = 0;          // scenes with a successful training (1 or 0 for a scene's own cell)
+  int scenes_tried = 0;    // scenes where it was trained at all, successfully or not
+  int trainings = 0;       // successful trainings
+  int failed = 0;          // failed trainings (`splat_failed`): counted, never scored
+  double psnr = kNoValue;  // the trainer's held-out metrics, dB
+  double ssim = kNoValue;
+  double lpips = kNoValue;         // NaN when the trainer reported none
+  double raytime_psnr = kNoValue;  // raytime's own over the trainer's renders (image_metrics.h)
+  double raytime_ssim = kNoValue;
+};
+
 struct CampaignReport {
   static constexpr const char* kAllScenes = "(all)";
 
@@ -100,6 +121,9 @@ struct CampaignReport {
   std::vector<std::pair<std::string, int>> pooled_keys;
   std::vector<CampaignCell> cells;     // per scene, then pooled over scenes
   std::vector<FailedRun> failed_runs;  // status != "ok": counted, never scored
+  // Table 4 cells of the successful runs' splat stages: per scene, then kAllScenes; by stage,
+  // trainer, level, then pose source in report order (prior first, ground_truth last).
+  std::vector<SplatCell> splat_cells;
 
   // nullptr when no run of that scene and level scored the arm.
   const CampaignCell* Find(const std::string& scene, double level_deg,
@@ -120,5 +144,8 @@ std::string CampaignReportMarkdown(const CampaignReport& report, const std::stri
 // One row per cell (scene, level, arm; scene kAllScenes for the pooled cells) with every
 // aggregate number, Wilson intervals included; empty fields for NaN.
 std::string CampaignCellsCsv(const CampaignReport& report);
+
+// One row per Table 4 cell (splat_cells); "" when the sweep trained no 3DGS.
+std::string CampaignSplatCsv(const CampaignReport& report);
 
 }  // namespace raytime

@@ -409,6 +409,9 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
                            {"test_filenames", nlohmann::json::array()}};
   for (const std::string& name : split.train) extras["train_filenames"].push_back("images/" + name);
   for (const std::string& name : split.test) extras["test_filenames"].push_back("images/" + name);
+  // nerfstudio's parser refuses a transforms.json that lists some splits but not the one asked
+  // for, and ns-train asks for "val": the held-out images serve as both.
+  extras["val_filenames"] = extras["test_filenames"];
   if (!tracks.empty()) extras["ply_file_path"] = "sparse_pc.ply";
 
   for (const auto& [name, all_poses] : poses) {

@@ -87,8 +87,8 @@ YAML::Node Stage::CliOptions() const {
 namespace raytime {
 
 std::vector<std::string> StageTypes() {
-  return {"dataset", "features", "matches",   "colmap_import", "bootstrap",
-          "prior",   "refine",   "classical", "evaluate",      "export"};
+  return {"dataset", "features",  "matches",  "colmap_import", "bootstrap", "prior",
+          "refine",  "classical", "evaluate", "export",        "splat"};
 }
 
 std::unique_ptr<Stage> CreateStage(const std::string& type) {
@@ -102,6 +102,7 @@ std::unique_ptr<Stage> CreateStage(const std::string& type) {
   if (type == "classical") return CreateClassicalStage();
   if (type == "evaluate") return CreateEvaluateStage();
   if (type == "export") return CreateExportStage();
+  if (type == "splat") return CreateSplatStage();
   throw InputError(UnknownKeyMessage("the pipeline", type, StageTypes(), "stage"));
 }
 

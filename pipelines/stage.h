@@ -31,6 +31,9 @@ struct StageContext {
   std::map<std::string, std::string> artifacts;
   // The HDF5 file this stage writes (WORKDIR/<stage>.h5); other outputs go below workdir.
   std::string output_path;
+  // `raytime run --force`: redo also what a stage would reuse from its own earlier results (the
+  // splat stage's finished trainings).
+  bool force = false;
 
   // File holding `artifact`; InputError naming the artifact and the stage that should make it.
   const std::string& Require(const std::string& artifact) const;
@@ -70,6 +73,13 @@ class Stage {
   virtual std::vector<std::string> ExtraOutputs() const { return {}; }
   // Files outside the work directory whose contents the result depends on (content-hashed).
   virtual std::vector<std::string> ExternalFiles() const { return {}; }
+  // Whether the result an earlier run left in `context.workdir` is complete. A stage that returns
+  // partial failures as warnings (a trainer that failed for one pose set) says false so that a
+  // rerun with unchanged inputs retries them instead of skipping the stage.
+  virtual bool Complete(const StageContext& context) const { return true; }
+  // Whether sweep runs may share this stage's result through the cache, which holds only its HDF5
+  // file: not when it writes files besides it.
+  virtual bool Cacheable() const { return ExtraOutputs().empty(); }
 
   // Runs the stage and returns its summary (timings, counts, metrics, guardrail verdicts, and
   // "warnings": an array of core/warnings.h objects the pipeline collects into summary.json).

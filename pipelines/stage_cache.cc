@@ -213,6 +213,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
       context.stage_id = stage_spec.id;
       context.workdir = workdir;
       context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
+      context.force = options.force;
       for (const auto& [artifact, source] : artifacts) context.artifacts[artifact] = source.file;
       const std::string key = StageKey(stage_spec, *stage, artifacts);
       const std::string record_path =
@@ -226,6 +227,10 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
         unchanged = !record.is_discarded() && record.value("key", "") == key;
         for (const auto& extra : stage->ExtraOutputs()) {
           unchanged = unchanged && fs::exists(fs::path(workdir) / extra);
+        }
+        if (unchanged && !stage->Complete(context)) {
+          spdlog::info("{}: the previous result is incomplete, running again", tag);
+          unchanged = false;
         }
       }
       std::vector<std::string> produced;
@@ -249,7 +254,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
       } else {
         // 2. Another run computed it (sweeps share a cache); stages that write folders besides
         // their HDF5 file always run.
-        const bool cacheable = !options.cache_dir.empty() && stage->ExtraOutputs().empty();
+        const bool cacheable = !options.cache_dir.empty() && stage->Cacheable();
         std::unique_ptr<CacheLock> lock;
         const fs::path cached = fs::path(options.cache_dir) / key;
         if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);

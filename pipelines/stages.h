@@ -17,6 +17,7 @@ std::unique_ptr<Stage> CreateRefineStage();
 std::unique_ptr<Stage> CreateClassicalStage();
 std::unique_ptr<Stage> CreateEvaluateStage();
 std::unique_ptr<Stage> CreateExportStage();
+std::unique_ptr<Stage> CreateSplatStage();
 
 // Provenance for a pose set or group written by `stage`.
 struct Provenance;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include "core/atomic_file.h"
@@ -82,14 +83,22 @@ SweepRow SweepRowFromRun(const std::string& label,
   const json pose_sets = summary.value("pose_sets", json::object());
   const json guardrails = summary.value("guardrails", json::object());
   const json warnings = summary.value("warnings", json::array());
+  std::set<std::string> splat_stages;  // their metrics are trainings per pose set, not pose errors
   for (const auto& stage : stages) {
     // Time of the stage's own computation, also when this run reused it.
     row.stage_seconds[stage["id"].get<std::string>()] = stage["status"] == "ran"
                                                             ? stage["seconds"].get<double>()
                                                             : stage.value("previous_seconds", 0.0);
+    if (stage.value("type", "") == "splat") splat_stages.insert(stage["id"].get<std::string>());
   }
   for (const auto& [arm, by_alignment] : metrics.items()) {
     if (!by_alignment.is_object()) continue;
+    if (splat_stages.count(arm)) {
+      for (const auto& [pose_set, training] : by_alignment.items()) {
+        if (training.is_object()) row.splat[arm][pose_set] = SweepSplatResult::FromJson(training);
+      }
+      continue;
+    }
     for (const auto& [alignment, errors] : by_alignment.items()) {
       if (!errors.is_object()) continue;
       row.errors[arm][alignment] = SweepPoseErrors::FromJson(errors);

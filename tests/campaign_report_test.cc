@@ -323,5 +323,148 @@ TEST_F(SweepFileTest, ReadsRowsAndNamesTheFileOnBadInput) {
   EXPECT_NE(ReadError(Write("[1]")).find("sweep row 1: not a sweep row"), std::string::npos);
 }
 
+// One pose set's training as a run's splat stage reports it.
+SweepSplatResult Training(const std::string& trainer, double psnr, double ssim, double lpips,
+                          double raytime_psnr = kNoValue) {
+  SweepSplatResult result;
+  result.trainer = trainer;
+  result.status = "ok";
+  result.psnr = psnr;
+  result.ssim = ssim;
+  result.lpips = lpips;
+  result.raytime_psnr = raytime_psnr;
+  result.raytime_ssim = std::isnan(raytime_psnr) ? kNoValue : 0.5;
+  result.seconds = 100.0;
+  return result;
+}
+
+SweepSplatResult FailedTraining(const std::string& trainer) {
+  SweepSplatResult result;
+  result.trainer = trainer;
+  result.status = "failed";
+  return result;
+}
+
+// Two scenes, two seeds, gsplat in stage splat and Inria in splat@inria: Table 4's cells are the
+// mean over scenes of each scene's mean over its seeds; a failed training is counted, not
+// scored; trainers are never pooled.
+std::vector<SweepRow> SplatRows() {
+  std::vector<SweepRow> rows = {
+      Row("A", "4", "0", {{"prior", {4, 4}}}), Row("A", "4", "1", {{"prior", {4, 4}}}),
+      Row("B", "4", "0", {{"prior", {4, 4}}}), Row("B", "4", "1", {{"prior", {4, 4}}})};
+  // Scene A: prior 20 and 22 (mean 21), refined 24 and 26 (mean 25); scene B: prior 17 (seed 1
+  // failed), refined 27 and 29 (mean 28), ground truth 30 (seed 0 only).
+  rows[0].splat["splat"] = {{"prior", Training("gsplat", 20, 0.5, 0.4, 30)},
+                            {"refined", Training("gsplat", 24, 0.7, 0.2, 31)}};
+  rows[1].splat["splat"] = {{"prior", Training("gsplat", 22, 0.6, 0.3, 32)},
+                            {"refined", Training("gsplat", 26, 0.8, 0.1, 33)}};
+  rows[2].splat["splat"] = {{"prior", Training("gsplat", 17, 0.4, 0.5)},
+                            {"refined", Training("gsplat", 27, 0.75, 0.15)},
+                            {"ground_truth", Training("gsplat", 30, 0.9, 0.05)}};
+  rows[3].splat["splat"] = {{"prior", FailedTraining("gsplat")},
+                            {"refined", Training("gsplat", 29, 0.85, kNoValue)}};
+  rows[0].splat["splat@inria"] = {{"prior", Training("inria", 10, 0.1, 0.9)}};
+  return rows;
+}
+
+TEST(CampaignReportTest, SplatTable4IsTheMeanOverScenesPerPoseSource) {
+  const CampaignReport report = AggregateCampaign(SplatRows());
+  const auto find = [&](const std::string& id, const std::string& scene,
+                        const std::string& pose_set) -> const SplatCell* {
+    for (const SplatCell& cell : report.splat_cells) {
+      if (cell.stage_id == id && cell.scene == scene && cell.pose_set == pose_set) return &cell;
+    }
+    return nullptr;
+  };
+  const SplatCell* prior = find("splat", CampaignReport::kAllScenes, "prior");
+  ASSERT_NE(prior, nullptr);
+  EXPECT_EQ(prior->trainer, "gsplat");
+  EXPECT_EQ(prior->level_deg, 4.0);
+  EXPECT_DOUBLE_EQ(prior->psnr, (21.0 + 17.0) / 2);  // not the mean of the three trainings
+  EXPECT_DOUBLE_EQ(prior->ssim, (0.55 + 0.4) / 2);
+  EXPECT_DOUBLE_EQ(prior->lpips, (0.35 + 0.5) / 2);
+  EXPECT_DOUBLE_EQ(prior->raytime_psnr, 31.0);  // scene A only: B's trainer left no renders
+  EXPECT_EQ(prior->scenes, 2);
+  EXPECT_EQ(prior->scenes_tried, 2);
+  EXPECT_EQ(prior->trainings, 3);
+  EXPECT_EQ(prior->failed, 1);
+  const SplatCell* refined = find("splat", CampaignReport::kAllScenes, "refined");
+  ASSERT_NE(refined, nullptr);
+  EXPECT_DOUBLE_EQ(refined->psnr, (25.0 + 28.0) / 2);
+  EXPECT_DOUBLE_EQ(refined->lpips, (0.15 + 0.15) / 2);  // B's seed 1 reported none
+  const SplatCell* b_refined = find("splat", "B", "refined");
+  ASSERT_NE(b_refined, nullptr);
+  EXPECT_DOUBLE_EQ(b_refined->psnr, 28.0);
+  EXPECT_DOUBLE_EQ(b_refined->lpips, 0.15);
+  const SplatCell* truth = find("splat", CampaignReport::kAllScenes, "ground_truth");
+  ASSERT_NE(truth, nullptr);
+  EXPECT_EQ(truth->scenes, 1);
+  EXPECT_EQ(truth->scenes_tried, 1);
+  EXPECT_DOUBLE_EQ(truth->psnr, 30.0);
+  const SplatCell* inria = find("splat@inria", CampaignReport::kAllScenes, "prior");
+  ASSERT_NE(inria, nullptr);
+  EXPECT_EQ(inria->trainer, "inria");
+  EXPECT_DOUBLE_EQ(inria->psnr, 10.0);
+
+  // Report order: the prior first, ground truth last.
+  std::vector<std::string> order;
+  for (const SplatCell& cell : report.splat_cells) {
+    if (cell.stage_id == "splat" && cell.scene == CampaignReport::kAllScenes) {
+      order.push_back(cell.pose_set);
+    }
+  }
+  EXPECT_EQ(order, (std::vector<std::string>{"prior", "refined", "ground_truth"}));
+
+  const std::string markdown = CampaignReportMarkdown(report, "sweep.json");
+  EXPECT_NE(markdown.find("## Downstream 3DGS on held-out views (Table 4 shape)"),
+            std::string::npos);
+  EXPECT_NE(markdown.find("### `splat` (gsplat), level 4°"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("### `splat@inria` (inria), level 4°"), std::string::npos);
+  EXPECT_NE(markdown.find("| prior | 19.00 | 0.475 | 0.425 | 31.00 | 0.500 | 2/2 | 1 |"),
+            std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| refined | 26.50 | 0.775 | 0.150 | 32.00 | 0.500 | 2/2 | 0 |"),
+            std::string::npos)
+      << markdown;
+  EXPECT_NE(markdown.find("| ground_truth | 30.00 | 0.900 | 0.050 | – | – | 1/1 | 0 |"),
+            std::string::npos)
+      << markdown;
+  // Per-scene PSNR (two scenes), with its mean row.
+  EXPECT_NE(markdown.find("| A | 21.00 | 25.00 | – |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("| B | 17.00 | 28.00 | 30.00 |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("| Mean | 19.00 | 26.50 | 30.00 |"), std::string::npos) << markdown;
+
+  const std::string csv = CampaignSplatCsv(report);
+  EXPECT_EQ(csv.rfind("stage,trainer,level_deg,scene,pose_set,", 0), 0u) << csv;
+  EXPECT_NE(csv.find("splat,gsplat,4,(all),prior,2,2,3,1,19,0.475,0.425,31,0.5\n"),
+            std::string::npos)
+      << csv;
+  // A sweep without splat stages has no Table 4.
+  EXPECT_TRUE(AggregateCampaign(HandMadeRows()).splat_cells.empty());
+  EXPECT_EQ(CampaignReportMarkdown(AggregateCampaign(HandMadeRows()), "s").find("Table 4"),
+            std::string::npos);
+  EXPECT_EQ(CampaignSplatCsv(AggregateCampaign(HandMadeRows())), "");
+}
+
+TEST_F(SweepFileTest, SplatResultsSurviveTheRoundTrip) {
+  json rows = json::array();
+  for (const SweepRow& row : SplatRows()) rows.push_back(row.ToJson());
+  const std::vector<SweepRow> read = ReadSweepRows(Write(rows.dump(2)));
+  ASSERT_EQ(read.size(), 4u);
+  EXPECT_EQ(read[3].ToJson(), SplatRows()[3].ToJson());
+  EXPECT_EQ(read[3].splat.at("splat").at("prior").status, "failed");
+  EXPECT_TRUE(std::isnan(read[3].splat.at("splat").at("refined").lpips));
+  EXPECT_EQ(read[0].splat.at("splat@inria").at("prior").trainer, "inria");
+  // The CSV columns name the stage and the pose set.
+  bool found = false;
+  for (const auto& [column, value] : read[0].Columns()) {
+    found = found || (column == "metrics.splat.refined.psnr" && value == "24");
+  }
+  EXPECT_TRUE(found);
+  EXPECT_NE(ReadError(Write(R"([{"run": "r", "status": "ok", "splat": {"splat": {"prior": 3}}}])"))
+                .find("splat.splat.prior is not an object"),
+            std::string::npos);
+}
+
 }  // namespace
 }  // namespace raytime

@@ -6,8 +6,10 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <stdexcept>
 
@@ -101,6 +103,40 @@ TEST(Process, WaitsForSeveralChildrenAndSignalsOne) {
   EXPECT_EQ(finished.status.exit_code, -1);
   EXPECT_EQ(finished.status.Describe(), "was killed by signal " + std::to_string(SIGTERM));
   EXPECT_THROW(WaitAnyProcess(), std::runtime_error) << "no children are left";
+}
+
+// A child in its own process group: waiting with a limit returns while it runs, and signalling the
+// group ends what the child started too (the trainer hook's timeout and interruption rely on it).
+TEST(Process, WaitsWithALimitAndSignalsAWholeGroup) {
+  TempDir dir("process");
+  ProcessOptions options;
+  options.new_process_group = true;
+  const std::string grandchild_pid = dir / "grandchild.pid";
+  const pid_t shell =
+      StartProcess({"/bin/sh", "-c", "sleep 60 & echo $! > " + grandchild_pid + "; wait"}, options);
+  EXPECT_EQ(::getpgid(shell), shell) << "the child leads its own group";
+  ProcessStatus status;
+  EXPECT_FALSE(WaitProcessFor(shell, 0.2, &status));
+  ASSERT_TRUE(std::filesystem::exists(grandchild_pid));
+  const pid_t grandchild = std::stoi(ReadTextFile(grandchild_pid));
+  EXPECT_EQ(::getpgid(grandchild), shell);
+
+  EXPECT_TRUE(SignalProcessGroup(shell, SIGTERM));
+  ASSERT_TRUE(WaitProcessFor(shell, 10.0, &status));
+  EXPECT_EQ(status.signal, SIGTERM);
+  // The grandchild is not ours to reap: it counts as ended once it is gone or a zombie (whether
+  // the container's init reaps orphans is not this test's business).
+  const auto running = [&] {
+    std::ifstream stat("/proc/" + std::to_string(grandchild) + "/stat");
+    std::string pid, name, state;
+    return stat >> pid >> name >> state && state != "Z";
+  };
+  for (int i = 0; i < 200 && running(); ++i) ::usleep(10000);
+  EXPECT_FALSE(running()) << "the sleep the shell started outlived the group's signal";
+
+  const pid_t quick = StartProcess({"/bin/sh", "-c", "exit 7"});
+  ASSERT_TRUE(WaitProcessFor(quick, 10.0, &status));
+  EXPECT_EQ(status.exit_code, 7);
 }
 
 }  // namespace

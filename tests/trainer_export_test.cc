@@ -392,6 +392,7 @@ TEST(TrainerExportTest, ExportsEveryPoseSetWithTheSameImagesSplitAndTracks) {
     EXPECT_EQ(transforms["ply_file_path"], "sparse_pc.ply");
     EXPECT_EQ(transforms["test_filenames"],
               nlohmann::json::array({"images/img0.png", "images/img3.png"}));
+    EXPECT_EQ(transforms["val_filenames"], transforms["test_filenames"]);
     EXPECT_EQ(transforms["train_filenames"],
               nlohmann::json::array({"images/img1.png", "images/img2.png"}));
     ASSERT_EQ(transforms["frames"].size(), 4u);

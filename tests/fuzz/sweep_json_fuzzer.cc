@@ -1,5 +1,5 @@
 // libFuzzer target: a sweep's sweep.json as `raytime report` reads it (core/sweep_row.h:
-// ReadSweepRows; evaluate/campaign_report.h: AggregateCampaign, then both report formats). The
+// ReadSweepRows; evaluate/campaign_report.h: AggregateCampaign, then the report formats). The
 // input is the file.
 #include <string>
 #include <string_view>
@@ -16,6 +16,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const CampaignReport report = AggregateCampaign(ReadSweepRows(path));
     CampaignReportMarkdown(report, path);
     CampaignCellsCsv(report);
+    CampaignSplatCsv(report);
   } catch (const InputError&) {
   }
   return 0;

@@ -1,0 +1,277 @@
+#include "evaluate/splat_trainer.h"
+
+#include <signal.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+
+#include "core/error.h"
+#include "core/interrupt.h"
+#include "core/process.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+const std::vector<std::string> kPlaceholders = {"data_dir", "result_dir", "pose_set"};
+
+// Seconds a stopped trainer gets to end on SIGTERM before its group is killed.
+constexpr double kStopGrace_s = 10.0;
+// What a failed run's summary quotes from the log.
+constexpr size_t kTailLines = 20;
+constexpr size_t kTailChars = 4000;
+
+// `value` as one shell word: unchanged when it holds only characters no shell treats specially,
+// else in single quotes (a quote inside closes, escapes and reopens them).
+std::string ShellWord(const std::string& value) {
+  static const std::string kPlain =
+      "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789@%+=:,./_-";
+  if (!value.empty() && value.find_first_not_of(kPlain) == std::string::npos) return value;
+  std::string quoted = "'";
+  for (const char c : value) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return quoted + "'";
+}
+
+// Placeholder-like names: a typo such as {data-dir} or {datadir} is an error rather than text the
+// shell receives; brace expansions ({a,b}, {1..3}) and awk programs do not look like this.
+bool IsNameChar(char c) {
+  return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+}
+
+// The "{name}"s of `text` that are not a shell's "${name}", in order.
+std::vector<std::string> BracedNames(const std::string& text) {
+  std::vector<std::string> names;
+  for (size_t open = text.find('{'); open != std::string::npos; open = text.find('{', open + 1)) {
+    const size_t close = text.find('}', open + 1);
+    if (close == std::string::npos) break;
+    const std::string name = text.substr(open + 1, close - open - 1);
+    if (name.empty() || !std::all_of(name.begin(), name.end(), IsNameChar)) continue;
+    if (open > 0 && text[open - 1] == '$') continue;
+    names.push_back(name);
+  }
+  return names;
+}
+
+// The last kTailLines lines of the log (at most kTailChars), for a failure's summary.
+std::string LogTail(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return "";
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  in.seekg(std::max<std::streamoff>(0, size - 64 * 1024));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Progress bars redraw one line with carriage returns: each redraw counts as a line.
+  std::vector<std::string> lines;
+  std::string line;
+  for (const char c : text) {
+    if (c != '\n' && c != '\r') {
+      line += c;
+      continue;
+    }
+    if (!line.empty()) lines.push_back(line);
+    line.clear();
+  }
+  if (!line.empty()) lines.push_back(line);
+  std::string tail;
+  for (size_t i = lines.size() > kTailLines ? lines.size() - kTailLines : 0; i < lines.size();
+       ++i) {
+    tail += lines[i] + "\n";
+  }
+  if (tail.size() > kTailChars) tail = tail.substr(tail.size() - kTailChars);
+  return tail;
+}
+
+std::string Absolute(const std::string& path) {
+  return fs::absolute(fs::path(path)).lexically_normal().string();
+}
+
+// Runs the command to its end or its timeout; fills the process fields of `summary`.
+void RunCommand(const SplatTrainerOptions& options, const SplatJob& job, SplatRunSummary* summary) {
+  {
+    std::ofstream log(job.log_path, std::ios::trunc);
+    log << "$ " << summary->command << "\n" << std::flush;
+    if (!log) ThrowInput(job.log_path, 0, "cannot write the trainer's log");
+  }
+  ProcessOptions process;
+  process.output_path = job.log_path;
+  process.append_output = true;
+  process.working_dir = options.working_dir;
+  process.new_process_group = true;
+  const auto start = std::chrono::steady_clock::now();
+  const pid_t pid = StartProcess({"/bin/sh", "-c", summary->command}, process);
+  // The trainer has its own group, so a terminal's Ctrl-C does not reach it: stop it with us.
+  std::mutex mutex;
+  bool running = true;
+  const InterruptAction stop_on_interrupt([&](int) {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (running) SignalProcessGroup(pid, SIGTERM);
+  });
+
+  ProcessStatus status;
+  bool ended = false;
+  if (options.timeout_s > 0.0) {
+    ended = WaitProcessFor(pid, options.timeout_s, &status);
+  } else {
+    status = WaitProcess(pid);
+    ended = true;
+  }
+  if (!ended) {
+    summary->timed_out = true;
+    SignalProcessGroup(pid, SIGTERM);
+    if (!WaitProcessFor(pid, kStopGrace_s, &status)) {
+      SignalProcessGroup(pid, SIGKILL);
+      status = WaitProcess(pid);
+    }
+  }
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    running = false;
+  }
+  summary->seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (Interrupting()) AwaitInterruptExit();
+  // Whatever the command left running in the background (a viewer, a server) ends with it: a
+  // hook that returns must not leave a GPU busy.
+  if (SignalProcessGroup(pid, SIGTERM)) {
+    std::ofstream(job.log_path, std::ios::app)
+        << "\n[raytime] stopped the processes the command left running (SIGTERM to its group)\n";
+  }
+  summary->exit_code = status.exit_code;
+  summary->signal = status.signal;
+  if (summary->timed_out) {
+    summary->status = "failed";
+    summary->error = "timed out after " + std::to_string(std::lround(options.timeout_s)) +
+                     " s (timeout_s) and was stopped";
+  } else if (!status.Succeeded()) {
+    summary->status = "failed";
+    summary->error = "the command " + status.Describe();
+  }
+}
+
+}  // namespace
+
+void SplatTrainerOptions::CheckRelations(const Requirement& require) const {
+  for (const std::string& name : BracedNames(command)) {
+    require(std::find(kPlaceholders.begin(), kPlaceholders.end(), name) != kPlaceholders.end(),
+            "option 'command': unknown placeholder {" + name +
+                "} (the placeholders are {data_dir}, {result_dir} and {pose_set}; a shell "
+                "variable is written ${" +
+                name + "})");
+  }
+}
+
+std::string DefaultSplatCommand(const std::string& trainer) {
+  if (trainer == "gsplat") {
+    // examples/simple_trainer.py in a gsplat checkout; --data_factor 1: the export is already at
+    // the resolution to train on (gsplat's default 4 downsamples); without --disable_viewer the
+    // script keeps its viewer alive after training and never exits.
+    return "python examples/simple_trainer.py default --data_dir {data_dir} --result_dir "
+           "{result_dir} --data_factor 1 --disable_viewer";
+  }
+  if (trainer == "inria") {
+    // The reference code's evaluation recipe (its README): train with the every-8th split, render
+    // the held-out views, score them into MODEL/results.json.
+    return "python train.py -s {data_dir} -m {result_dir} --eval && python render.py -m "
+           "{result_dir} && python metrics.py -m {result_dir}";
+  }
+  if (trainer == "nerfstudio") {
+    // A fixed experiment name and timestamp put config.yml where ns-eval can be told; tensorboard
+    // instead of the default visualizer so training ends without a viewer or a login.
+    return "ns-train splatfacto --data {data_dir} --output-dir {result_dir} --experiment-name "
+           "raytime --timestamp run --vis tensorboard && ns-eval --load-config "
+           "{result_dir}/raytime/splatfacto/run/config.yml --output-path {result_dir}/eval.json "
+           "--render-output-path {result_dir}/eval_renders";
+  }
+  throw InputError("unknown trainer '" + trainer + "' (gsplat, inria, nerfstudio)");
+}
+
+std::string ExpandSplatCommand(const SplatTrainerOptions& options, const SplatJob& job) {
+  const std::string command =
+      options.command.empty() ? DefaultSplatCommand(options.trainer) : options.command;
+  const std::map<std::string, std::string> values = {
+      {"data_dir", ShellWord(Absolute(job.data_dir))},
+      {"result_dir", ShellWord(Absolute(job.result_dir))},
+      {"pose_set", ShellWord(job.pose_set)}};
+  std::string expanded;
+  size_t pos = 0;
+  while (pos < command.size()) {
+    const size_t open = command.find('{', pos);
+    if (open == std::string::npos) break;
+    const size_t close = command.find('}', open + 1);
+    if (close == std::string::npos) break;
+    const auto value = values.find(command.substr(open + 1, close - open - 1));
+    if (value == values.end() || (open > 0 && command[open - 1] == '$')) {
+      expanded += command.substr(pos, open + 1 - pos);
+      pos = open + 1;
+      continue;
+    }
+    expanded += command.substr(pos, open - pos) + value->second;
+    pos = close + 1;
+  }
+  return expanded + command.substr(std::min(pos, command.size()));
+}
+
+SplatRunSummary RunSplatTrainer(const SplatTrainerOptions& options, const SplatJob& job) {
+  if (!options.working_dir.empty() && !fs::is_directory(options.working_dir)) {
+    ThrowInput(options.working_dir, 0,
+               "the trainer's working directory (option 'working_dir') does not exist");
+  }
+  SplatRunSummary summary;
+  summary.pose_set = job.pose_set;
+  summary.trainer = options.trainer;
+  summary.status = "ok";
+  summary.reused = job.reuse_result;
+  summary.command = ExpandSplatCommand(options, job);
+  summary.data_dir = Absolute(job.data_dir);
+  summary.result_dir = Absolute(job.result_dir);
+  summary.log_path = job.log_path;
+
+  if (!job.reuse_result) {
+    // A fresh folder: metrics an earlier run left must never pass for this run's.
+    fs::remove_all(summary.result_dir);
+    fs::create_directories(summary.result_dir);
+    if (!job.log_path.empty()) fs::create_directories(fs::path(job.log_path).parent_path());
+    RunCommand(options, job, &summary);
+  }
+
+  if (summary.ok()) {
+    try {
+      const TrainerMetrics metrics = ReadTrainerMetrics(options.trainer, summary.result_dir);
+      summary.metrics_file = metrics.file;
+      summary.step = metrics.step;
+      summary.psnr = metrics.psnr;
+      summary.ssim = metrics.ssim;
+      summary.lpips = metrics.lpips;
+      summary.num_gaussians = metrics.num_gaussians;
+    } catch (const InputError& e) {
+      summary.status = "failed";
+      summary.error = std::string("the command succeeded but its metrics do not read: ") + e.what();
+    }
+  }
+  if (summary.ok()) {
+    TrainerMetrics step;
+    step.step = summary.step;
+    try {
+      const std::vector<HeldOutView> views =
+          TrainerHeldOutViews(options.trainer, summary.result_dir, step, &summary.raytime_note);
+      if (!views.empty()) {
+        const HeldOutScore score = ScoreHeldOutViews(views);
+        summary.raytime_images = score.num_images;
+        summary.raytime_psnr = score.psnr;
+        summary.raytime_ssim = score.ssim;
+      }
+    } catch (const InputError& e) {
+      summary.raytime_note = std::string("renders not scored: ") + e.what();
+    }
+  }
+  if (!summary.ok()) summary.log_tail = LogTail(job.log_path);
+  return summary;
+}
+
+}  // namespace raytime
