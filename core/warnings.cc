@@ -4,8 +4,30 @@
 
 namespace raytime {
 
-// Messages and names may quote file names and contents that are not UTF-8 (EscapeInvalidUtf8);
-// summary.json must still be written.
+namespace {
+
+// Every string (and object key) of `value` with invalid UTF-8 escaped (EscapeInvalidUtf8).
+nlohmann::json EscapeStrings(const nlohmann::json& value) {
+  if (value.is_string()) return EscapeInvalidUtf8(value.get<std::string>());
+  if (value.is_array()) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& element : value) out.push_back(EscapeStrings(element));
+    return out;
+  }
+  if (value.is_object()) {
+    nlohmann::json out = nlohmann::json::object();
+    for (const auto& [key, element] : value.items()) {
+      out[EscapeInvalidUtf8(key)] = EscapeStrings(element);
+    }
+    return out;
+  }
+  return value;
+}
+
+}  // namespace
+
+// Messages, names and details may quote file names and contents that are not UTF-8
+// (EscapeInvalidUtf8); summary.json must still be written.
 nlohmann::json Warning::ToJson() const {
   nlohmann::json out = {{"code", code}, {"message", EscapeInvalidUtf8(message)}};
   if (!images.empty()) {
@@ -18,7 +40,7 @@ nlohmann::json Warning::ToJson() const {
       out["pairs"].push_back({EscapeInvalidUtf8(a), EscapeInvalidUtf8(b)});
     }
   }
-  if (!details.empty()) out["details"] = details;
+  if (!details.empty()) out["details"] = EscapeStrings(details);
   return out;
 }
 

@@ -20,6 +20,7 @@
 #include "core/formats/nerfstudio.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
+#include "core/warnings.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -304,6 +305,17 @@ TEST(Formats, ImageNamesThatAreNotUtf8AreRefusedWithAPrintableMessage) {
 
   EXPECT_EQ(EscapeInvalidUtf8("d\xe9mo \xc3\xa9 \xe2\x82"), "d\\xE9mo \xc3\xa9 \\xE2\\x82");
   EXPECT_EQ(std::string(InputError("x\xff").what()), "x\\xFF");
+}
+
+TEST(Formats, WarningsQuotingBytesThatAreNotUtf8StillSerialize) {
+  // A warning may quote names and file contents in its message, images, pairs and details.
+  const Warning warning{
+      "code", "m\xff", {"i\xfe.jpg"}, {{"a\xfd", "b"}}, {{"names", {"n\x9b"}}, {"k\xfc", 1}}};
+  const std::string text = WarningsToJson({warning}).dump();
+  EXPECT_NE(text.find("m\\\\xFF"), std::string::npos) << text;
+  EXPECT_NE(text.find("n\\\\x9B"), std::string::npos) << text;
+  EXPECT_NE(text.find("k\\\\xFC"), std::string::npos) << text;
+  EXPECT_NE(text.find("i\\\\xFE.jpg"), std::string::npos) << text;
 }
 
 std::string SharedData(const std::string& relative) {

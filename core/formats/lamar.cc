@@ -211,7 +211,10 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     if (!names.insert(frame.name).second) {
       ThrowInput(images_path, row.line, "image " + frame.name + " is listed twice");
     }
-    frame.has_image = fs::exists(root / "raw_data" / frame.name);
+    // The name comes from the file: a path the system cannot even look up (too long, say) is an
+    // image that is not there, reported as such, not an escaping filesystem_error.
+    std::error_code missing;
+    frame.has_image = fs::exists(root / "raw_data" / frame.name, missing);
     frame.K = camera->second.first;
     frame.width = camera->second.second.first;
     frame.height = camera->second.second.second;
