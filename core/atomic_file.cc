@@ -156,6 +156,11 @@ void WriteTextFileAtomically(const std::string& path, const std::string& content
   });
 }
 
+bool PathExists(const std::string& path) {
+  std::error_code error;
+  return std::filesystem::exists(path, error);
+}
+
 std::string ReadTextFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) ThrowInput(path, 0, "cannot open file for reading");

@@ -22,6 +22,10 @@ void WriteTextFileAtomically(const std::string& path, const std::string& content
 // Whole file as a string; throws InputError naming the path when it cannot be read.
 std::string ReadTextFile(const std::string& path);
 
+// Whether `path` exists, false when the system cannot even look it up (a name too long, say):
+// for paths built from names read out of a file, which must not escape as filesystem_error.
+bool PathExists(const std::string& path);
+
 // Temporary files. Every writer names its temporary sibling ".NAME.tmp.PID.N" (N counts within
 // the process) and registers it while it exists, so that an interrupted run removes its own
 // (RemovePendingTemporaryFiles, called by core/interrupt.h) and the next run in a work directory

@@ -1,4 +1,5 @@
 #include "core/formats/dataset.h"
+#include "core/atomic_file.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -55,7 +56,8 @@ std::string FindColmapModel(const std::string& root, const std::string& model) {
 void CheckImagesExist(const ImageSet& images, const std::string& dataset_root) {
   std::vector<std::string> missing;
   for (const auto& image : images.images) {
-    if (!fs::exists(fs::path(images.image_root) / image.name)) missing.push_back(image.name);
+    if (!PathExists((fs::path(images.image_root) / image.name).string()))
+      missing.push_back(image.name);
   }
   if (!missing.empty()) {
     ThrowInput((fs::path(images.image_root) / missing.front()).string(), 0,

@@ -213,8 +213,7 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     }
     // The name comes from the file: a path the system cannot even look up (too long, say) is an
     // image that is not there, reported as such, not an escaping filesystem_error.
-    std::error_code missing;
-    frame.has_image = fs::exists(root / "raw_data" / frame.name, missing);
+    frame.has_image = PathExists((root / "raw_data" / frame.name).string());
     frame.K = camera->second.first;
     frame.width = camera->second.second.first;
     frame.height = camera->second.second.second;

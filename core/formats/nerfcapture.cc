@@ -1,4 +1,5 @@
 #include "core/formats/nerfcapture.h"
+#include "core/atomic_file.h"
 
 #include <cmath>
 #include <filesystem>
@@ -53,15 +54,15 @@ CaptureRecording ReadNerfCapture(const std::string& path) {
     frame.name = fs::path(file_path).filename().string();
     // The app writes "images/<n>" for the file images/<n>.png.
     const fs::path folder = root / directory;
-    if (!fs::exists(folder / frame.name)) {
+    if (!PathExists((folder / frame.name).string())) {
       for (const char* extension : {".png", ".jpg", ".jpeg"}) {
-        if (fs::exists(folder / (frame.name + extension))) {
+        if (PathExists((folder / (frame.name + extension)).string())) {
           frame.name += extension;
           break;
         }
       }
     }
-    frame.has_image = fs::exists(folder / frame.name);
+    frame.has_image = PathExists((folder / frame.name).string());
     const std::vector<double> rows = [&] {
       if (!entry.contains("transform_matrix") || !entry["transform_matrix"].is_array() ||
           entry["transform_matrix"].size() != 4) {

@@ -1,4 +1,5 @@
 #include "core/formats/polycam.h"
+#include "core/atomic_file.h"
 
 #include <algorithm>
 #include <cmath>
@@ -45,7 +46,7 @@ CaptureRecording ReadPolycam(const std::string& path) {
     CaptureFrame frame;
     frame.source = source;
     frame.name = file.stem().string() + ".jpg";
-    frame.has_image = fs::exists(images / frame.name);
+    frame.has_image = PathExists((images / frame.name).string());
     Eigen::Matrix3d rotation;
     Eigen::Vector3d centre;
     for (int r = 0; r < 3; ++r) {

@@ -1,4 +1,5 @@
 #include "core/formats/record3d.h"
+#include "core/atomic_file.h"
 
 #include <cmath>
 #include <filesystem>
@@ -55,11 +56,11 @@ CaptureRecording ReadRecord3d(const std::string& path) {
     CaptureFrame frame;
     frame.source = metadata_path;
     frame.name = std::to_string(i) + ".jpg";
-    if (!fs::exists(root / "rgb" / frame.name) &&
+    if (!PathExists((root / "rgb" / frame.name).string()) &&
         fs::exists(root / "rgb" / (std::to_string(i) + ".png"))) {
       frame.name = std::to_string(i) + ".png";
     }
-    frame.has_image = fs::exists(root / "rgb" / frame.name);
+    frame.has_image = PathExists((root / "rgb" / frame.name).string());
     const json wrapper = {{"pose", poses[i]}};
     const std::vector<double> p =
         JsonNumbers(wrapper, "pose", 7, metadata_path, "poses[" + std::to_string(i) + "]");

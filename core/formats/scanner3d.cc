@@ -1,4 +1,5 @@
 #include "core/formats/scanner3d.h"
+#include "core/atomic_file.h"
 
 #include <algorithm>
 #include <filesystem>
@@ -35,7 +36,7 @@ CaptureRecording ReadScanner3d(const std::string& path) {
     CaptureFrame frame;
     frame.source = source;
     frame.name = file.stem().string() + ".jpg";
-    frame.has_image = fs::exists(fs::path(path) / frame.name);
+    frame.has_image = PathExists((fs::path(path) / frame.name).string());
     const std::vector<double> m = JsonNumbers(frame_json, "cameraPoseARFrame", 16, source, "");
     const Eigen::Matrix4d pose =
         Eigen::Map<const Eigen::Matrix<double, 4, 4, Eigen::RowMajor>>(m.data());

@@ -1,4 +1,5 @@
 #include "core/formats/scannetpp.h"
+#include "core/atomic_file.h"
 
 #include <algorithm>
 #include <filesystem>
@@ -85,7 +86,7 @@ CaptureRecording ReadScanNetPPIphone(const std::string& path) {
     CaptureFrame frame;
     frame.source = json_path;
     frame.name = key + ".jpg";
-    frame.has_image = fs::exists(rgb / frame.name);
+    frame.has_image = PathExists((rgb / frame.name).string());
     frame.K = FromArkitIntrinsics(JsonMatrix(entry, "intrinsic", 3, json_path, where));
     if (entry.contains("pose"))
       frame.capture = PoseOf(JsonMatrix(entry, "pose", 4, json_path, where), json_path, where);
