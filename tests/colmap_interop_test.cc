@@ -3,17 +3,16 @@
 // intrinsics, keypoints and tracks bit-identical. This pins down the binary layout, the camera
 // model ids and the text syntax against COLMAP itself rather than against our own reader.
 #include <gtest/gtest.h>
-#include <stdlib.h>
-#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <random>
-#include <sstream>
 #include <string>
+#include <vector>
 
 #include "core/atomic_file.h"
 #include "core/formats/colmap_model.h"
+#include "tests/colmap_command.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -22,22 +21,6 @@ namespace raytime {
 namespace {
 
 constexpr double kPoseTolerance = 1e-9;
-
-std::string FindOnPath(const std::string& program) {
-  const char* path = getenv("PATH");
-  std::stringstream dirs(path ? path : "");
-  for (std::string dir; std::getline(dirs, dir, ':');) {
-    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / program;
-    if (access(candidate.c_str(), X_OK) == 0) return candidate.string();
-  }
-  return "";
-}
-
-std::string Quoted(const std::string& s) {
-  std::string quoted = "'";
-  for (const char c : s) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
 
 // Converts the model in `input` to `output_type` (TXT or BIN) in `output` with the real COLMAP.
 // Fails the test with COLMAP's output when it cannot run.
@@ -48,13 +31,12 @@ void ColmapConvert(const std::string& input, const std::string& output,
       << "the COLMAP 3.8 binary `colmap` is not on PATH; this test needs it (CI installs it)";
   fs::create_directories(output);
   const std::string log = output + ".log";
-  // COLMAP links Qt; without a display its platform plugin must be the offscreen one.
-  const std::string command = "QT_QPA_PLATFORM=offscreen " + Quoted(colmap) +
-                              " model_converter --input_path " + Quoted(input) + " --output_path " +
-                              Quoted(output) + " --output_type " + output_type + " > " +
-                              Quoted(log) + " 2>&1";
-  const int status = std::system(command.c_str());
-  ASSERT_EQ(status, 0) << command << "\n" << ReadTextFile(log);
+  const std::vector<std::string> args = {"model_converter", "--input_path", input,
+                                         "--output_path",   output,         "--output_type",
+                                         output_type};
+  const ProcessStatus status = RunColmap(colmap, args, log);
+  ASSERT_TRUE(status.Succeeded()) << CommandLine(args) << " " << status.Describe() << "\n"
+                                  << ReadTextFile(log);
 }
 
 // A raytime scene: two cameras (one with OpenCV distortion), random rotations and centres.

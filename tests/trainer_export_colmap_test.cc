@@ -11,8 +11,6 @@
 //     own residuals at the solution;
 //   - the prior, refined and ground-truth folders hold the same images and split.
 #include <gtest/gtest.h>
-#include <stdlib.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -21,7 +19,6 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -29,6 +26,7 @@
 #include "core/formats/colmap_model.h"
 #include "core/formats/dataset.h"
 #include "core/statistics.h"
+#include "tests/colmap_command.h"
 #include "tests/raytime_command.h"
 #include "tests/temp_dir.h"
 
@@ -51,29 +49,6 @@ constexpr double kLensK1 = -0.08, kLensK2 = 0.03, kLensP1 = 6e-4, kLensP2 = -4e-
 constexpr double kMaxMeanAbsoluteDifference = 1.5;
 constexpr double kMaxBlurredMeanAbsoluteDifference = 0.5;
 constexpr double kMaxMeanSignedDifference = 0.1;
-
-std::string FindOnPath(const std::string& program) {
-  const char* path = getenv("PATH");
-  std::stringstream dirs(path ? path : "");
-  for (std::string dir; std::getline(dirs, dir, ':');) {
-    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / program;
-    if (access(candidate.c_str(), X_OK) == 0) return candidate.string();
-  }
-  return "";
-}
-
-std::string Quoted(const std::string& s) {
-  std::string quoted = "'";
-  for (const char c : s) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return quoted + "'";
-}
-
-// Runs COLMAP (offscreen Qt) with `args`; its output goes to `log`.
-int RunColmap(const std::string& colmap, const std::string& args, const std::string& log) {
-  const std::string command =
-      "QT_QPA_PLATFORM=offscreen " + Quoted(colmap) + " " + args + " > " + Quoted(log) + " 2>&1";
-  return std::system(command.c_str());
-}
 
 // The sample scene as a COLMAP dataset whose camera has the distortion above: each image resampled
 // so that a pixel shows what the sample's pinhole camera sees along the distorted camera's ray
@@ -157,7 +132,7 @@ TEST(TrainerExportColmapTest, SampleWithDistortionAgreesWithColmapAndReprojects)
           "  - export: {poses: [prior, refined, ground_truth], formats: [colmap_text, "
           "3dgs]}\n");
   const CommandResult run =
-      RunRaytime("run " + Quoted(pipeline) + " --workdir " + Quoted(workdir.string()));
+      RunRaytime("run " + CommandLine({pipeline, "--workdir", workdir.string()}));
   ASSERT_EQ(run.exit_code, 0) << run.output;
   const nlohmann::json summary = ReadJson(workdir / "summary.json");
   nlohmann::json refine, exported;
@@ -176,12 +151,12 @@ TEST(TrainerExportColmapTest, SampleWithDistortionAgreesWithColmapAndReprojects)
   // colmap image_undistorter on the refined poses with the distorted camera (the colmap_text
   // export: an OPENCV model), default options (blank_pixels 0, min_scale 0.2, max_scale 2).
   const fs::path by_colmap = dir.path() / "colmap_undistorted";
-  ASSERT_EQ(RunColmap(colmap,
-                      "image_undistorter --image_path " + Quoted((dataset / "images").string()) +
-                          " --input_path " + Quoted((workdir / "refined").string()) +
-                          " --output_path " + Quoted(by_colmap.string()) + " --output_type COLMAP",
-                      dir / "image_undistorter.log"),
-            0)
+  ASSERT_TRUE(RunColmap(colmap,
+                        {"image_undistorter", "--image_path", (dataset / "images").string(),
+                         "--input_path", (workdir / "refined").string(), "--output_path",
+                         by_colmap.string(), "--output_type", "COLMAP"},
+                        dir / "image_undistorter.log")
+                  .Succeeded())
       << ReadTextFile(dir / "image_undistorter.log");
   const fs::path ours = workdir / "3dgs" / "refined";
   const ColmapModel theirs_model = ReadColmapModelBinary((by_colmap / "sparse").string());
@@ -249,9 +224,9 @@ TEST(TrainerExportColmapTest, SampleWithDistortionAgreesWithColmapAndReprojects)
 
   // colmap model_analyzer reads the export.
   const std::string analyzer_log = dir / "model_analyzer.log";
-  ASSERT_EQ(RunColmap(colmap, "model_analyzer --path " + Quoted((ours / "sparse/0").string()),
-                      analyzer_log),
-            0)
+  ASSERT_TRUE(
+      RunColmap(colmap, {"model_analyzer", "--path", (ours / "sparse/0").string()}, analyzer_log)
+          .Succeeded())
       << ReadTextFile(analyzer_log);
   const std::string analysis = ReadTextFile(analyzer_log);
   EXPECT_NE(analysis.find("Points: " + std::to_string(ours_model.points3D.size())),
