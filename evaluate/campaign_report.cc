@@ -488,7 +488,11 @@ std::string SplatTables(const CampaignReport& report) {
     if (std::find(groups.begin(), groups.end(), group) == groups.end()) groups.push_back(group);
   }
   std::string text;
-  for (const auto& [id, trainer, level] : groups) {
+  for (const auto& group : groups) {
+    // Named references, not a structured binding: C++17 lambdas (below) cannot capture bindings.
+    const std::string& id = std::get<0>(group);
+    const std::string& trainer = std::get<1>(group);
+    const double level = std::get<2>(group);
     if (groups.size() > 1 || report.level_swept) {
       text += "\n### `" + id + "` (" + trainer + ")" +
               (report.level_swept ? ", level " + LevelText(report, level) : std::string()) + "\n\n";
