@@ -4,9 +4,9 @@
 
 namespace raytime {
 
-size_t InvalidUtf8Offset(const std::string& text) {
+size_t InvalidUtf8Offset(const std::string& text, size_t from) {
   const auto byte = [&](size_t i) { return static_cast<unsigned char>(text[i]); };
-  size_t i = 0;
+  size_t i = from;
   while (i < text.size()) {
     const unsigned char lead = byte(i);
     size_t length = 0;
@@ -40,18 +40,26 @@ std::string EscapeInvalidUtf8(const std::string& text) {
   std::string out;
   size_t begin = 0;
   while (begin < text.size()) {
-    const size_t bad = InvalidUtf8Offset(text.substr(begin));
+    const size_t bad = InvalidUtf8Offset(text, begin);
     if (bad == std::string::npos) {
       out.append(text, begin, std::string::npos);
       break;
     }
-    out.append(text, begin, bad);
+    out.append(text, begin, bad - begin);
     char hex[8];
-    std::snprintf(hex, sizeof(hex), "\\x%02X", static_cast<unsigned char>(text[begin + bad]));
+    std::snprintf(hex, sizeof(hex), "\\x%02X", static_cast<unsigned char>(text[bad]));
     out += hex;
-    begin += bad + 1;
+    begin = bad + 1;
   }
   return out;
+}
+
+std::string DescribeInvalidUtf8(const std::string& text) {
+  const size_t offset = InvalidUtf8Offset(text);
+  if (offset == std::string::npos) return "";
+  char hex[8];
+  std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(text[offset]));
+  return std::string("byte ") + hex + " at offset " + std::to_string(offset);
 }
 
 std::string Located(const std::string& path, int line, const std::string& message) {

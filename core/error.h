@@ -7,9 +7,13 @@
 
 namespace raytime {
 
-// The offset of the first byte of `text` outside a well-formed UTF-8 sequence (RFC 3629: no
-// overlong forms, surrogates or code points beyond U+10FFFF), or std::string::npos.
-size_t InvalidUtf8Offset(const std::string& text);
+// The offset of the first byte of `text` at or after `from` outside a well-formed UTF-8 sequence
+// (RFC 3629: no overlong forms, surrogates or code points beyond U+10FFFF), or std::string::npos.
+size_t InvalidUtf8Offset(const std::string& text, size_t from = 0);
+
+// "byte 0xFF at offset 5": the first byte of `text` outside UTF-8, for messages that name it
+// without repeating it; "" when `text` is UTF-8.
+std::string DescribeInvalidUtf8(const std::string& text);
 
 // `text` with every byte outside a well-formed UTF-8 sequence written as \xHH. Messages quote file
 // names and file contents, which on Linux are bytes; summary.json, HDF5 string attributes and the

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <numeric>
 #include <sstream>
 
@@ -53,13 +52,9 @@ int YamlLine(const YAML::Node& node) {
 
 void RequireUtf8(const std::string& text, const std::string& path, int line,
                  const std::string& what) {
-  const size_t offset = InvalidUtf8Offset(text);
-  if (offset == std::string::npos) return;
-  char hex[8];
-  std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(text[offset]));
-  ThrowInput(path, line,
-             what + " must be UTF-8 text (byte " + hex + " at offset " + std::to_string(offset) +
-                 " is not)");
+  const std::string invalid = DescribeInvalidUtf8(text);
+  if (invalid.empty()) return;
+  ThrowInput(path, line, what + " must be UTF-8 text (" + invalid + " is not)");
 }
 
 namespace {

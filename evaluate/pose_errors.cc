@@ -101,9 +101,14 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
 
   // SPEC §6: the alignment is fitted on camera centres only, estimate -> ground truth.
   std::vector<Eigen::Vector3d> estimate_centres, gt_centres;
+  std::vector<Eigen::Quaterniond> estimate_rotations, gt_rotations;
   for (const std::string& name : join.both) {
-    estimate_centres.push_back(estimate.world_from_cam.at(name).translation);
-    gt_centres.push_back(ground_truth.world_from_cam.at(name).translation);
+    const Rigid3& estimated = estimate.world_from_cam.at(name);
+    const Rigid3& gt = ground_truth.world_from_cam.at(name);
+    estimate_centres.push_back(estimated.translation);
+    gt_centres.push_back(gt.translation);
+    estimate_rotations.push_back(estimated.rotation);
+    gt_rotations.push_back(gt.rotation);
   }
   try {
     summary.gt_from_estimate = FitAlignment(estimate_centres, gt_centres, kind);
@@ -135,11 +140,6 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
   if (summary.scene_scale_m > 0) {
     summary.mean_centre_relative = summary.mean_centre_m / summary.scene_scale_m;
     summary.median_centre_relative = summary.median_centre_m / summary.scene_scale_m;
-  }
-  std::vector<Eigen::Quaterniond> estimate_rotations, gt_rotations;
-  for (const std::string& name : join.both) {
-    estimate_rotations.push_back(estimate.world_from_cam.at(name).rotation);
-    gt_rotations.push_back(ground_truth.world_from_cam.at(name).rotation);
   }
   const std::vector<double> relative_deg =
       RelativeRotationErrorsDeg(estimate_rotations, gt_rotations);

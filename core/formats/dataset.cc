@@ -2,7 +2,6 @@
 #include "core/atomic_file.h"
 
 #include <algorithm>
-#include <cstdio>
 #include <filesystem>
 
 #include "core/error.h"
@@ -83,13 +82,10 @@ std::string TransformsPath(const std::string& path, const std::string& file) {
 // name is bytes on Linux. Refused here, once, rather than written back altered.
 void RequireUtf8Names(const std::vector<std::string>& names, const std::string& source) {
   for (const std::string& name : names) {
-    const size_t offset = InvalidUtf8Offset(name);
-    if (offset == std::string::npos) continue;
-    char hex[8];
-    std::snprintf(hex, sizeof(hex), "0x%02X", static_cast<unsigned char>(name[offset]));
+    const std::string invalid = DescribeInvalidUtf8(name);
+    if (invalid.empty()) continue;
     ThrowInput(source, 0,
-               "image name '" + name + "' is not UTF-8 text (byte " + hex + " at offset " +
-                   std::to_string(offset) +
+               "image name '" + name + "' is not UTF-8 text (" + invalid +
                    "); rename it: COLMAP models, transforms.json and summary.json hold names as "
                    "UTF-8");
   }
@@ -98,6 +94,7 @@ void RequireUtf8Names(const std::vector<std::string>& names, const std::string& 
 void RequireUtf8Names(const Dataset& dataset, const std::string& source) {
   RequireUtf8Names(Names(dataset.images), source);
   if (dataset.capture) RequireUtf8Names(Names(*dataset.capture), source);
+  if (dataset.ground_truth) RequireUtf8Names(Names(*dataset.ground_truth), source);
 }
 
 }  // namespace
@@ -157,7 +154,6 @@ Dataset LoadDataset(const DatasetOptions& options) {
   std::sort(dataset.files.begin(), dataset.files.end());
   if (poses.size() > 0) dataset.ground_truth = std::move(poses);
   RequireUtf8Names(dataset, options.root);
-  if (dataset.ground_truth) RequireUtf8Names(Names(*dataset.ground_truth), options.root);
   return dataset;
 }
 
