@@ -1,5 +1,6 @@
 #include "core/geometry.h"
 
+#include <Eigen/QR>
 #include <Eigen/SVD>
 #include <cmath>
 #include <stdexcept>
@@ -71,10 +72,17 @@ double RotationDistance(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b
 
 namespace {
 // Umeyama's rotation is free about the line through collinear (or coincident) points, and
-// Eigen::umeyama then returns an arbitrary one instead of failing, so check the spread first.
+// Eigen::umeyama then returns an arbitrary one instead of failing, so check the spread first. The
+// singular values of the centred points are those of the 3x3 R of their QR decomposition (what
+// JacobiSVD's own QR preconditioner computes); a JacobiSVD of the 3 x N matrix itself made this
+// file the slowest of the build to compile.
 bool Collinear(const Eigen::Matrix3Xd& points) {
-  const Eigen::Matrix3Xd centred = points.colwise() - points.rowwise().mean();
-  const Eigen::Vector3d singular = Eigen::JacobiSVD<Eigen::Matrix3Xd>(centred).singularValues();
+  if (points.cols() < 3) return true;
+  const Eigen::Matrix<double, Eigen::Dynamic, 3> centred =
+      (points.colwise() - points.rowwise().mean()).transpose();
+  const Eigen::HouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 3>> qr(centred);
+  const Eigen::Matrix3d r = qr.matrixQR().topRows<3>().triangularView<Eigen::Upper>();
+  const Eigen::Vector3d singular = Eigen::JacobiSVD<Eigen::Matrix3d>(r).singularValues();
   return !(singular(1) > 1e-9 * singular(0));
 }
 }  // namespace

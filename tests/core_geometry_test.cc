@@ -206,6 +206,10 @@ TEST(GeometryTest, FitAlignmentRejectsDegenerateInput) {
   EXPECT_THROW(FitAlignment(line, line, AlignmentKind::kSE3), std::invalid_argument);
   const std::vector<Eigen::Vector3d> same(4, Eigen::Vector3d(1, 2, 3));
   EXPECT_THROW(FitAlignment(same, same, AlignmentKind::kSim3), std::invalid_argument);
+  // A track 1e-6 of its length off a line still determines the rotation (threshold 1e-9).
+  std::vector<Eigen::Vector3d> nearly = line;
+  nearly[2] += Eigen::Vector3d(5e-6, -5e-6, 0.0);
+  EXPECT_NO_THROW(FitAlignment(nearly, nearly, AlignmentKind::kSim3));
 }
 
 TEST(GeometryTest, Rigid3InverseAndComposition) {
