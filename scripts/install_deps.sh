@@ -8,6 +8,7 @@ packages=(
   libhdf5-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev libspdlog-dev libxxhash-dev
   libsqlite3-dev libgtest-dev libgmock-dev
   colmap
+  clang-14 libclang-rt-14-dev
   python3-matplotlib python3-numpy
 )
 missing=()
