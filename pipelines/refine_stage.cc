@@ -31,7 +31,7 @@ namespace raytime {
 namespace {
 
 struct RefineStageOptions {
-  // plain | gnc | cap100 | anchored | room-staged | basin (files in the preset directory).
+  // plain | gnc | cap100 | anchored | room-staged | basin | auto (files in the preset directory).
   std::string preset = "gnc";
   // Pose set the solve starts from, e.g. "prior@bootstrap" for a stage prior@bootstrap, so arms
   // seeded differently can share one run.
@@ -227,8 +227,7 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
              " fired: the refined poses of these images are the prior's, "
              "unrefined" +
              (trust_region ? std::string("; for a prior more than ~2° off, refine with "
-                                         "preset basin (no orientation prior, no trust "
-                                         "region)")
+                                         "preset auto (basin solve first, no trust region)")
                            : std::string()),
          names,
          {},
@@ -249,6 +248,19 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
     for (const PairResidual& pair : pairs.pairs) {
       warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
     }
+    warnings->push_back(warning);
+  }
+  const PairRemovalSummary& removal = summary.pair_removal;
+  if (!removal.doubtful_images.empty()) {
+    Warning warning{"doubtful_images",
+                    "after removing the pairs the basin solution left unexplained, the poses of " +
+                        std::to_string(removal.doubtful_images.size()) +
+                        " image(s) rest on one pair that nothing else checks (it may be a wrong "
+                        "one)",
+                    {},
+                    {},
+                    {{"pairs_kept_for_connectivity", removal.kept.size()}}};
+    for (const int image : removal.doubtful_images) warning.images.push_back(names.at(image));
     warnings->push_back(warning);
   }
 }

@@ -11,6 +11,45 @@ namespace {
 // Rays that are parallel to within this (1 - cos²) carry no depth information.
 constexpr double kMinSinSquared = 1e-10;
 
+// World-frame unit direction of every observation's ray at `world_from_cam`.
+std::vector<Eigen::Vector3d> RayDirections(const ProblemLayout& layout, const RefineInput& input,
+                                           const std::vector<Rigid3>& world_from_cam,
+                                           const CameraBlocks& cameras) {
+  std::vector<Eigen::Vector3d> directions(layout.observations.size());
+  for (size_t o = 0; o < layout.observations.size(); ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                             input.keypoints[obs.image](obs.keypoint, 1)};
+    const double* intrinsics = cameras.Of(obs.image).params.data();
+    double undistorted[2], ray[3];
+    UndistortPixel(intrinsics, pixel, undistorted);
+    PixelToUnitRay(intrinsics, undistorted, ray);
+    directions[o] = world_from_cam[obs.image].rotation * Eigen::Vector3d(ray[0], ray[1], ray[2]);
+  }
+  return directions;
+}
+
+// Depth along the source ray of the closest approach of the residual's two rays, when they meet
+// in front of both cameras (0 otherwise).
+double ClosestApproachDepth(const ProblemLayout& layout, const CrossProjection& residual,
+                            const std::vector<Eigen::Vector3d>& directions,
+                            const std::vector<Rigid3>& world_from_cam) {
+  const int i = layout.observations[residual.source].image;
+  const int j = layout.observations[residual.target].image;
+  const Eigen::Vector3d& d1 = directions[residual.source];
+  const Eigen::Vector3d& d2 = directions[residual.target];
+  const Eigen::Vector3d w = world_from_cam[i].translation - world_from_cam[j].translation;
+  // Closest approach of O_i + s·d1 and O_j + u·d2 (unit directions).
+  const double b = d1.dot(d2);
+  const double denom = 1.0 - b * b;
+  if (denom < kMinSinSquared) return 0.0;
+  const double d = d1.dot(w);
+  const double e = d2.dot(w);
+  const double s = (b * e - d) / denom;
+  const double u = (e - b * d) / denom;
+  return s > 0.0 && u > 0.0 ? s : 0.0;
+}
+
 }  // namespace
 
 std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
@@ -25,37 +64,15 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
   }
 
   // World-frame unit direction of every observation's ray under the prior.
-  std::vector<Eigen::Vector3d> directions(layout.observations.size());
-  for (size_t o = 0; o < layout.observations.size(); ++o) {
-    const LayoutObservation& obs = layout.observations[o];
-    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
-                             input.keypoints[obs.image](obs.keypoint, 1)};
-    const double* intrinsics = cameras.Of(obs.image).params.data();
-    double undistorted[2], ray[3];
-    UndistortPixel(intrinsics, pixel, undistorted);
-    PixelToUnitRay(intrinsics, undistorted, ray);
-    directions[o] = world_from_cam[obs.image].rotation * Eigen::Vector3d(ray[0], ray[1], ray[2]);
-  }
-
+  const std::vector<Eigen::Vector3d> directions =
+      RayDirections(layout, input, world_from_cam, cameras);
   const size_t num_images = world_from_cam.size();
   std::vector<std::vector<double>> depths(num_images);
   std::vector<double> all_depths;
   for (const CrossProjection& residual : layout.residuals) {
-    const int i = layout.observations[residual.source].image;
-    const int j = layout.observations[residual.target].image;
-    const Eigen::Vector3d& d1 = directions[residual.source];
-    const Eigen::Vector3d& d2 = directions[residual.target];
-    const Eigen::Vector3d w = world_from_cam[i].translation - world_from_cam[j].translation;
-    // Closest approach of O_i + s·d1 and O_j + u·d2 (unit directions).
-    const double b = d1.dot(d2);
-    const double denom = 1.0 - b * b;
-    if (denom < kMinSinSquared) continue;
-    const double d = d1.dot(w);
-    const double e = d2.dot(w);
-    const double s = (b * e - d) / denom;
-    const double u = (e - b * d) / denom;
-    if (s > 0.0 && u > 0.0) {
-      depths[i].push_back(s);
+    const double s = ClosestApproachDepth(layout, residual, directions, world_from_cam);
+    if (s > 0.0) {
+      depths[layout.observations[residual.source].image].push_back(s);
       all_depths.push_back(s);
     }
   }
@@ -84,6 +101,29 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
     ray_times[t] = image_depth[layout.observations[layout.ray_time_observation[t]].image];
   }
   return ray_times;
+}
+
+int StartRayTimesAtClosestApproach(const ProblemLayout& layout, const RefineInput& input,
+                                   const std::vector<Rigid3>& world_from_cam,
+                                   const CameraBlocks& cameras,
+                                   const std::vector<bool>& needs_start,
+                                   std::vector<double>* ray_times) {
+  const std::vector<Eigen::Vector3d> directions =
+      RayDirections(layout, input, world_from_cam, cameras);
+  std::vector<std::vector<double>> depths(ray_times->size());
+  for (const CrossProjection& residual : layout.residuals) {
+    const int t = layout.observations[residual.source].ray_time;
+    if (t < 0 || !needs_start[t]) continue;
+    const double s = ClosestApproachDepth(layout, residual, directions, world_from_cam);
+    if (s > 0.0) depths[t].push_back(s);
+  }
+  int started = 0;
+  for (size_t t = 0; t < depths.size(); ++t) {
+    if (depths[t].empty()) continue;
+    (*ray_times)[t] = UpperMedian(std::move(depths[t]), (*ray_times)[t]);
+    ++started;
+  }
+  return started;
 }
 
 }  // namespace raytime

@@ -27,4 +27,19 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
                                     const CameraBlocks& cameras, const std::string& mode,
                                     double constant, RayTimeInitSummary* summary);
 
+// The finish of the basin-first solve (RefineOptions::basin_first) starts from poses an earlier
+// pass solved on capped matches, and adds the observations the cap left out. Started at their
+// image's depth scale, many of them would begin hundreds of pixels off, where the nominal arctan
+// loss has no gradient, and stay there. Each ray time t with needs_start[t] starts instead at the
+// median over its residuals of the depth, along its own ray, of the closest approach to the
+// target observation's ray at `world_from_cam` (the solved poses, not the prior), over the pairs
+// of rays that meet in front of both cameras; a ray time without such a residual keeps its value.
+// A start per observation on its own ray, as the method's variables are: no point is built or
+// shared between observations. Returns how many ray times were started so.
+int StartRayTimesAtClosestApproach(const ProblemLayout& layout, const RefineInput& input,
+                                   const std::vector<Rigid3>& world_from_cam,
+                                   const CameraBlocks& cameras,
+                                   const std::vector<bool>& needs_start,
+                                   std::vector<double>* ray_times);
+
 }  // namespace raytime

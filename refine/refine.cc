@@ -1,4 +1,5 @@
-// RefinePoses: one pass (or the two passes of the staged room recipe, §4.3) of layout → ray-time
+// RefinePoses: one pass (or the two passes of the staged room recipe, §4.3, or the three of the
+// basin-first solve) of layout → ray-time
 // initialization → problem → GNC → gauge polish, then the posterior guardrails (§3.6, §4.3, and
 // the inconsistent-pairs test beyond the paper).
 #include "refine/refine.h"
@@ -8,11 +9,15 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <limits>
+#include <optional>
+#include <set>
 #include <string>
 #include <unordered_map>
 
 #include "core/error.h"
+#include "core/graph.h"
 #include "core/options.h"
 #include "core/statistics.h"
 #include "core/timing.h"
@@ -105,6 +110,7 @@ struct PassSettings {
   bool refine_focal = false;
   bool refine_principal_point = false;
   bool refine_distortion = false;
+  bool start_unsolved_at_closest_approach = false;  // StartRayTimesAtClosestApproach
 };
 
 // State carried from one pass to the next (the staged recipe's warm start), and the last pass's
@@ -133,11 +139,21 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   std::vector<double> ray_times =
       InitialRayTimes(layout, input, state->world_from_cam, state->cameras, options.ray_time_init,
                       options.ray_time_constant_m, &pass.ray_time_init);
-  // A later pass starts every ray time an earlier pass solved from its solved value.
+  // A later pass starts every ray time an earlier pass solved from its solved value ...
+  std::vector<bool> unsolved(ray_times.size(), true);
   for (size_t t = 0; t < ray_times.size(); ++t) {
     const auto it = state->ray_time_by_observation.find(
         KeyOf(layout.observations[layout.ray_time_observation[t]]));
-    if (it != state->ray_time_by_observation.end()) ray_times[t] = it->second;
+    if (it == state->ray_time_by_observation.end()) continue;
+    ray_times[t] = it->second;
+    unsolved[t] = false;
+    ++pass.ray_time_init.num_warm_started;
+  }
+  // ... and, in the basin-first finish, the ones the earlier passes' cap left out at their own
+  // closest approach at the solved poses.
+  if (settings.start_unsolved_at_closest_approach && pass.ray_time_init.num_warm_started > 0) {
+    pass.ray_time_init.num_closest_approach_started = StartRayTimesAtClosestApproach(
+        layout, input, state->world_from_cam, state->cameras, unsolved, &ray_times);
   }
 
   RayTimeProblemSettings problem_settings;
@@ -189,14 +205,21 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   // The polish moves cameras and ray times by one similarity: the residuals are the solve's.
   std::vector<double> norms =
       ResidualNorms(input, layout, state->world_from_cam, state->cameras, solved_ray_times);
+  double loss_sum = 0.0;
+  for (const double norm : norms) {
+    loss_sum += options.loss_scale_px2 * std::atan(norm * norm / options.loss_scale_px2);
+  }
+  pass.match_cost_px2 = norms.empty() ? 0.0 : loss_sum / static_cast<double>(norms.size());
   pass.residual_median_px = Median(norms, 0.0);
   if (!norms.empty()) {
     const size_t rank = (norms.size() * 9 + 9) / 10 - 1;  // nearest rank: ceil(0.9 n) - 1
     std::nth_element(norms.begin(), norms.begin() + rank, norms.end());
     pass.residual_p90_px = norms[rank];
   }
-  spdlog::info("refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px",
-               pass.name, pass.residual_median_px, pass.residual_p90_px);
+  spdlog::info(
+      "refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px, mean "
+      "match term {:.4g} px²",
+      pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2);
   return pass;
 }
 
@@ -220,10 +243,11 @@ SolvedObservations SolvedObservationsOf(const PassState& state) {
   return out;
 }
 
-// Per image pair with used matches, its median positive-ray epipolar distance at the last pass's
-// solved poses and intrinsics (PairResidualMedians' plain arrays from the layout; input order).
-std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const PassState& state) {
-  const ProblemLayout& layout = state.layout;
+// Per image pair with matches in `layout`, its median positive-ray epipolar distance at the given
+// poses and intrinsics blocks (PairResidualMedians' plain arrays from the layout; input order).
+std::vector<PairResidual> PairResidualsAt(const RefineInput& input, const ProblemLayout& layout,
+                                          const std::vector<Rigid3>& world_from_cam,
+                                          const CameraBlocks& cameras) {
   const int num_observations = static_cast<int>(layout.observations.size());
   Eigen::VectorXi images(num_observations);
   Keypoints pixels(num_observations, 2);
@@ -252,9 +276,14 @@ std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const Pa
   }
   std::vector<IntrinsicsVector> image_intrinsics;
   for (size_t i = 0; i < input.prior_world_from_cam.size(); ++i) {
-    image_intrinsics.emplace_back(state.cameras.Of(static_cast<int>(i)).params.data());
+    image_intrinsics.emplace_back(cameras.Of(static_cast<int>(i)).params.data());
   }
-  return PairResidualMedians(image_intrinsics, state.world_from_cam, images, pixels, pairs);
+  return PairResidualMedians(image_intrinsics, world_from_cam, images, pixels, pairs);
+}
+
+// The same at the last pass's solved poses and intrinsics, on its used matches.
+std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const PassState& state) {
+  return PairResidualsAt(input, state.layout, state.world_from_cam, state.cameras);
 }
 
 // The blocks of the last pass's layout and the fewest observations one of them has.
@@ -271,6 +300,211 @@ void CountBlocks(const PassState& state, CameraBlocksSummary* summary) {
         summary->num_blocks == 0 ? count : std::min(summary->min_block_observations, count);
     ++summary->num_blocks;
   }
+}
+
+// Number of connected components of the graph whose nodes are the images and whose edges are
+// the pairs with matches.
+int CountComponents(const RefineInput& input) {
+  std::vector<std::pair<int, int>> edges;
+  for (const PairMatchIndices& pair : input.pairs) {
+    if (pair.matches.rows() > 0) edges.emplace_back(pair.image1, pair.image2);
+  }
+  const std::vector<int> labels =
+      ConnectedComponents(static_cast<int>(input.prior_world_from_cam.size()), edges);
+  return labels.empty() ? 0 : *std::max_element(labels.begin(), labels.end()) + 1;
+}
+
+// The pairs of `input` that `residuals` (of every pair, any order) put above threshold_px,
+// worst first, except one whose removal would split the match graph further (appended to
+// *kept): the pairs to leave out of the next solve.
+std::vector<PairResidual> SelectInconsistentPairs(std::vector<PairResidual> residuals,
+                                                  double threshold_px, const RefineInput& input,
+                                                  std::vector<PairResidual>* kept) {
+  std::stable_sort(residuals.begin(), residuals.end(),
+                   [](const PairResidual& a, const PairResidual& b) {
+                     return a.median_px > b.median_px;
+                   });
+  RefineInput graph;  // the pairs' images only (CountComponents reads no keypoints)
+  graph.prior_world_from_cam.resize(input.prior_world_from_cam.size());
+  graph.pairs = input.pairs;
+  const int components = CountComponents(graph);
+  std::vector<PairResidual> selected;
+  for (const PairResidual& residual : residuals) {
+    if (!(residual.median_px > threshold_px)) break;  // sorted; infinite, never NaN
+    const auto it = std::find_if(
+        graph.pairs.begin(), graph.pairs.end(), [&](const PairMatchIndices& pair) {
+          return pair.image1 == residual.image1 && pair.image2 == residual.image2;
+        });
+    if (it == graph.pairs.end()) continue;
+    const auto index = it - graph.pairs.begin();
+    PairMatchIndices taken = std::move(*it);
+    graph.pairs.erase(it);
+    if (CountComponents(graph) > components) {
+      graph.pairs.insert(graph.pairs.begin() + index, std::move(taken));
+      kept->push_back(residual);
+      continue;
+    }
+    selected.push_back(residual);
+  }
+  return selected;
+}
+
+// `input` without the pairs of `removed`.
+RefineInput WithoutPairs(const RefineInput& input, const std::vector<PairResidual>& removed) {
+  RefineInput out;
+  out.cameras = input.cameras;
+  out.camera_index = input.camera_index;
+  out.prior_world_from_cam = input.prior_world_from_cam;
+  out.keypoints = input.keypoints;
+  for (const PairMatchIndices& pair : input.pairs) {
+    const bool drop = std::any_of(removed.begin(), removed.end(), [&](const PairResidual& r) {
+      return r.image1 == pair.image1 && r.image2 == pair.image2;
+    });
+    if (!drop) out.pairs.push_back(pair);
+  }
+  return out;
+}
+
+bool SamePairs(const std::vector<PairResidual>& a, const std::vector<PairResidual>& b) {
+  std::set<std::pair<int, int>> sa, sb;
+  for (const PairResidual& pair : a) sa.emplace(pair.image1, pair.image2);
+  for (const PairResidual& pair : b) sb.emplace(pair.image1, pair.image2);
+  return sa == sb;
+}
+
+// The basin-first solve (RefineOptions::basin_first): basin pass, wrong-pair removal with basin
+// solves again (when enabled), orientation-prior probe, finish. When pairs are removed, *pruned
+// holds the input without them, which the later passes and the posterior checks use.
+void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
+                   const PassSettings& nominal, const std::vector<Rigid3>& prior, PassState* state,
+                   RefineSummary* summary, std::optional<RefineInput>* pruned) {
+  PassSettings basin;
+  basin.name = "basin";
+  basin.max_matches_per_pair = options.basin_max_matches_per_pair;
+  basin.orientation_weight = 0.0;
+  basin.scales = options.StageScales();
+  const PassState start = *state;
+  summary->passes.push_back(RunPass(input, options, basin, prior, state));
+
+  // Wrong-pair removal: every pair of the input is judged at the current basin solution (on the
+  // basin's capped matches), and the basin is solved again from the prior without the ones above
+  // the threshold, until the solution leaves exactly the pairs it was solved without (or none)
+  // above it. Judging the removed pairs again matters: a solution pulled off by wrong pairs leaves
+  // some correct ones off too, and they come back once it is right. Solving from the prior again
+  // (not from the pulled-off solution) gives the GNC schedule its whole basin.
+  const RefineInput* active = &input;
+  PairRemovalSummary& removal = summary->pair_removal;
+  removal.enabled = options.max_pair_removal_rounds > 0;
+  if (removal.enabled) {
+    const ProblemLayout judged =
+        BuildPerObservationLayout(input, options.basin_max_matches_per_pair,
+                                  options.match_cap_seed);
+    while (true) {
+      const std::vector<PairResidual> residuals =
+          PairResidualsAt(input, judged, state->world_from_cam, state->cameras);
+      std::vector<PairResidual> kept;
+      const std::vector<PairResidual> selected =
+          SelectInconsistentPairs(residuals, options.inconsistent_pair_px, input, &kept);
+      if (selected.empty() && kept.empty() && removal.removed.empty()) {
+        removal.stop_reason = "consistent";
+        break;
+      }
+      if (SamePairs(selected, removal.removed)) {
+        removal.stop_reason = selected.empty() ? "consistent" : "stable";
+        break;
+      }
+      if (removal.rounds == options.max_pair_removal_rounds) {
+        removal.stop_reason = "max_rounds";
+        break;
+      }
+      ++removal.rounds;
+      removal.removed = selected;
+      removal.kept = kept;
+      pruned->emplace(WithoutPairs(input, selected));
+      active = &pruned->value();
+      spdlog::info(
+          "refine: {} of {} pairs above {:.3g} px at the basin solution{}{}; solving the basin "
+          "again from the prior without them (round {} of at most {})",
+          selected.size(), residuals.size(), options.inconsistent_pair_px,
+          selected.empty() ? std::string()
+                           : fmt::format(" (worst ({}, {}) {:.1f} px)", selected.front().image1,
+                                         selected.front().image2, selected.front().median_px),
+          kept.empty() ? std::string()
+                       : fmt::format(", {} kept to hold the graph together", kept.size()),
+          removal.rounds, options.max_pair_removal_rounds);
+      *state = start;
+      PassSettings again = basin;
+      again.name = "basin_round" + std::to_string(removal.rounds + 1);
+      summary->passes.push_back(RunPass(*active, options, again, prior, state));
+    }
+  }
+  if (!removal.removed.empty()) {
+    std::vector<int> remaining(input.prior_world_from_cam.size(), 0);
+    std::vector<bool> lost(input.prior_world_from_cam.size(), false);
+    for (const PairMatchIndices& pair : active->pairs) {
+      if (pair.matches.rows() == 0) continue;
+      ++remaining[pair.image1];
+      ++remaining[pair.image2];
+    }
+    for (const PairResidual& pair : removal.removed) lost[pair.image1] = lost[pair.image2] = true;
+    std::vector<bool> doubtful(lost.size(), false);
+    for (const PairResidual& pair : removal.kept) doubtful[pair.image1] = doubtful[pair.image2] = true;
+    for (size_t i = 0; i < lost.size(); ++i) {
+      if (doubtful[i] || (lost[i] && remaining[i] <= 1)) {
+        removal.doubtful_images.push_back(static_cast<int>(i));
+      }
+    }
+  }
+  const PassState basin_state = *state;
+
+  OrientationPriorProbe& probe = summary->orientation_prior;
+  probe.enabled = true;
+  probe.weight = options.orientation_weight;
+  probe.max_increase = options.orientation_prior_max_increase;
+  probe.free_residual_median_px = summary->passes.back().residual_median_px;
+  probe.free_match_cost_px2 = summary->passes.back().match_cost_px2;
+  if (options.orientation_weight > 0) {
+    PassSettings probe_pass = basin;
+    probe_pass.name = "orientation_probe";
+    probe_pass.orientation_weight = options.orientation_weight;
+    probe_pass.scales = {options.loss_scale_px2};
+    summary->passes.push_back(RunPass(*active, options, probe_pass, prior, state));
+    probe.prior_residual_median_px = summary->passes.back().residual_median_px;
+    probe.prior_match_cost_px2 = summary->passes.back().match_cost_px2;
+    probe.increase = probe.free_residual_median_px > 0
+                         ? probe.prior_residual_median_px / probe.free_residual_median_px - 1.0
+                         : 0.0;
+    for (size_t i = 0; i < prior.size(); ++i) {
+      probe.max_rotation_change_deg = std::max(
+          probe.max_rotation_change_deg, RotationDistance(basin_state.world_from_cam[i].rotation,
+                                                          state->world_from_cam[i].rotation) *
+                                             180.0 / M_PI);
+    }
+    probe.kept = probe.increase <= probe.max_increase;
+    if (probe.kept) {
+      spdlog::info(
+          "refine: orientation prior (λR = {:g}) kept: the matches agree with the prior's "
+          "rotations (median residual {:+.2f} % under it, threshold {:+.2f} %; rotations moved "
+          "up to {:.3f}°)",
+          probe.weight, 100 * probe.increase, 100 * probe.max_increase,
+          probe.max_rotation_change_deg);
+    } else {
+      spdlog::info(
+          "refine: orientation prior (λR = {:g}) dropped: the matches contradict the prior's "
+          "rotations (median residual {:+.2f} % under it, threshold {:+.2f} %; it moved rotations "
+          "up to {:.3f}°); the finish runs with λR = 0 from the basin solve",
+          probe.weight, 100 * probe.increase, 100 * probe.max_increase,
+          probe.max_rotation_change_deg);
+      *state = basin_state;
+    }
+  }
+
+  PassSettings finish = nominal;
+  finish.name = "finish";
+  finish.scales = {options.loss_scale_px2};
+  finish.orientation_weight = probe.kept ? options.orientation_weight : 0.0;
+  finish.start_unsolved_at_closest_approach = true;
+  summary->passes.push_back(RunPass(*active, options, finish, prior, state));
 }
 
 }  // namespace
@@ -308,6 +542,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     state.cameras = PerCameraBlocks(input);
   }
 
+  std::optional<RefineInput> pruned;  // the input less the pairs the basin-first solve removed
   PassSettings nominal;
   nominal.name = "solve";
   nominal.max_matches_per_pair = options.max_matches_per_pair;
@@ -330,6 +565,8 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     pass2.scales = {options.loss_scale_px2};
     const std::vector<Rigid3> pass1_poses = state.world_from_cam;
     summary.passes.push_back(RunPass(input, options, pass2, pass1_poses, &state));
+  } else if (options.basin_first) {
+    RunBasinFirst(input, options, nominal, prior, &state, &summary, &pruned);
   } else {
     summary.passes.push_back(RunPass(input, options, nominal, prior, &state));
   }
@@ -374,9 +611,15 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   // Against the solve's own matches (prior-independent), flag only.
   if (options.inconsistent_pairs_test) {
     summary.inconsistent_pairs =
-        CheckInconsistentPairs(SolvedPairResiduals(input, state), options.inconsistent_pair_px,
+        CheckInconsistentPairs(SolvedPairResiduals(pruned ? *pruned : input, state),
+                               options.inconsistent_pair_px,
                                options.max_inconsistent_pair_fraction);
     if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
+  }
+  // After the removal, a pose resting on one pair nothing else checks looks consistent whether
+  // that pair is right or not (the pose simply follows it); it disagreed with the solution once.
+  if (!summary.pair_removal.doubtful_images.empty()) {
+    summary.guardrails_fired.push_back("doubtful_images");
   }
 
   output->solved_world_from_cam = state.world_from_cam;
@@ -408,10 +651,39 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
         pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : "");
   }
+  const PairRemovalSummary& removal = summary.pair_removal;
+  if (summary.returned_prior) {
+    summary.decision = "returned_prior";
+  } else if (!summary.guardrails_fired.empty()) {
+    summary.decision = "flagged";
+  } else if (!removal.removed.empty()) {
+    summary.decision = "re_solved";
+  } else {
+    summary.decision = "accepted";
+  }
   if (summary.returned_prior) {
     spdlog::warn("refine: guardrail fired ({}): returning the prior",
                  summary.guardrails_fired.front());
   }
+  if (removal.enabled) {
+    spdlog::info("refine: pair removal: {} pair(s) removed in {} round(s), stopped: {}{}",
+                 removal.removed.size(), removal.rounds, removal.stop_reason,
+                 removal.kept.empty()
+                     ? std::string()
+                     : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
+                                   removal.kept.size()));
+  }
+  if (!removal.doubtful_images.empty()) {
+    std::string listed;
+    for (const int image : removal.doubtful_images) {
+      listed += (listed.empty() ? "" : ", ") + std::to_string(image);
+    }
+    spdlog::warn(
+        "refine: guardrail fired (doubtful_images): after removing inconsistent pairs, the poses "
+        "of images {} rest on one pair that nothing else checks",
+        listed);
+  }
+  spdlog::info("refine: decision: {}", summary.decision);
   if (pairs.fired) {
     // The first few in the log; all of them in the summary.
     constexpr size_t kLogged = 8;
@@ -440,6 +712,9 @@ nlohmann::json RefineSummary::ToJson() const {
             {"solve_seconds", solve_seconds},
             {"jacobian_seconds", jacobian_seconds},
             {"total_seconds", total_seconds}}},
+          {"orientation_prior", orientation_prior},
+          {"pair_removal", pair_removal},
+          {"decision", decision},
           {"guardrails",
            {{"fired", guardrails_fired},
             {"returned_prior", returned_prior},

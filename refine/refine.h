@@ -97,14 +97,22 @@ struct RayTimeInitSummary {
   double min_depth = 0.0;
   double median_depth = 0.0;
   double max_depth = 0.0;
+  // A later pass: ray times started at an earlier pass's solved value, and (basin-first finish)
+  // the others started at their own closest approach at the current poses
+  // (StartRayTimesAtClosestApproach, ray_time_init.h).
+  int num_warm_started = 0;
+  int num_closest_approach_started = 0;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RayTimeInitSummary, mode, num_depth_samples,
-                                   images_with_fallback, min_depth, median_depth, max_depth)
+                                   images_with_fallback, min_depth, median_depth, max_depth,
+                                   num_warm_started, num_closest_approach_started)
 
 // One pass of the refiner: a problem object and its GNC stages (two passes in the staged room
-// recipe of §4.3, one otherwise).
+// recipe of §4.3, three in the basin-first solve, one otherwise).
 struct RefinePassSummary {
-  std::string name;  // "solve", or "pass1_poses" / "pass2_self_calibration"
+  // "solve"; "pass1_poses" / "pass2_self_calibration" (staged); "basin" / "orientation_probe" /
+  // "finish" (basin_first)
+  std::string name;
   int num_cameras = 0;
   int num_observations = 0;        // distinct (image, keypoint) in the used matches
   int num_ray_times = 0;           // = observations (per_observation) or tracks (anchored)
@@ -122,6 +130,9 @@ struct RefinePassSummary {
   // pixels: the median and the 90th percentile (nearest rank) over the residuals.
   double residual_median_px = 0.0;
   double residual_p90_px = 0.0;
+  // The match term at the solution: the mean over the residuals of the nominal arctan loss
+  // rho(|r|^2) = a atan(|r|^2 / a), a = loss_scale_px2, px² (what the basin-first probe compares).
+  double match_cost_px2 = 0.0;
   double build_seconds = 0.0;
   double solve_seconds = 0.0;
 };
@@ -129,8 +140,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefinePassSummary, name, num_cameras, num_obs
                                    num_ray_times, num_tracks, num_matches_input, num_matches_used,
                                    num_residuals, elimination_group_size, orientation_weight,
                                    self_calibration, ray_time_init, stages, gauge_polish,
-                                   residual_median_px, residual_p90_px, build_seconds,
-                                   solve_seconds)
+                                   residual_median_px, residual_p90_px, match_cost_px2,
+                                   build_seconds, solve_seconds)
 
 // Prior trust region (§3.6): per-frame motion of the solution from the prior, prior's frame.
 struct TrustRegionVerdict {
@@ -183,6 +194,50 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num
                                    num_inconsistent, fraction, median_pair_px, pair_threshold_px,
                                    fraction_threshold, pairs)
 
+// The basin-first solve's orientation-prior probe (RefineOptions::basin_first): whether the
+// matches agree with the prior's rotations, and so whether the finish keeps λR.
+struct OrientationPriorProbe {
+  bool enabled = false;
+  double weight = 0.0;  // λR probed (orientation_weight), 1/rad²
+  // The median cross-projection residual (RefinePassSummary::residual_median_px) of the basin
+  // solve (λR = 0) and of the probe (λR = weight) on the same matches, pixels, and the mean match
+  // terms (match_cost_px2) beside them.
+  double free_residual_median_px = 0.0;
+  double prior_residual_median_px = 0.0;
+  double free_match_cost_px2 = 0.0;
+  double prior_match_cost_px2 = 0.0;
+  double increase = 0.0;                 // prior_residual_median_px / free_... - 1
+  double max_increase = 0.0;             // orientation_prior_max_increase
+  double max_rotation_change_deg = 0.0;  // largest per-frame rotation between the two solutions
+  bool kept = false;                     // the finish runs with λR = weight (else 0)
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(OrientationPriorProbe, enabled, weight, free_residual_median_px,
+                                   prior_residual_median_px, free_match_cost_px2,
+                                   prior_match_cost_px2, increase, max_increase,
+                                   max_rotation_change_deg, kept)
+
+// The basin-first solve's wrong-pair removal (RefineOptions::max_pair_removal_rounds).
+struct PairRemovalSummary {
+  bool enabled = false;
+  int rounds = 0;  // basin solves rerun from the prior without removed pairs
+  // The pairs the returned solve was made without, worst first, each with its measure at the basin
+  // solution that removed it (indices into RefineInput's images).
+  std::vector<PairResidual> removed;
+  // Inconsistent pairs left in because removing them would split the match graph, with their
+  // measure when they were kept.
+  std::vector<PairResidual> kept;
+  // Images whose pose the removal leaves resting on evidence nothing else checks: the two images
+  // of a kept pair, and an image that lost pairs and is left with at most one (its two pairs
+  // disagreed: the one left may be the wrong one). The check "doubtful_images" fires
+  // (RefineSummary::guardrails_fired, flag only). Sorted.
+  std::vector<int> doubtful_images;
+  // "consistent": no pair above the threshold at the last basin solution; "stable": exactly the
+  // removed pairs are; "max_rounds": the bound was reached with another set above it.
+  std::string stop_reason;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairRemovalSummary, enabled, rounds, removed, kept,
+                                   doubtful_images, stop_reason)
+
 // How the images' cameras became the solve's intrinsics blocks (refine/camera_blocks.h).
 struct CameraBlocksSummary {
   std::string sharing;  // RefineOptions::intrinsics_sharing
@@ -215,13 +270,19 @@ struct RefineSummary {
   double jacobian_seconds = 0.0;
   double total_seconds = 0.0;
   bool solver_failed = false;  // a Ceres solve reported FAILURE
+  OrientationPriorProbe orientation_prior;
+  PairRemovalSummary pair_removal;
   TrustRegionVerdict trust_region;
   WanderVerdict wander;
   InconsistentPairsVerdict inconsistent_pairs;
-  // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs"
-  // (flag only), in this order.
+  // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs",
+  // "doubtful_images" (flag only), in this order.
   std::vector<std::string> guardrails_fired;
   bool returned_prior = false;
+  // What was returned, one word: "accepted" (no check fired), "re_solved" (accepted after
+  // removing pairs, pair_removal), "flagged" (returned with a flag-only check fired),
+  // "returned_prior" (a check returned the prior).
+  std::string decision;
 
   // The fields by name (as the NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE lists above), with the four
   // totals of seconds under "timings" and the verdicts under "guardrails" ("fired" =

@@ -131,6 +131,33 @@ struct RefineOptions {
   double stage1_orientation_weight = 10.0;  // λR of pass 1, 1/rad²
   int stage1_max_matches_per_pair = 100;    // cap of pass 1; 0 keeps all
 
+  // Basin-first solve (issue 12, the `auto` preset; built from §4.8 "Basin of convergence" and
+  // §3.3): pass 1 = the basin solve, poses only, full GNC schedule, no orientation prior and
+  // basin_max_matches_per_pair matches, which recovers priors tens of degrees off; pass 2 = the
+  // orientation-prior probe, one nominal-scale solve of the same matches from pass 1's solution
+  // with λR = orientation_weight against the original prior's rotations; pass 3 = the finish from
+  // the solution the probe keeps, one nominal-scale solve with max_matches_per_pair matches and
+  // the self-calibration options. The probe decides λR of the finish from the data: when pulling
+  // the rotations towards the prior raises the median cross-projection residual (robust to the
+  // outliers, which saturate the arctan loss and dilute its mean) by more than
+  // orientation_prior_max_increase, the matches contradict the prior's rotations
+  // (a wrong prior, or a phone's rotation drift) and the finish runs with λR = 0 from pass 1;
+  // otherwise the prior only fixes what the matches leave undetermined (the slow rotation drift a
+  // long sweep's λR = 0 solve picks up at no cost) and the finish keeps it.
+  bool basin_first = false;
+  int basin_max_matches_per_pair = 100;          // cap of passes 1 and 2; 0 keeps all
+  double orientation_prior_max_increase = 0.05;  // relative rise of the median residual
+  // Wrong-pair removal of the basin-first solve (issue 12; beyond the paper, cf. its §4.11
+  // "Failure analysis"): after the basin solve every pair is judged at its solution (the
+  // inconsistent-pairs test's per-pair measure against inconsistent_pair_px), and the basin is
+  // solved again from the prior without the inconsistent ones, until the solution leaves exactly
+  // those it was solved without above the threshold, at most this many times; the probe and the
+  // finish then use the remaining pairs. A removal that would split the match graph is not made
+  // (that pair stays, and the images it holds are reported as doubtful). The 4 px threshold
+  // separates castle-P19's 44 wrong pairs from its correct ones at the basin solution from an
+  // exact and an 8° prior alike.
+  int max_pair_removal_rounds = 0;
+
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("parameterization", parameterization,
@@ -212,6 +239,20 @@ struct RefineOptions {
       "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative());
     v("stage1_max_matches_per_pair", stage1_max_matches_per_pair,
       "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative());
+    v("basin_first", basin_first,
+      "Basin solve (GNC, λR 0, capped), then a probe that keeps the orientation prior only if "
+      "the matches agree, then the finish (§4.8, §3.3)");
+    v("basin_max_matches_per_pair", basin_max_matches_per_pair,
+      "Match cap of the basin solve and the orientation-prior probe; 0 keeps all (§4.7: 100)",
+      NonNegative());
+    v("orientation_prior_max_increase", orientation_prior_max_increase,
+      "Relative rise of the median residual under the orientation prior above which the finish "
+      "drops it",
+      NonNegative());
+    v("max_pair_removal_rounds", max_pair_removal_rounds,
+      "Basin-first: times the pairs the basin solve leaves above inconsistent_pair_px are removed "
+      "and the basin solve rerun; 0 keeps every pair",
+      NonNegative());
   }
 
   // Fixed intrinsics are each image's own: a shared set exists only to be refined.
@@ -221,6 +262,10 @@ struct RefineOptions {
             "to self-calibrate, so it needs refine_focal, refine_principal_point or "
             "refine_distortion; with fixed intrinsics every image uses its own camera as given "
             "(intrinsics_sharing: per_camera)");
+    require(!(staged && basin_first),
+            "staged and basin_first are two different multi-pass recipes; choose one");
+    require(max_pair_removal_rounds == 0 || basin_first,
+            "max_pair_removal_rounds needs basin_first (the pairs are judged at the basin solve)");
   }
 
   // True when any intrinsic is refined.

@@ -13,6 +13,7 @@
 #include <string>
 #include <utility>
 
+#include "evaluate/pose_errors.h"
 #include "refine/cross_projection_cost.h"
 #include "refine/guardrails.h"
 #include "refine/pair_consistency.h"
@@ -23,6 +24,13 @@
 
 namespace raytime {
 namespace {
+
+double MeanRotationErrorDeg(const std::vector<Rigid3>& estimate,
+                            const std::vector<Rigid3>& truth) {
+  PoseErrorOptions options;
+  options.alignment = "sim3";
+  return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options).mean_rotation_deg;
+}
 
 SyntheticSceneOptions Scene() {
   SyntheticSceneOptions options;
@@ -460,16 +468,13 @@ TEST(RefineGuardrailTest, InconsistentPairsStaysQuietOnAHealthySolve) {
   }
 }
 
-// Repeated structure (§4.11; castle-P19's walls): in every third pair (i, j), image j's side of
-// each match is replaced by a new keypoint of j, the projection of the point moved 1.5 m along the
-// vertical axis (the same window one storey over). The pair's matches agree with each other and
-// with a wrong relative pose (camera j moved 1.5 m the other way), not with the scene, and are
-// 130 px off it. Returns the corrupted pairs.
-std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
+// Repeated structure (§4.11; castle-P19's walls): in pair `p` (i, j), image j's side of each
+// match is replaced by a new keypoint of j, the projection of the point moved by `shift` (e.g.
+// 1.5 m along the vertical axis: the same window one storey over). The pair's matches agree with
+// each other and with a wrong relative pose (camera j moved by -shift), not with the scene.
+void CorruptPair(SyntheticScene* scene, size_t p, const Eigen::Vector3d& shift) {
   const CameraIntrinsics& intrinsics = scene->input.cameras.at(0);  // one shared camera
-  const Eigen::Vector3d storey(0.0, -1.5, 0.0);
-  std::set<std::pair<int, int>> corrupted;
-  for (size_t p = 1; p < scene->input.pairs.size(); p += 3) {
+  {
     PairMatchIndices& pair = scene->input.pairs[p];
     const int i = pair.image1;
     const int j = pair.image2;
@@ -479,7 +484,7 @@ std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
       const std::vector<int>& map = scene->keypoint_of_point[i];
       const int point =
           static_cast<int>(std::find(map.begin(), map.end(), pair.matches(m, 0)) - map.begin());
-      const Eigen::Vector3d copy = scene->points[point] + storey;
+      const Eigen::Vector3d copy = scene->points[point] + shift;
       const Eigen::Vector3d c = scene->ground_truth[j].Inverse() * copy;
       if (c.z() < 1.0) continue;
       double undistorted[2], distorted[2];
@@ -499,7 +504,15 @@ std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
       pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
       pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
     }
-    corrupted.emplace(i, j);
+  }
+}
+
+// Every third pair corrupted one storey over (1.5 m, 130 px off the scene). Returns them.
+std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
+  std::set<std::pair<int, int>> corrupted;
+  for (size_t p = 1; p < scene->input.pairs.size(); p += 3) {
+    CorruptPair(scene, p, Eigen::Vector3d(0.0, -1.5, 0.0));
+    corrupted.emplace(scene->input.pairs[p].image1, scene->input.pairs[p].image2);
   }
   return corrupted;
 }
@@ -557,6 +570,85 @@ TEST(RefineGuardrailTest, InconsistentPairsFlagsWrongPairsAndReturnsTheSolution)
   EXPECT_FALSE(off.inconsistent_pairs.enabled);
   EXPECT_FALSE(off.inconsistent_pairs.fired);
   EXPECT_TRUE(off.guardrails_fired.empty());
+}
+
+// The basin-first solve with wrong-pair removal (the auto preset's max_pair_removal_rounds), on
+// the same third of the pairs matched to the wrong copy, from a 6° prior: the removal takes out
+// exactly those pairs, solves again, and returns a solution as accurate as the robust loss gives
+// with them in, now with nothing flagged; without removal the same solve is flagged.
+TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
+  SyntheticScene scene = MakeSyntheticScene(Scene());
+  const std::set<std::pair<int, int>> corrupted = CorruptEveryThirdPair(&scene);
+  scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 6.0, 0.1, 7);
+  RefineOptions options;
+  options.basin_first = true;
+  options.trust_region = false;
+  options.max_matches_per_pair = 100;
+  options.max_pair_removal_rounds = 3;
+  options.num_threads = 2;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  const PairRemovalSummary& removal = summary.pair_removal;
+  EXPECT_TRUE(removal.enabled);
+  EXPECT_GE(removal.rounds, 1);
+  EXPECT_EQ(removal.stop_reason, "stable") << "the wrong pairs stay off the solution without them";
+  EXPECT_TRUE(removal.kept.empty());
+  std::set<std::pair<int, int>> removed;
+  for (const PairResidual& pair : removal.removed) {
+    removed.emplace(pair.image1, pair.image2);
+    EXPECT_GT(pair.median_px, options.inconsistent_pair_px);
+  }
+  EXPECT_EQ(removed, corrupted);
+  EXPECT_EQ(summary.passes[1].name, "basin_round2");
+  EXPECT_EQ(summary.inconsistent_pairs.num_pairs, 12) << "the final check sees the kept pairs";
+  EXPECT_TRUE(summary.guardrails_fired.empty());
+  EXPECT_EQ(summary.decision, "re_solved");
+  EXPECT_EQ(summary.ToJson()["pair_removal"]["removed"].size(), 6u);
+  EXPECT_TRUE(removal.doubtful_images.empty()) << "every camera keeps two or more pairs";
+  const double error = MeanRotationErrorDeg(output.world_from_cam, scene.ground_truth);
+  EXPECT_LT(error, 0.1);
+
+  options.max_pair_removal_rounds = 0;
+  const RefineSummary kept = RefinePoses(scene.input, options, &output);
+  EXPECT_FALSE(kept.pair_removal.enabled);
+  EXPECT_EQ(kept.decision, "flagged");
+  EXPECT_EQ(kept.guardrails_fired, std::vector<std::string>{"inconsistent_pairs"});
+  EXPECT_GT(MeanRotationErrorDeg(output.world_from_cam, scene.ground_truth), 0.9 * error);
+}
+
+// A camera whose only two pairs are both wrong, each to another copy, so they disagree: the
+// removal takes out the one the basin solution leaves off, the camera then follows the other, which
+// looks consistent but may be as wrong; the camera is listed as doubtful and the check fires.
+TEST(RefineGuardrailTest, BasinFirstFlagsACameraLeftOnOneUncheckedPair) {
+  SyntheticScene scene = MakeSyntheticScene(Scene());
+  const int last = static_cast<int>(scene.ground_truth.size()) - 1;
+  std::vector<PairMatchIndices> pairs;
+  for (const PairMatchIndices& pair : scene.input.pairs) {
+    if (pair.image2 != last || pair.image1 >= last - 2) pairs.push_back(pair);
+  }
+  scene.input.pairs = pairs;
+  std::vector<size_t> last_pairs;
+  for (size_t p = 0; p < pairs.size(); ++p) {
+    if (pairs[p].image2 == last) last_pairs.push_back(p);
+  }
+  ASSERT_EQ(last_pairs.size(), 2u);
+  CorruptPair(&scene, last_pairs[0], Eigen::Vector3d(0.0, -1.5, 0.0));
+  CorruptPair(&scene, last_pairs[1], Eigen::Vector3d(2.0, 0.0, 0.0));
+  RefineOptions options;
+  options.basin_first = true;
+  options.trust_region = false;
+  options.max_pair_removal_rounds = 3;
+  options.num_threads = 2;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  ASSERT_EQ(summary.pair_removal.removed.size(), 1u);
+  EXPECT_EQ(summary.pair_removal.removed[0].image2, last);
+  EXPECT_EQ(summary.pair_removal.doubtful_images, std::vector<int>{last});
+  EXPECT_FALSE(summary.inconsistent_pairs.fired) << "the pose follows the pair that is left";
+  EXPECT_EQ(summary.guardrails_fired, std::vector<std::string>{"doubtful_images"});
+  EXPECT_EQ(summary.decision, "flagged");
+  EXPECT_FALSE(summary.returned_prior);
+  EXPECT_EQ(summary.ToJson()["pair_removal"]["doubtful_images"][0], last);
 }
 
 // Ray times stuck in the arctan's flat tail (from far-off priors) make the cross-projection

@@ -163,6 +163,38 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
   EXPECT_EQ(constant, std::vector<double>(truth.size(), 1.0));
 }
 
+// The basin-first finish's start (StartRayTimesAtClosestApproach): at exact poses and noise-free
+// keypoints every flagged ray time starts at its own true depth, where the per-image start misses
+// most by metres; unflagged ones keep their values.
+TEST(RefineLayoutTest, ClosestApproachStartPutsEachFlaggedRayTimeAtItsTrueDepth) {
+  SyntheticSceneOptions options;
+  options.num_cameras = 6;
+  options.num_points = 200;
+  const SyntheticScene scene = MakeSyntheticScene(options);
+  const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
+  const std::vector<double> truth = TrueRayTimes(scene, layout);
+  RayTimeInitSummary summary;
+  const std::vector<double> per_image = InitialRayTimes(
+      layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input), "auto", 1.0, &summary);
+  std::vector<bool> needs_start(per_image.size());
+  for (size_t t = 0; t < needs_start.size(); ++t) needs_start[t] = t % 2 == 0;
+  std::vector<double> started = per_image;
+  const int count = StartRayTimesAtClosestApproach(
+      layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input), needs_start, &started);
+  EXPECT_EQ(count, static_cast<int>((per_image.size() + 1) / 2));
+  int per_image_off_by_a_metre = 0;
+  for (size_t t = 0; t < started.size(); ++t) {
+    const double expected = truth[layout.ray_time_observation[t]];
+    if (needs_start[t]) {
+      EXPECT_NEAR(started[t], expected, 1e-6 * expected) << "ray time " << t;
+      if (std::abs(per_image[t] - expected) > 1.0) ++per_image_off_by_a_metre;
+    } else {
+      EXPECT_EQ(started[t], per_image[t]);
+    }
+  }
+  EXPECT_GT(per_image_off_by_a_metre, count / 2);
+}
+
 // With per-image intrinsics (focal 3 %, principal point 8 px apart), noise-free keypoints and the
 // exact prior, each observation's ray is unprojected with its own image's camera: matched rays
 // meet, every closest-approach depth is the true depth, and each image's start is the upper

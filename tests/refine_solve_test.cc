@@ -367,6 +367,79 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   EXPECT_NEAR(output.cameras[0].params[kFx] / truth.params[kFx], 1.0, 0.005);
 }
 
+// The basin-first solve (issue 12, preset auto): from an exact prior the probe finds the matches
+// agreeing with the prior's rotations and the finish keeps λR on every match; the three passes are
+// the basin solve (GNC, λR = 0, capped), the probe (one stage, same matches) and the finish.
+TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  RefineOptions options;
+  options.basin_first = true;
+  options.trust_region = false;
+  options.basin_max_matches_per_pair = 60;
+  options.num_threads = 2;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  ASSERT_EQ(summary.passes.size(), 3u);
+  EXPECT_EQ(summary.passes[0].name, "basin");
+  EXPECT_EQ(summary.passes[0].orientation_weight, 0.0);
+  EXPECT_EQ(summary.passes[0].stages.size(), 3u);
+  EXPECT_LT(summary.passes[0].num_matches_used, summary.passes[0].num_matches_input);
+  EXPECT_EQ(summary.passes[1].name, "orientation_probe");
+  EXPECT_EQ(summary.passes[1].orientation_weight, 1e3);
+  EXPECT_EQ(summary.passes[1].stages.size(), 1u);
+  EXPECT_EQ(summary.passes[1].num_matches_used, summary.passes[0].num_matches_used);
+  EXPECT_EQ(summary.passes[2].name, "finish");
+  EXPECT_EQ(summary.passes[2].num_matches_used, summary.passes[2].num_matches_input);
+  // The finish starts the basin's ray times where it solved them and every other one on its ray.
+  EXPECT_EQ(summary.passes[1].ray_time_init.num_warm_started, summary.passes[1].num_ray_times);
+  EXPECT_EQ(summary.passes[2].ray_time_init.num_warm_started, summary.passes[0].num_ray_times);
+  EXPECT_GT(summary.passes[2].ray_time_init.num_closest_approach_started, 0);
+  EXPECT_LE(summary.passes[2].ray_time_init.num_warm_started +
+                summary.passes[2].ray_time_init.num_closest_approach_started,
+            summary.passes[2].num_ray_times);
+  const OrientationPriorProbe& probe = summary.orientation_prior;
+  EXPECT_TRUE(probe.enabled);
+  EXPECT_TRUE(probe.kept);
+  EXPECT_LT(std::abs(probe.increase), 0.005);
+  EXPECT_EQ(probe.free_residual_median_px, summary.passes[0].residual_median_px);
+  EXPECT_EQ(probe.prior_residual_median_px, summary.passes[1].residual_median_px);
+  EXPECT_EQ(probe.free_match_cost_px2, summary.passes[0].match_cost_px2);
+  EXPECT_EQ(probe.prior_match_cost_px2, summary.passes[1].match_cost_px2);
+  EXPECT_EQ(summary.passes[2].orientation_weight, 1e3);
+  EXPECT_LT(Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.05);
+  EXPECT_TRUE(summary.guardrails_fired.empty());
+}
+
+// From a prior 8° off, holding the rotations to it costs the matches: the probe's median residual
+// rises far above the threshold, the finish drops λR and starts from the basin solve, and the
+// result is as accurate as from an exact prior, where the same finish with the prior kept would not
+// be.
+TEST(RefineSolveTest, BasinFirstDropsAnOrientationPriorTheMatchesContradict) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  scene.input.prior_world_from_cam = PerturbedPrior(scene, 8.0, 3);
+  RefineOptions options;
+  options.basin_first = true;
+  options.trust_region = false;
+  options.basin_max_matches_per_pair = 60;
+  options.num_threads = 2;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  const OrientationPriorProbe& probe = summary.orientation_prior;
+  EXPECT_FALSE(probe.kept);
+  EXPECT_GT(probe.increase, 5 * options.orientation_prior_max_increase);
+  EXPECT_GT(probe.max_rotation_change_deg, 0.5);
+  ASSERT_EQ(summary.passes.size(), 3u);
+  EXPECT_EQ(summary.passes[2].orientation_weight, 0.0);
+  EXPECT_LT(Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.05);
+
+  // The same finish with the prior kept: pinned towards the 8° prior.
+  options.orientation_prior_max_increase = 1e6;
+  RefineOutput kept_output;
+  const RefineSummary kept = RefinePoses(scene.input, options, &kept_output);
+  EXPECT_TRUE(kept.orientation_prior.kept);
+  EXPECT_GT(Errors(kept_output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.2);
+}
+
 // Every key path of a JSON value, arrays as "[]" (their elements' keys merged).
 void CollectKeyPaths(const nlohmann::json& value, const std::string& path,
                      std::set<std::string>* out) {
@@ -480,6 +553,8 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].ray_time_init.min_depth",
       "passes[].ray_time_init.median_depth",
       "passes[].ray_time_init.max_depth",
+      "passes[].ray_time_init.num_warm_started",
+      "passes[].ray_time_init.num_closest_approach_started",
       "passes[].gauge_polish",
       "passes[].gauge_polish.prior_cost_before",
       "passes[].gauge_polish.prior_cost_after",
@@ -488,6 +563,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].gauge_polish.scale",
       "passes[].residual_median_px",
       "passes[].residual_p90_px",
+      "passes[].match_cost_px2",
       "passes[].build_seconds",
       "passes[].solve_seconds",
       "passes[].stages",
@@ -511,6 +587,25 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "timings.solve_seconds",
       "timings.jacobian_seconds",
       "timings.total_seconds",
+      "orientation_prior",
+      "orientation_prior.enabled",
+      "orientation_prior.weight",
+      "orientation_prior.free_residual_median_px",
+      "orientation_prior.prior_residual_median_px",
+      "orientation_prior.free_match_cost_px2",
+      "orientation_prior.prior_match_cost_px2",
+      "orientation_prior.increase",
+      "orientation_prior.max_increase",
+      "orientation_prior.max_rotation_change_deg",
+      "orientation_prior.kept",
+      "pair_removal",
+      "pair_removal.enabled",
+      "pair_removal.rounds",
+      "pair_removal.removed",
+      "pair_removal.kept",
+      "pair_removal.doubtful_images",
+      "pair_removal.stop_reason",
+      "decision",
       "guardrails",
       "guardrails.fired",
       "guardrails.returned_prior",
