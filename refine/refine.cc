@@ -447,8 +447,22 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       ++remaining[pair.image2];
     }
     for (const PairResidual& pair : removal.removed) lost[pair.image1] = lost[pair.image2] = true;
+    // A kept pair bridges two parts of the graph: the smaller part's placement rests on it.
     std::vector<bool> doubtful(lost.size(), false);
-    for (const PairResidual& pair : removal.kept) doubtful[pair.image1] = doubtful[pair.image2] = true;
+    for (const PairResidual& kept : removal.kept) {
+      std::vector<std::pair<int, int>> edges;
+      for (const PairMatchIndices& pair : active->pairs) {
+        const bool is_kept = pair.image1 == kept.image1 && pair.image2 == kept.image2;
+        if (pair.matches.rows() > 0 && !is_kept) edges.emplace_back(pair.image1, pair.image2);
+      }
+      const std::vector<int> labels = ConnectedComponents(static_cast<int>(lost.size()), edges);
+      const int side1 = labels[kept.image1];
+      const int side2 = labels[kept.image2];
+      const auto size1 = std::count(labels.begin(), labels.end(), side1);
+      const auto size2 = std::count(labels.begin(), labels.end(), side2);
+      const int smaller = size1 < size2 || (size1 == size2 && side1 > side2) ? side1 : side2;
+      for (size_t i = 0; i < labels.size(); ++i) doubtful[i] = doubtful[i] || labels[i] == smaller;
+    }
     for (size_t i = 0; i < lost.size(); ++i) {
       if (doubtful[i] || (lost[i] && remaining[i] <= 1)) {
         removal.doubtful_images.push_back(static_cast<int>(i));

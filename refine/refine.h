@@ -226,9 +226,9 @@ struct PairRemovalSummary {
   // Inconsistent pairs left in because removing them would split the match graph, with their
   // measure when they were kept.
   std::vector<PairResidual> kept;
-  // Images whose pose the removal leaves resting on evidence nothing else checks: the two images
-  // of a kept pair, and an image that lost pairs and is left with at most one (its two pairs
-  // disagreed: the one left may be the wrong one). The check "doubtful_images" fires
+  // Images whose pose the removal leaves resting on evidence nothing else checks: the images of
+  // the smaller part of the graph a kept pair alone connects, and an image that lost pairs and is
+  // left with at most one (its pairs disagreed: the one left may be the wrong one). The check "doubtful_images" fires
   // (RefineSummary::guardrails_fired, flag only). Sorted.
   std::vector<int> doubtful_images;
   // "consistent": no pair above the threshold at the last basin solution; "stable": exactly the

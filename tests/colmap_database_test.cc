@@ -230,6 +230,9 @@ TEST(ColmapDatabase, KeypointShiftLosesAtMostOneUlp) {
         ++total;
       }
     }
+    ASSERT_EQ(db.features[i].keypoints.rows(), s.features[i].keypoints.rows());
+    // No block of an empty matrix: Eigen offsets its null data pointer (undefined behaviour).
+    if (s.features[i].keypoints.rows() == 0) continue;
     EXPECT_EQ(db.features[i].keypoints.rightCols(2), s.features[i].keypoints.rightCols(2));
   }
   EXPECT_GE(exact, 0.98 * total);
