@@ -410,7 +410,9 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
         break;
       }
       if (SamePairs(selected, removal.removed)) {
-        removal.stop_reason = selected.empty() ? "consistent" : "stable";
+        // Nothing removable but bridges above the threshold: they are still reported.
+        if (removal.rounds == 0) removal.kept = kept;
+        removal.stop_reason = selected.empty() && removal.kept.empty() ? "consistent" : "stable";
         break;
       }
       if (removal.rounds == options.max_pair_removal_rounds) {
@@ -438,7 +440,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       summary->passes.push_back(RunPass(*active, options, again, prior, state));
     }
   }
-  if (!removal.removed.empty()) {
+  if (!removal.removed.empty() || !removal.kept.empty()) {
     std::vector<int> remaining(input.prior_world_from_cam.size(), 0);
     std::vector<bool> lost(input.prior_world_from_cam.size(), false);
     for (const PairMatchIndices& pair : active->pairs) {
