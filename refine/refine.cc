@@ -302,15 +302,17 @@ void CountBlocks(const PassState& state, CameraBlocksSummary* summary) {
   }
 }
 
-// Number of connected components of the graph whose nodes are the images and whose edges are
-// the pairs with matches.
-int CountComponents(const RefineInput& input) {
+// The match graph's edges: (image1, image2) of every pair with matches, in input order.
+std::vector<std::pair<int, int>> MatchedEdges(const RefineInput& input) {
   std::vector<std::pair<int, int>> edges;
   for (const PairMatchIndices& pair : input.pairs) {
     if (pair.matches.rows() > 0) edges.emplace_back(pair.image1, pair.image2);
   }
-  const std::vector<int> labels =
-      ConnectedComponents(static_cast<int>(input.prior_world_from_cam.size()), edges);
+  return edges;
+}
+
+int CountComponents(int num_images, const std::vector<std::pair<int, int>>& edges) {
+  const std::vector<int> labels = ConnectedComponents(num_images, edges);
   return labels.empty() ? 0 : *std::max_element(labels.begin(), labels.end()) + 1;
 }
 
@@ -324,23 +326,19 @@ std::vector<PairResidual> SelectInconsistentPairs(std::vector<PairResidual> resi
                    [](const PairResidual& a, const PairResidual& b) {
                      return a.median_px > b.median_px;
                    });
-  RefineInput graph;  // the pairs' images only (CountComponents reads no keypoints)
-  graph.prior_world_from_cam.resize(input.prior_world_from_cam.size());
-  graph.pairs = input.pairs;
-  const int components = CountComponents(graph);
+  const int num_images = static_cast<int>(input.prior_world_from_cam.size());
+  std::vector<std::pair<int, int>> edges = MatchedEdges(input);
+  const int components = CountComponents(num_images, edges);
   std::vector<PairResidual> selected;
   for (const PairResidual& residual : residuals) {
     if (!(residual.median_px > threshold_px)) break;  // sorted; infinite, never NaN
-    const auto it = std::find_if(
-        graph.pairs.begin(), graph.pairs.end(), [&](const PairMatchIndices& pair) {
-          return pair.image1 == residual.image1 && pair.image2 == residual.image2;
-        });
-    if (it == graph.pairs.end()) continue;
-    const auto index = it - graph.pairs.begin();
-    PairMatchIndices taken = std::move(*it);
-    graph.pairs.erase(it);
-    if (CountComponents(graph) > components) {
-      graph.pairs.insert(graph.pairs.begin() + index, std::move(taken));
+    const auto it =
+        std::find(edges.begin(), edges.end(), std::make_pair(residual.image1, residual.image2));
+    if (it == edges.end()) continue;
+    const auto index = it - edges.begin();
+    edges.erase(it);
+    if (CountComponents(num_images, edges) > components) {
+      edges.insert(edges.begin() + index, {residual.image1, residual.image2});
       kept->push_back(residual);
       continue;
     }
@@ -443,20 +441,18 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   if (!removal.removed.empty() || !removal.kept.empty()) {
     std::vector<int> remaining(input.prior_world_from_cam.size(), 0);
     std::vector<bool> lost(input.prior_world_from_cam.size(), false);
-    for (const PairMatchIndices& pair : active->pairs) {
-      if (pair.matches.rows() == 0) continue;
-      ++remaining[pair.image1];
-      ++remaining[pair.image2];
+    const std::vector<std::pair<int, int>> active_edges = MatchedEdges(*active);
+    for (const auto& [image1, image2] : active_edges) {
+      ++remaining[image1];
+      ++remaining[image2];
     }
     for (const PairResidual& pair : removal.removed) lost[pair.image1] = lost[pair.image2] = true;
     // A kept pair bridges two parts of the graph: the smaller part's placement rests on it.
     std::vector<bool> doubtful(lost.size(), false);
     for (const PairResidual& kept : removal.kept) {
-      std::vector<std::pair<int, int>> edges;
-      for (const PairMatchIndices& pair : active->pairs) {
-        const bool is_kept = pair.image1 == kept.image1 && pair.image2 == kept.image2;
-        if (pair.matches.rows() > 0 && !is_kept) edges.emplace_back(pair.image1, pair.image2);
-      }
+      std::vector<std::pair<int, int>> edges = active_edges;
+      edges.erase(std::remove(edges.begin(), edges.end(), std::make_pair(kept.image1, kept.image2)),
+                  edges.end());
       const std::vector<int> labels = ConnectedComponents(static_cast<int>(lost.size()), edges);
       const int side1 = labels[kept.image1];
       const int side2 = labels[kept.image2];

@@ -367,16 +367,22 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   EXPECT_NEAR(output.cameras[0].params[kFx] / truth.params[kFx], 1.0, 0.005);
 }
 
-// The basin-first solve (issue 12, preset auto): from an exact prior the probe finds the matches
-// agreeing with the prior's rotations and the finish keeps λR on every match; the three passes are
-// the basin solve (GNC, λR = 0, capped), the probe (one stage, same matches) and the finish.
-TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
-  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+// The basin-first solve without a trust region, its cap lowered to the small scene's pairs.
+RefineOptions BasinFirstOptions() {
   RefineOptions options;
   options.basin_first = true;
   options.trust_region = false;
   options.basin_max_matches_per_pair = 60;
   options.num_threads = 2;
+  return options;
+}
+
+// The basin-first solve (issue 12, preset auto): from an exact prior the probe finds the matches
+// agreeing with the prior's rotations and the finish keeps λR on every match; the three passes are
+// the basin solve (GNC, λR = 0, capped), the probe (one stage, same matches) and the finish.
+TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  RefineOptions options = BasinFirstOptions();
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   ASSERT_EQ(summary.passes.size(), 3u);
@@ -417,11 +423,7 @@ TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
 TEST(RefineSolveTest, BasinFirstDropsAnOrientationPriorTheMatchesContradict) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 8.0, 3);
-  RefineOptions options;
-  options.basin_first = true;
-  options.trust_region = false;
-  options.basin_max_matches_per_pair = 60;
-  options.num_threads = 2;
+  RefineOptions options = BasinFirstOptions();
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   const OrientationPriorProbe& probe = summary.orientation_prior;
