@@ -1,5 +1,7 @@
 #include "pipelines/stage.h"
 
+#include <CLI/CLI.hpp>
+
 #include "core/error.h"
 
 namespace raytime {

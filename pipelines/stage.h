@@ -3,7 +3,6 @@
 #pragma once
 
 #include <yaml-cpp/yaml.h>
-#include <CLI/CLI.hpp>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -11,6 +10,11 @@
 #include <vector>
 
 #include "core/options.h"
+
+// CLI11 is header-only and heavy: only stage.cc and the CLI need its definitions.
+namespace CLI {
+class App;
+}
 
 namespace raytime {
 
