@@ -18,6 +18,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/geometry.h"
+#include "tests/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -25,7 +26,7 @@ namespace {
 Eigen::Matrix3d RandomRotation(std::mt19937& rng, double max_angle_rad) {
   std::normal_distribution<double> normal;
   std::uniform_real_distribution<double> uniform(0.0, max_angle_rad);
-  const Eigen::Vector3d axis = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+  const Eigen::Vector3d axis = DrawVector3([&] { return normal(rng); }).normalized();
   return ExpSO3(axis * uniform(rng));
 }
 
@@ -54,11 +55,11 @@ Scene OrbitScene(int num_cameras, int num_points, std::mt19937& rng) {
     const double angle = 1.6 * M_PI * i / num_cameras;
     const Eigen::Vector3d centre(6 * std::cos(angle), 6 * std::sin(angle), 1.0 + jitter(rng));
     scene.centres.push_back(centre);
-    scene.rotations.push_back(
-        LookAt(centre, Eigen::Vector3d(jitter(rng), jitter(rng), jitter(rng))));
+    scene.rotations.push_back(LookAt(centre, DrawVector3([&] { return jitter(rng); })));
   }
   std::uniform_real_distribution<double> box(-1.5, 1.5);
-  for (int k = 0; k < num_points; ++k) scene.points.emplace_back(box(rng), box(rng), box(rng));
+  for (int k = 0; k < num_points; ++k)
+    scene.points.push_back(DrawVector3([&] { return box(rng); }));
   return scene;
 }
 
@@ -185,15 +186,14 @@ TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
   for (size_t k = 0; k < result.edges.size(); ++k) {
     ViewGraphEdge& e = result.edges[k];
     // Small noise on every pair, as two-view estimates carry.
-    e.rotation =
-        ExpSO3(Eigen::Vector3d(normal(rng), normal(rng), normal(rng)) * 0.002) * e.rotation;
+    e.rotation = ExpSO3(DrawVector3([&] { return normal(rng); }) * 0.002) * e.rotation;
     if (unit(rng) < 0.2) {
       outlier[k] = true;
       ++num_outliers;
       // The most supported pairs: the spanning-tree initialization is built from outliers.
       e.num_inliers = 1000;
       e.rotation = RandomRotation(rng, M_PI) * e.rotation;
-      e.translation = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)).normalized();
+      e.translation = DrawVector3([&] { return normal(rng); }).normalized();
     }
   }
   ASSERT_GT(num_outliers, 15);
@@ -222,8 +222,7 @@ TEST(Bootstrap, FragilityIsSmallOnCleanGraph) {
   result.edges = AllPairs(scene);
   std::normal_distribution<double> normal;
   for (auto& e : result.edges) {
-    e.rotation =
-        ExpSO3(Eigen::Vector3d(normal(rng), normal(rng), normal(rng)) * 0.002) * e.rotation;
+    e.rotation = ExpSO3(DrawVector3([&] { return normal(rng); }) * 0.002) * e.rotation;
   }
   SolveGlobalPoses(12, BootstrapOptions(), &result);
   EXPECT_LT(result.fragility.mean_residual_deg, 0.5);
@@ -289,7 +288,7 @@ TEST(GraphSupport, CountsSharesAndReasons) {
 
 Eigen::Vector3d Noisy(const Eigen::Vector3d& ray, double sigma_rad, std::mt19937& rng) {
   std::normal_distribution<double> normal(0.0, sigma_rad);
-  return (ray + Eigen::Vector3d(normal(rng), normal(rng), normal(rng))).normalized();
+  return (ray + DrawVector3([&] { return normal(rng); })).normalized();
 }
 
 TEST(RelativePose, FivePointRecoversPoseWithOutliers) {
@@ -305,7 +304,8 @@ TEST(RelativePose, FivePointRecoversPoseWithOutliers) {
     b2.col(k) = Noisy(scene.rotations[j].transpose() * (scene.points[k] - scene.centres[j]),
                       0.3 / 1000, rng);
     if (k % 4 == 0) {  // 25 % gross outliers
-      b2.col(k) = Eigen::Vector3d(0.3 * normal(rng), 0.3 * normal(rng), 1).normalized();
+      const Eigen::Vector2d xy = 0.3 * DrawVector2([&] { return normal(rng); });
+      b2.col(k) = Eigen::Vector3d(xy.x(), xy.y(), 1).normalized();
     }
   }
   for (const std::string algorithm : {"stewenius", "nister"}) {
@@ -333,7 +333,8 @@ TEST(RelativePose, FlagsPureRotationAndTooFewInliers) {
   Eigen::Matrix3Xd b1(3, 200), b2(3, 200);
   std::uniform_real_distribution<double> box(-0.5, 0.5);
   for (int k = 0; k < 200; ++k) {
-    const Eigen::Vector3d point(box(rng), box(rng), 1.0);
+    const Eigen::Vector2d xy = DrawVector2([&] { return box(rng); });
+    const Eigen::Vector3d point(xy.x(), xy.y(), 1.0);
     b1.col(k) = Noisy(point.normalized(), 0.2 / 1000, rng);
     b2.col(k) = Noisy(rotation * point.normalized(), 0.2 / 1000, rng);
   }

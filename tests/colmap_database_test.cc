@@ -17,6 +17,7 @@
 
 #include "core/error.h"
 #include "core/formats/colmap_database.h"
+#include "tests/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -268,7 +269,9 @@ TEST(ColmapDatabase, ExportShiftsKeypointsPrincipalPointAndFundamentalMatrix) {
   pair.image2 = 1;
   pair.matches.resize(n, 2);
   for (int i = 0; i < n; ++i) {
-    const Eigen::Vector3d x1(u(rng), u(rng), depth(rng));
+    const double z = depth(rng);
+    const Eigen::Vector2d xy = DrawVector2([&] { return u(rng); });
+    const Eigen::Vector3d x1(xy.x(), xy.y(), z);
     const Eigen::Vector3d x2 = R * x1 + t;
     const Eigen::Vector3d p1 = K * x1 / x1.z(), p2 = K * x2 / x2.z();
     features[0].keypoints.row(i) << float(p1.x()), float(p1.y()), 2.0f, 0.0f;

@@ -13,6 +13,7 @@
 #include "core/atomic_file.h"
 #include "core/formats/colmap_model.h"
 #include "tests/colmap_command.h"
+#include "tests/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -56,9 +57,8 @@ void MakeScene(ImageSet* images, PoseSet* poses) {
   for (int i = 0; i < 9; ++i) {
     const std::string name = "img_" + std::to_string(i) + ".jpg";
     images->images.push_back({name, 1536, images->cameras[i % 2].height, i % 2});
-    const Eigen::Quaterniond q(normal(rng), normal(rng), normal(rng), normal(rng));
-    poses->world_from_cam[name] =
-        Rigid3(q.normalized(), Eigen::Vector3d(centre(rng), centre(rng), centre(rng)));
+    const Eigen::Quaterniond q = DrawQuaternion([&] { return normal(rng); });
+    poses->world_from_cam[name] = Rigid3(q.normalized(), DrawVector3([&] { return centre(rng); }));
   }
 }
 
@@ -92,14 +92,16 @@ ColmapModel MakeRawModel() {
   uint64_t next_point_id = 1;
   for (auto& [image_id, image] : model.images) {
     for (uint32_t k = 0; k < 5; ++k) {
-      image.points2D.emplace_back(pixel(rng), pixel(rng));
+      image.points2D.push_back(DrawVector2([&] { return pixel(rng); }));
       if (k % 2 == 0) {
         image.point3D_ids.push_back(kInvalidPoint3DId);
         continue;
       }
       ColmapPoint3D point;
       point.point3D_id = next_point_id++;
-      point.xyz = Eigen::Vector3d(pixel(rng), -pixel(rng), pixel(rng) / 3);
+      const double z = pixel(rng) / 3;
+      const double y = -pixel(rng);
+      point.xyz = Eigen::Vector3d(pixel(rng), y, z);
       point.rgb[0] = uint8_t(k * 50);
       point.rgb[1] = 255;
       point.error = pixel(rng) / 1000;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "tests/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -19,14 +20,15 @@ Eigen::Vector3d RandomUnit(std::mt19937_64& rng) {
   std::normal_distribution<double> normal;
   Eigen::Vector3d v;
   do {
-    v = Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+    v = DrawVector3([&] { return normal(rng); });
   } while (v.norm() < 1e-3);
   return v.normalized();
 }
 
 Eigen::Quaterniond RandomRotation(std::mt19937_64& rng) {
   std::uniform_real_distribution<double> angle(0.0, M_PI);
-  return Eigen::Quaterniond(Eigen::AngleAxisd(angle(rng), RandomUnit(rng)));
+  const Eigen::Vector3d axis = RandomUnit(rng);
+  return Eigen::Quaterniond(Eigen::AngleAxisd(angle(rng), axis));
 }
 
 double MaxAbs(const Eigen::MatrixXd& m) { return m.cwiseAbs().maxCoeff(); }
@@ -35,7 +37,8 @@ TEST(GeometryTest, ExpLogRoundTripGenericAngles) {
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> angle(1e-3, M_PI - 1e-3);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Vector3d omega = angle(rng) * RandomUnit(rng);
+    const Eigen::Vector3d axis = RandomUnit(rng);
+    const Eigen::Vector3d omega = angle(rng) * axis;
     const Eigen::Matrix3d r = ExpSO3(omega);
     EXPECT_LT(MaxAbs(r.transpose() * r - Eigen::Matrix3d::Identity()), 1e-14);
     EXPECT_NEAR(r.determinant(), 1.0, 1e-14);
@@ -138,7 +141,7 @@ TEST(GeometryTest, OrthonormalizeNeverReturnsAReflection) {
 std::vector<Eigen::Vector3d> RandomPoints(std::mt19937_64& rng, int n) {
   std::uniform_real_distribution<double> coord(-5.0, 5.0);
   std::vector<Eigen::Vector3d> points;
-  for (int i = 0; i < n; ++i) points.emplace_back(coord(rng), coord(rng), coord(rng));
+  for (int i = 0; i < n; ++i) points.push_back(DrawVector3([&] { return coord(rng); }));
   return points;
 }
 

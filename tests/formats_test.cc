@@ -21,6 +21,7 @@
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
 #include "core/warnings.h"
+#include "tests/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -104,9 +105,9 @@ Scene MakeScene(int num_images, int num_cameras, uint64_t seed) {
     const int camera = i % num_cameras;
     scene.images.images.push_back(
         {name, scene.images.cameras[camera].width, scene.images.cameras[camera].height, camera});
-    const Eigen::Quaterniond q(normal(rng), normal(rng), normal(rng), normal(rng));
+    const Eigen::Quaterniond q = DrawQuaternion([&] { return normal(rng); });
     scene.poses.world_from_cam[name] =
-        Rigid3(q.normalized(), Eigen::Vector3d(uniform(rng), uniform(rng), uniform(rng)));
+        Rigid3(q.normalized(), DrawVector3([&] { return uniform(rng); }));
   }
   return scene;
 }

@@ -449,7 +449,9 @@ SyntheticPair MakeSyntheticPair(const CameraIntrinsics& camera, int num_points, 
   std::vector<int> descriptor_id[2];
   int id = 0;
   while (static_cast<int>(kp[0].size()) < num_points) {
-    const Eigen::Vector3d p1(4 * u(rng), 3 * u(rng), 8 + 4 * u(rng));
+    const double z = 8 + 4 * u(rng);
+    const double y = 3 * u(rng);
+    const Eigen::Vector3d p1(4 * u(rng), y, z);
     const Eigen::Vector3d p2 = pair.cam2_from_cam1 * p1;
     double pix[2][2];
     ProjectPinhole(camera.params.data(), p1.data(), pix[0]);
@@ -473,7 +475,8 @@ SyntheticPair MakeSyntheticPair(const CameraIntrinsics& camera, int num_points, 
   pair.num_points = num_points;
   for (int v = 0; v < 2; ++v) {
     for (int c = 0; c < clutter; ++c) {
-      kp[v].emplace_back(camera.width * 0.5 * (1 + u(rng)), camera.height * 0.5 * (1 + u(rng)));
+      const double y = camera.height * 0.5 * (1 + u(rng));
+      kp[v].emplace_back(camera.width * 0.5 * (1 + u(rng)), y);
       descriptor_id[v].push_back(id++);
     }
   }

@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/version.h"
+#include "tests/random_draws.h"
 
 namespace fs = std::filesystem;
 
@@ -84,10 +85,9 @@ PoseSet SamplePoses(unsigned seed, int count) {
   std::normal_distribution<double> normal;
   PoseSet poses;
   for (int i = 0; i < count; ++i) {
-    const Eigen::Quaterniond q =
-        Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized();
+    const Eigen::Quaterniond q = DrawQuaternion([&] { return normal(rng); }).normalized();
     poses.world_from_cam["000" + std::to_string(i) + ".jpg"] =
-        Rigid3(q, Eigen::Vector3d(normal(rng), normal(rng), normal(rng)) * 10.0);
+        Rigid3(q, DrawVector3([&] { return normal(rng); }) * 10.0);
   }
   return poses;
 }

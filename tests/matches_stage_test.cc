@@ -13,6 +13,7 @@
 #include "core/hdf5_store.h"
 #include "pipelines/stage.h"
 #include "temp_dir.h"
+#include "tests/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -40,7 +41,7 @@ RingScene MakeRingScene(int n) {
   std::vector<Eigen::Vector3d> points(num_points);
   std::vector<std::vector<int>> descriptors(num_points, std::vector<int>(128));
   for (int p = 0; p < num_points; ++p) {
-    points[p] = Eigen::Vector3d(uniform(rng), uniform(rng), uniform(rng));
+    points[p] = DrawVector3([&] { return uniform(rng); });
     for (int& value : descriptors[p]) value = byte(rng);
   }
   for (int i = 0; i < n; ++i) {
@@ -60,7 +61,8 @@ RingScene MakeRingScene(int n) {
       const Eigen::Vector3d in_cam = world_from_cam.transpose() * (points[p] - centre);
       const double u = 500 * in_cam.x() / in_cam.z() + 319.5;
       const double v = 500 * in_cam.y() / in_cam.z() + 239.5;
-      keypoints.emplace_back(u + 0.3 * noise(rng), v + 0.3 * noise(rng), 2.0f, 0.0f);
+      const double dv = 0.3 * noise(rng);
+      keypoints.emplace_back(u + 0.3 * noise(rng), v + dv, 2.0f, 0.0f);
       std::vector<int> row = descriptors[p];
       for (int& value : row) value = std::clamp(value + static_cast<int>(noise(rng)), 0, 255);
       rows.push_back(row);

@@ -14,6 +14,7 @@
 
 #include "core/error.h"
 #include "core/pair_selection.h"
+#include "tests/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -248,7 +249,7 @@ TEST(PairSelection, NeighboursSurviveAnEightDegreePrior) {
   std::mt19937 rng(7);
   std::normal_distribution<double> gauss;
   for (auto& view : views) {
-    const Eigen::Vector3d axis = Eigen::Vector3d(gauss(rng), gauss(rng), gauss(rng)).normalized();
+    const Eigen::Vector3d axis = DrawVector3([&] { return gauss(rng); }).normalized();
     view.world_from_cam_rotation =
         view.world_from_cam_rotation * Eigen::AngleAxisd(8 * M_PI / 180, axis).toRotationMatrix();
   }

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "core/camera.h"
+#include "tests/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -92,7 +93,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
   for (int p = 0; p < options.num_points; ++p) {
     Eigen::Vector3d point;
     do {
-      point = Eigen::Vector3d(random.Uniform(-1, 1), random.Uniform(-1, 1), random.Uniform(-1, 1));
+      point = DrawVector3([&] { return random.Uniform(-1, 1); });
     } while (point.squaredNorm() > 1.0);
     scene.points.push_back(options.point_radius_m * point);
   }
@@ -102,8 +103,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
     const double angle = n > 1 ? -0.5 * span + span * i / (n - 1) : 0.0;
     const Eigen::Vector3d centre(options.arc_radius_m * std::sin(angle), random.Uniform(-1.0, 1.0),
                                  -options.arc_radius_m * std::cos(angle));
-    const Eigen::Vector3d target(random.Uniform(-1, 1), random.Uniform(-1, 1),
-                                 random.Uniform(-1, 1));
+    const Eigen::Vector3d target = DrawVector3([&] { return random.Uniform(-1, 1); });
     scene.ground_truth.push_back(LookAt(centre, target));
   }
   input.prior_world_from_cam = scene.ground_truth;
@@ -118,7 +118,7 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
                              &keypoint)) {
         continue;
       }
-      keypoint += options.pixel_noise * Eigen::Vector2d(random.Normal(), random.Normal());
+      keypoint += options.pixel_noise * DrawVector2([&] { return random.Normal(); });
       visible.emplace_back(p, keypoint);
     }
     // Keypoint order unrelated to point order, as from a detector.

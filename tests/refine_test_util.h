@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "refine/problem_layout.h"
+#include "tests/random_draws.h"
 #include "tests/refine_synthetic.h"
 
 namespace raytime {
@@ -34,8 +35,8 @@ inline std::vector<Rigid3> JitterPoses(const std::vector<Rigid3>& poses, double 
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   std::vector<Rigid3> out = poses;
   for (Rigid3& pose : out) {
-    const Eigen::Vector3d axis = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
-    const Eigen::Vector3d direction = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    const Eigen::Vector3d axis = DrawVector3([&] { return u(rng); }).normalized();
+    const Eigen::Vector3d direction = DrawVector3([&] { return u(rng); }).normalized();
     pose.rotation =
         Eigen::Quaterniond(Eigen::AngleAxisd(degrees * M_PI / 180.0, axis)) * pose.rotation;
     pose.translation += metres * direction;

@@ -240,7 +240,11 @@ SmallScene MakeSmallScene(const fs::path& image_root) {
                           Camera(96, 72, 82.0, 47.5, 35.5)};
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int i = 0; i < 12; ++i) scene.points.emplace_back(0.8 * u(rng), 0.6 * u(rng), 5 + u(rng));
+  for (int i = 0; i < 12; ++i) {
+    const double z = 5 + u(rng);
+    const double y = 0.6 * u(rng);
+    scene.points.emplace_back(0.8 * u(rng), y, z);
+  }
   fs::create_directories(image_root);
   const int num_images = 4;
   for (int i = 0; i < num_images; ++i) {
