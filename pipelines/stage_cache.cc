@@ -133,6 +133,11 @@ class RunSummary {
 // The checks a stage reports as fired, for the run's guardrails section.
 void CollectStage(const std::string& id, const json& stage_summary, json* summary) {
   if (stage_summary.contains("metrics")) (*summary)["metrics"].update(stage_summary["metrics"]);
+  if (stage_summary.contains("agreement")) {
+    for (const auto& [reference, scores] : stage_summary["agreement"].items()) {
+      (*summary)["agreement"][reference].update(scores);
+    }
+  }
   if (stage_summary.contains("guardrails")) {
     (*summary)["guardrails"][id] = stage_summary["guardrails"];
   }

@@ -210,6 +210,39 @@ stages:
   EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
 
+// A capture has no ground truth: `reference` scores pose sets against another estimate. Scored
+// against a 4° prior, the ground truth is 4° off (the angle between two rotations is symmetric).
+TEST_F(PipelineTest, EvaluateScoresAgainstAnotherPoseSet) {
+  const std::string pipeline = WriteFile("reference.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior@four: {level_deg: 4, seed: 5}
+  - evaluate: {poses: [ground_truth, "prior@four"], alignments: [none], reference: "prior@four"}
+)");
+  const std::string run_dir = (workdir_ / "reference").string();
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + run_dir);
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadJson(fs::path(run_dir) / "summary.json");
+  // Agreement, not errors: kept apart from `metrics`, which sweeps read as errors.
+  EXPECT_FALSE(summary["metrics"].contains("ground_truth")) << summary["metrics"];
+  const json& agreement = summary["agreement"]["prior@four"];
+  EXPECT_NEAR(agreement["ground_truth"]["none"]["mean_rotation_deg"].get<double>(), 4.0, 1e-9);
+  EXPECT_NEAR(agreement["prior@four"]["none"]["mean_rotation_deg"].get<double>(), 0.0, 1e-12);
+  EXPECT_NE(result.output.find("ground_truth vs prior@four (none)"), std::string::npos)
+      << result.output;
+
+  // A reference no stage writes is refused before anything runs, by name.
+  const std::string missing = WriteFile("missing_reference.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {}
+  - evaluate: {poses: [prior], reference: "classical@mapper"}
+)");
+  CommandResult refused = RunRaytime("run " + missing + " --workdir " + run_dir + "-missing");
+  EXPECT_EQ(refused.exit_code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("classical@mapper"), std::string::npos) << refused.output;
+}
+
 TEST_F(PipelineTest, UnknownStageNamesLineAndNearestStage) {
   const std::string pipeline = WriteFile("bad_stage.yaml", R"(dataset: {format: strecha, root: x}
 stages:
