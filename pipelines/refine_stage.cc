@@ -121,6 +121,14 @@ std::vector<std::vector<int>> MatchedComponents(const ImageSet& images,
   return components;
 }
 
+// Whether a prior pose set was made from the match graph: the bootstrap's own poses, or a prior
+// stage that took them (`source: bootstrap`).
+bool FromBootstrap(const Provenance& provenance) {
+  if (provenance.stage == "bootstrap") return true;
+  return provenance.stage == "prior" && provenance.options.is_object() &&
+         provenance.options.value("source", "") == "bootstrap";
+}
+
 // The refiner's input for one component: its images (in image-list order), their cameras (the
 // image set's camera list, indexed as there), keypoints and prior poses, and the verified pairs
 // between them; `names` receives the images' names.
@@ -300,8 +308,10 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     const std::vector<ImageFeatures> features =
         Hdf5Reader(context.Require("features")).ReadFeatures();
     const std::vector<PairMatches> matches = Hdf5Reader(context.Require("matches")).ReadMatches();
-    const PoseSet prior =
-        Hdf5Reader(context.Require(PoseArtifact(options_.prior))).ReadPoseSet(options_.prior);
+    Provenance prior_provenance;
+    const PoseSet prior = Hdf5Reader(context.Require(PoseArtifact(options_.prior)))
+                              .ReadPoseSet(options_.prior, nullptr, &prior_provenance);
+    const bool prior_from_bootstrap = FromBootstrap(prior_provenance);
     if (features.size() != images.images.size()) {
       throw InputError(context.Require("features") + ": features for " +
                        std::to_string(features.size()) + " images, but the image list has " +
@@ -363,8 +373,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     RayTimeObservations rays;
     for (size_t c = 0; c < num_solved; ++c) {
       std::vector<std::string> names;
-      const RefineInput input =
-          ComponentInput(images, features, matches, prior, components[c], &names);
+      RefineInput input = ComponentInput(images, features, matches, prior, components[c], &names);
+      input.prior_rotations_from_matches = prior_from_bootstrap;
       RefineOutput output;
       const RefineSummary summary = RefinePoses(input, options_.refine, &output);
       for (size_t k = 0; k < names.size(); ++k) {

@@ -475,7 +475,14 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   probe.max_increase = options.orientation_prior_max_increase;
   probe.free_residual_median_px = summary->passes.back().residual_median_px;
   probe.free_match_cost_px2 = summary->passes.back().match_cost_px2;
-  if (options.orientation_weight > 0) {
+  probe.prior_from_matches = input.prior_rotations_from_matches && options.orientation_weight > 0;
+  if (probe.prior_from_matches) {
+    spdlog::info(
+        "refine: orientation prior (λR = {:g}) not used: the prior's rotations were estimated "
+        "from these matches (the bootstrap), so they add nothing but their own errors; the finish "
+        "runs with λR = 0",
+        probe.weight);
+  } else if (options.orientation_weight > 0) {
     PassSettings probe_pass = basin;
     probe_pass.name = "orientation_probe";
     probe_pass.orientation_weight = options.orientation_weight;

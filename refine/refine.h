@@ -40,6 +40,11 @@ struct RefineInput {
   std::vector<Rigid3> prior_world_from_cam;  // one per image
   std::vector<Keypoints> keypoints;          // per image: distorted pixels, OpenCV convention
   std::vector<PairMatchIndices> pairs;       // indices into the images above
+  // The prior's rotations were estimated from these same matches (the bootstrap: rotation
+  // averaging of five-point relative poses, §4.8 "Refinement without an external prior"). An
+  // orientation prior towards them brings no information the matches lack, only their averaging
+  // errors, so the basin-first solve finishes without one and does not probe it.
+  bool prior_rotations_from_matches = false;
 
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
 };
@@ -210,11 +215,14 @@ struct OrientationPriorProbe {
   double max_increase = 0.0;             // orientation_prior_max_increase
   double max_rotation_change_deg = 0.0;  // largest per-frame rotation between the two solutions
   bool kept = false;                     // the finish runs with λR = weight (else 0)
+  // Not probed: the prior's rotations came from the matches (RefineInput), the finish runs with
+  // λR = 0.
+  bool prior_from_matches = false;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(OrientationPriorProbe, enabled, weight, free_residual_median_px,
                                    prior_residual_median_px, free_match_cost_px2,
                                    prior_match_cost_px2, increase, max_increase,
-                                   max_rotation_change_deg, kept)
+                                   max_rotation_change_deg, kept, prior_from_matches)
 
 // The basin-first solve's wrong-pair removal (RefineOptions::max_pair_removal_rounds).
 struct PairRemovalSummary {

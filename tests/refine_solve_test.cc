@@ -600,6 +600,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "orientation_prior.max_increase",
       "orientation_prior.max_rotation_change_deg",
       "orientation_prior.kept",
+      "orientation_prior.prior_from_matches",
       "pair_removal",
       "pair_removal.enabled",
       "pair_removal.rounds",

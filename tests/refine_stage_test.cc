@@ -132,11 +132,12 @@ SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
 // no trust region: its thresholds are object-scale, these scenes are 16 m deep).
 nlohmann::json RunRefine(
     const SceneInputs& scene, const TempDir& dir, PoseSet* refined,
-    const std::string& options = "{preset: plain, num_threads: 1, trust_region: false}") {
+    const std::string& options = "{preset: plain, num_threads: 1, trust_region: false}",
+    const Provenance& prior_provenance = Provenance{"test", {}, "", ""}) {
   {
     Hdf5Writer writer(dir / "inputs.h5");
     writer.WriteImages(scene.images);
-    writer.WritePoseSet("prior", scene.prior, PoseRole::kPrior, Provenance{"test", {}, "", ""});
+    writer.WritePoseSet("prior", scene.prior, PoseRole::kPrior, prior_provenance);
     writer.WriteFeatures(scene.features, Provenance{"test", {}, "", ""});
     writer.WriteMatches(scene.matches, Provenance{"test", {}, "", ""});
     writer.Commit();
@@ -166,6 +167,35 @@ const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::stri
     if (warning["code"] == code) return &warning;
   }
   return nullptr;
+}
+
+// A prior the bootstrap made has rotations estimated from the same matches: preset auto finishes
+// without an orientation prior towards them and does not probe it; any other prior is probed.
+TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
+  std::vector<CameraIntrinsics> cameras;
+  const SceneInputs scene = MakePerImageScene(&cameras);
+  const std::string options = "{preset: auto, num_threads: 1}";
+  for (const bool from_bootstrap : {false, true}) {
+    TempDir dir("refine_stage");
+    const Provenance provenance =
+        from_bootstrap ? Provenance{"prior", {{"source", "bootstrap"}}, "", ""}
+                       : Provenance{"prior", {{"source", "capture"}}, "", ""};
+    PoseSet refined;
+    const nlohmann::json summary = RunRefine(scene, dir, &refined, options, provenance);
+    const nlohmann::json& probe = summary["orientation_prior"];
+    EXPECT_EQ(probe["prior_from_matches"], from_bootstrap) << probe;
+    std::vector<std::string> passes;
+    for (const auto& pass : summary["passes"]) passes.push_back(pass["name"]);
+    if (from_bootstrap) {
+      EXPECT_FALSE(probe["kept"]);
+      EXPECT_EQ(passes, std::vector<std::string>({"basin", "finish"}));
+      EXPECT_EQ(summary["passes"].back()["orientation_weight"], 0.0);
+    } else {
+      EXPECT_EQ(passes, std::vector<std::string>({"basin", "orientation_probe", "finish"}));
+    }
+    EXPECT_LT(ComputePoseErrors(refined, scene.ground_truth, PoseErrorOptions()).mean_rotation_deg,
+              0.05);
+  }
 }
 
 TEST(RefineStageTest, UnmatchedCameraIsReportedAndNotExported) {
