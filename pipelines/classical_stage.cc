@@ -34,7 +34,8 @@ class ClassicalStage : public StageWithOptions<ClassicalStageOptions> {
  public:
   std::string type() const override { return "classical"; }
   std::string description() const override {
-    return "Classical control: COLMAP point_triangulator + bundle_adjuster from the prior";
+    return "COLMAP on raytime's matches: point_triangulator + bundle_adjuster from the prior "
+           "(mode triangulate, the classical control) or the prior-free mapper (mode mapper)";
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages, "features", "matches"};

@@ -322,10 +322,9 @@ int CountComponents(int num_images, const std::vector<std::pair<int, int>>& edge
 std::vector<PairResidual> SelectInconsistentPairs(std::vector<PairResidual> residuals,
                                                   double threshold_px, const RefineInput& input,
                                                   std::vector<PairResidual>* kept) {
-  std::stable_sort(residuals.begin(), residuals.end(),
-                   [](const PairResidual& a, const PairResidual& b) {
-                     return a.median_px > b.median_px;
-                   });
+  std::stable_sort(
+      residuals.begin(), residuals.end(),
+      [](const PairResidual& a, const PairResidual& b) { return a.median_px > b.median_px; });
   const int num_images = static_cast<int>(input.prior_world_from_cam.size());
   std::vector<std::pair<int, int>> edges = MatchedEdges(input);
   const int components = CountComponents(num_images, edges);
@@ -347,19 +346,16 @@ std::vector<PairResidual> SelectInconsistentPairs(std::vector<PairResidual> resi
   return selected;
 }
 
-// `input` without the pairs of `removed`.
+// `input` without the pairs of `removed` (every other field as it is).
 RefineInput WithoutPairs(const RefineInput& input, const std::vector<PairResidual>& removed) {
-  RefineInput out;
-  out.cameras = input.cameras;
-  out.camera_index = input.camera_index;
-  out.prior_world_from_cam = input.prior_world_from_cam;
-  out.keypoints = input.keypoints;
-  for (const PairMatchIndices& pair : input.pairs) {
-    const bool drop = std::any_of(removed.begin(), removed.end(), [&](const PairResidual& r) {
-      return r.image1 == pair.image1 && r.image2 == pair.image2;
-    });
-    if (!drop) out.pairs.push_back(pair);
-  }
+  std::set<std::pair<int, int>> drop;
+  for (const PairResidual& pair : removed) drop.emplace(pair.image1, pair.image2);
+  RefineInput out = input;
+  out.pairs.erase(std::remove_if(out.pairs.begin(), out.pairs.end(),
+                                 [&](const PairMatchIndices& pair) {
+                                   return drop.count({pair.image1, pair.image2}) > 0;
+                                 }),
+                  out.pairs.end());
   return out;
 }
 
@@ -394,9 +390,8 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   PairRemovalSummary& removal = summary->pair_removal;
   removal.enabled = options.max_pair_removal_rounds > 0;
   if (removal.enabled) {
-    const ProblemLayout judged =
-        BuildPerObservationLayout(input, options.basin_max_matches_per_pair,
-                                  options.match_cap_seed);
+    const ProblemLayout judged = BuildPerObservationLayout(
+        input, options.basin_max_matches_per_pair, options.match_cap_seed);
     while (true) {
       const std::vector<PairResidual> residuals =
           PairResidualsAt(input, judged, state->world_from_cam, state->cameras);
@@ -629,10 +624,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   summary.returned_prior = !summary.guardrails_fired.empty();
   // Against the solve's own matches (prior-independent), flag only.
   if (options.inconsistent_pairs_test) {
-    summary.inconsistent_pairs =
-        CheckInconsistentPairs(SolvedPairResiduals(pruned ? *pruned : input, state),
-                               options.inconsistent_pair_px,
-                               options.max_inconsistent_pair_fraction);
+    summary.inconsistent_pairs = CheckInconsistentPairs(
+        SolvedPairResiduals(pruned ? *pruned : input, state), options.inconsistent_pair_px,
+        options.max_inconsistent_pair_fraction);
     if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
   }
   // After the removal, a pose resting on one pair nothing else checks looks consistent whether
