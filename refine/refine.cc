@@ -346,10 +346,16 @@ std::vector<PairResidual> SelectInconsistentPairs(std::vector<PairResidual> resi
   return selected;
 }
 
+// The (image1, image2) keys of `pairs`.
+std::set<std::pair<int, int>> PairKeys(const std::vector<PairResidual>& pairs) {
+  std::set<std::pair<int, int>> keys;
+  for (const PairResidual& pair : pairs) keys.emplace(pair.image1, pair.image2);
+  return keys;
+}
+
 // `input` without the pairs of `removed` (every other field as it is).
 RefineInput WithoutPairs(const RefineInput& input, const std::vector<PairResidual>& removed) {
-  std::set<std::pair<int, int>> drop;
-  for (const PairResidual& pair : removed) drop.emplace(pair.image1, pair.image2);
+  const std::set<std::pair<int, int>> drop = PairKeys(removed);
   RefineInput out = input;
   out.pairs.erase(std::remove_if(out.pairs.begin(), out.pairs.end(),
                                  [&](const PairMatchIndices& pair) {
@@ -360,10 +366,7 @@ RefineInput WithoutPairs(const RefineInput& input, const std::vector<PairResidua
 }
 
 bool SamePairs(const std::vector<PairResidual>& a, const std::vector<PairResidual>& b) {
-  std::set<std::pair<int, int>> sa, sb;
-  for (const PairResidual& pair : a) sa.emplace(pair.image1, pair.image2);
-  for (const PairResidual& pair : b) sb.emplace(pair.image1, pair.image2);
-  return sa == sb;
+  return PairKeys(a) == PairKeys(b);
 }
 
 // The basin-first solve (RefineOptions::basin_first): basin pass, wrong-pair removal with basin
