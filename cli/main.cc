@@ -115,24 +115,25 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
   const std::string cells_path = (fs::path(out_dir) / "report_cells.csv").string();
   WriteTextFileAtomically(markdown_path, CampaignReportMarkdown(report, sweep_path));
   WriteTextFileAtomically(cells_path, CampaignCellsCsv(report));
-  spdlog::info("report: {} runs ({} failed), {} scene(s), {} level(s), {} arm(s): {}, {}",
-               report.total_runs, report.failed_runs.size(), report.scenes.size(),
-               report.levels.size(), report.arms.size(), markdown_path, cells_path);
+  spdlog::info(
+      fmt::format("report: {} runs ({} failed), {} scene(s), {} level(s), {} arm(s): {}, {}",
+                  report.total_runs, report.failed_runs.size(), report.scenes.size(),
+                  report.levels.size(), report.arms.size(), markdown_path, cells_path));
   // Table 4's cells, when the sweep trained 3DGS (splat stages).
   const std::string splat_path = (fs::path(out_dir) / "report_splat.csv").string();
   if (!report.splat_cells.empty()) {
     WriteTextFileAtomically(splat_path, CampaignSplatCsv(report));
-    spdlog::info("report: downstream 3DGS (Table 4) cells: {}", splat_path);
+    spdlog::info(fmt::format("report: downstream 3DGS (Table 4) cells: {}", splat_path));
   }
 
   const std::string script = (ScriptDirectory() / "plot_campaign.py").string();
   if (!fs::exists(kPython)) {
-    spdlog::warn("report: {} not found, no plots written", kPython);
+    spdlog::warn(fmt::format("report: {} not found, no plots written", kPython));
     return 0;
   }
   if (!fs::exists(script)) {
-    spdlog::warn("report: plot script {} not found (set RAYTIME_SCRIPT_DIR), no plots written",
-                 script);
+    spdlog::warn(fmt::format(
+        "report: plot script {} not found (set RAYTIME_SCRIPT_DIR), no plots written", script));
     return 0;
   }
   const ProcessStatus status = RunProcess({kPython, script, cells_path, out_dir});
@@ -144,8 +145,8 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
     throw std::runtime_error("report: " + script + " failed (" + status.Describe() + "); " +
                              markdown_path + " and " + cells_path + " were written");
   } else {
-    spdlog::info("report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}",
-                 out_dir);
+    spdlog::info(fmt::format(
+        "report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}", out_dir));
   }
   return 0;
 }
@@ -321,7 +322,7 @@ int Main(int argc, char** argv) {
   if (report->parsed()) return RunReportCommand(sweep_dir, report_dir, report_options);
   if (resize->parsed()) {
     const int count = ResizeScene(resize_input, resize_output, resize_options);
-    spdlog::info("resize-scene: wrote {} images to {}", count, resize_output);
+    spdlog::info(fmt::format("resize-scene: wrote {} images to {}", count, resize_output));
     return 0;
   }
   for (auto& [type, stage] : stages) {
@@ -344,11 +345,11 @@ int main(int argc, char** argv) {
     return status;
   } catch (const raytime::InputError& e) {
     if (raytime::Interrupting()) raytime::AwaitInterruptExit();
-    spdlog::error("{}", e.what());
+    spdlog::error(fmt::format("{}", e.what()));
     return 2;
   } catch (const std::exception& e) {
     if (raytime::Interrupting()) raytime::AwaitInterruptExit();
-    spdlog::error("{}", e.what());
+    spdlog::error(fmt::format("{}", e.what()));
     return 1;
   }
 }

@@ -365,8 +365,9 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
     }
     if (SecondsSince(last_progress) > kProgressSeconds || i + 1 == num_images) {
       last_progress = std::chrono::steady_clock::now();
-      spdlog::info("export (3dgs): images {}/{} ({} undistorted, {} copied)", i + 1, num_images,
-                   summary.num_images_undistorted, summary.num_images_copied);
+      spdlog::info(fmt::format("export (3dgs): images {}/{} ({} undistorted, {} copied)", i + 1,
+                               num_images, summary.num_images_undistorted,
+                               summary.num_images_copied));
     }
   }
 
@@ -382,12 +383,12 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
     }
     tracks = MergeTracks(track_obs, projections, options.max_track_error_px, &summary.tracks);
     summary.points_from = source->pose_set;
-    spdlog::info(
+    spdlog::info(fmt::format(
         "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
         "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
         summary.tracks.num_tracks, source->pose_set, track_obs.image.size(),
         summary.tracks.num_kept, summary.tracks.num_disagreeing, options.max_track_error_px,
-        summary.tracks.num_behind_camera, summary.tracks.num_without_ray_time);
+        summary.tracks.num_behind_camera, summary.tracks.num_without_ray_time));
   }
 
   // The 2D points, the same for every pose set: per image its tracks' observations.
@@ -445,7 +446,7 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
                {},
                {},
                {{"pose_set", name}, {"points_from", source->pose_set}}});
-          spdlog::warn("export (3dgs): {}", warnings->back().message);
+          spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
         }
       }
     }
@@ -511,11 +512,11 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
       WriteLines((fs::path(tmp) / "test.txt").string(), split.test);
       WriteLines((fs::path(tmp) / "train.txt").string(), split.train);
     });
-    spdlog::info(
+    spdlog::info(fmt::format(
         "export (3dgs): {} -> {}: {} images ({} train, {} test), {} points ({}), median "
         "reprojection {:.3g} px",
         name, dir, num_images, split.train.size(), split.test.size(), model.points3D.size(), frame,
-        summary.reprojection_median_px[name]);
+        summary.reprojection_median_px[name]));
     summary.pose_sets.push_back(name);
     summary.directories.push_back(dir);
   }
@@ -526,7 +527,7 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
                          {},
                          {},
                          {}});
-    spdlog::warn("export (3dgs): {}", warnings->back().message);
+    spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
   }
   summary.num_images = num_images;
   summary.num_points = static_cast<int>(tracks.size());

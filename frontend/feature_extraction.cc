@@ -203,8 +203,9 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
     }
     (*features)[i] = ExtractSift(gray, options);
     if (EffectiveFirstOctave(gray.cols, gray.rows, options) < 0) ++upsampled;
-    spdlog::info("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images, info.name,
-                 (*features)[i].keypoints.rows(), SecondsSince(image_start));
+    spdlog::info(fmt::format("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images,
+                             info.name, (*features)[i].keypoints.rows(),
+                             SecondsSince(image_start)));
   });
 
   FeatureExtractionSummary summary;

@@ -215,8 +215,8 @@ MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageF
   const int block = std::max(1, num_pairs / 20);
   std::atomic<int> done{0}, kept{0};
   std::mutex log_mutex;
-  spdlog::info("matches: {} pairs of {} images ({}, {} kernel)", num_pairs, num_images,
-               options.pairs, MatchKernelName(kernel));
+  spdlog::info(fmt::format("matches: {} pairs of {} images ({}, {} kernel)", num_pairs, num_images,
+                           options.pairs, MatchKernelName(kernel)));
   tbb::parallel_for(0, num_pairs, [&](int p) {
     const auto [i, j] = candidates[p];
     const CameraIntrinsics& camera1 = images.cameras.at(images.images[i].camera_index);
@@ -230,8 +230,8 @@ MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageF
     const int finished = ++done;
     if (finished % block == 0 || finished == num_pairs) {
       std::lock_guard<std::mutex> lock(log_mutex);
-      spdlog::info("matches: {}/{} pairs, {} verified, {:.1f} s", finished, num_pairs, kept.load(),
-                   SecondsSince(start));
+      spdlog::info(fmt::format("matches: {}/{} pairs, {} verified, {:.1f} s", finished, num_pairs,
+                               kept.load(), SecondsSince(start)));
     }
   });
 

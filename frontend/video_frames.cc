@@ -34,8 +34,9 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
   std::set<int> wanted;
   const bool by_count = options.num_frames > 0 && frame_count > 0;
   if (options.num_frames > 0 && frame_count == 0) {
-    spdlog::warn("video: {} does not report its length; using stride {} instead of {} frames",
-                 options.video, options.stride, options.num_frames);
+    spdlog::warn(
+        fmt::format("video: {} does not report its length; using stride {} instead of {} frames",
+                    options.video, options.stride, options.num_frames));
   }
   if (by_count) {
     const int count = std::min(options.num_frames, frame_count);
@@ -84,8 +85,8 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
       kept.push_back({index, time_s});
       ++local.num_frames_written;
       if (local.num_frames_written % 50 == 0) {
-        spdlog::info("video: {} frames kept of {} read", local.num_frames_written,
-                     local.num_frames_read);
+        spdlog::info(fmt::format("video: {} frames kept of {} read", local.num_frames_written,
+                                 local.num_frames_read));
       }
     }
   });
@@ -96,15 +97,16 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
         ThrowInput(options.video, 0,
                    "the video has neither increasing frame timestamps nor a frame rate");
       }
-      spdlog::warn("video: {} has no increasing frame timestamps; using frame number / {} fps",
-                   options.video, fps);
+      spdlog::warn(
+          fmt::format("video: {} has no increasing frame timestamps; using frame number / {} fps",
+                      options.video, fps));
       for (DecodedFrame& frame : kept) frame.time_s = frame.number / fps;
     }
     *frames = std::move(kept);
   }
   local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  spdlog::info("video: kept {} of {} frames of {} in {}", local.num_frames_written,
-               local.num_frames_read, options.video, folder);
+  spdlog::info(fmt::format("video: kept {} of {} frames of {} in {}", local.num_frames_written,
+                           local.num_frames_read, options.video, folder));
   if (summary) *summary = local;
   return images;
 }

@@ -75,7 +75,8 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     const std::string& matches_path = context.Require("matches");
     const std::vector<ImageFeatures> features = Hdf5Reader(features_path).ReadFeatures();
     const std::vector<PairMatches> matches = Hdf5Reader(matches_path).ReadMatches();
-    spdlog::info("bootstrap: {} images, {} pairs", images.images.size(), matches.size());
+    spdlog::info(
+        fmt::format("bootstrap: {} images, {} pairs", images.images.size(), matches.size()));
 
     BootstrapResult result;
     try {
@@ -87,29 +88,31 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     const int usable = result.support.num_usable_pairs;
     const int pure_rotation = result.support.num_pure_rotation_pairs;
     spdlog::info(
-        "bootstrap: relative poses of {} pairs in {:.2f} s: {} usable ({} near-pure "
-        "rotation)",
-        result.edges.size(), result.relative_pose_seconds, usable, pure_rotation);
+        fmt::format("bootstrap: relative poses of {} pairs in {:.2f} s: {} usable ({} near-pure "
+                    "rotation)",
+                    result.edges.size(), result.relative_pose_seconds, usable, pure_rotation));
     const char* verdict = FragilityVerdict(result);
     spdlog::log(
         result.fragility.fragile || result.support.weak ? spdlog::level::warn : spdlog::level::info,
-        "bootstrap: fragility {:.2f}° mean pairwise rotation residual ({} pairs) -> {}{}",
-        result.fragility.mean_residual_deg, result.fragility.num_pairs, verdict,
-        result.support.weak
-            ? ": the view graph cannot support the estimate, " + DescribeWeakness(result.support)
-            : std::string());
-    spdlog::info("bootstrap: wrong-pair detector rejects {} of {} usable pairs ({} rounds)",
-                 result.pairs.num_wrong, usable, result.pairs.rounds);
+        fmt::format(
+            "bootstrap: fragility {:.2f}° mean pairwise rotation residual ({} pairs) -> {}{}",
+            result.fragility.mean_residual_deg, result.fragility.num_pairs, verdict,
+            result.support.weak ? ": the view graph cannot support the estimate, " +
+                                      DescribeWeakness(result.support)
+                                : std::string()));
     spdlog::info(
+        fmt::format("bootstrap: wrong-pair detector rejects {} of {} usable pairs ({} rounds)",
+                    result.pairs.num_wrong, usable, result.pairs.rounds));
+    spdlog::info(fmt::format(
         "bootstrap: {} of {} images have a rotation; positions by {}: {} estimated, {} filled by "
         "the look-at fallback",
         result.num_rotations_registered, images.images.size(), options_.bootstrap.positions,
-        result.num_positions_estimated, result.num_positions_filled);
+        result.num_positions_estimated, result.num_positions_filled));
     if (result.num_rotations_registered < static_cast<int>(images.images.size())) {
       spdlog::warn(
-          "bootstrap: {} images are outside the largest connected pair graph and get "
-          "no pose",
-          images.images.size() - result.num_rotations_registered);
+          fmt::format("bootstrap: {} images are outside the largest connected pair graph and get "
+                      "no pose",
+                      images.images.size() - result.num_rotations_registered));
     }
 
     const PoseSet poses = BootstrapPoses(images, result);

@@ -66,21 +66,21 @@ class ClassicalStage : public StageWithOptions<ClassicalStageOptions> {
                         options_.control.refine_intrinsics ? "OPENCV" : "");
     const double export_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    spdlog::info("classical: exported {} images and {} pairs to {} ({:.2f} s)",
-                 images.images.size(), pairs.size(), database, export_s);
+    spdlog::info(fmt::format("classical: exported {} images and {} pairs to {} ({:.2f} s)",
+                             images.images.size(), pairs.size(), database, export_s));
 
     ClassicalControlSummary control;
     const PoseSet poses =
         RunClassicalControl(database, images, prior, options_.control, workdir.string(), &control);
     spdlog::info(
-        "classical: {} mode, {} round(s), {}/{} images registered, {} points, "
-        "reprojection error {:.3f} px, {:.1f} s (log: {})",
-        control.mode, control.rounds, control.num_registered, control.num_images,
-        control.num_points, control.mean_reprojection_error_px, control.wall_time_s,
-        control.log_path);
+        fmt::format("classical: {} mode, {} round(s), {}/{} images registered, {} points, "
+                    "reprojection error {:.3f} px, {:.1f} s (log: {})",
+                    control.mode, control.rounds, control.num_registered, control.num_images,
+                    control.num_points, control.mean_reprojection_error_px, control.wall_time_s,
+                    control.log_path));
     if (control.num_registered < control.num_images) {
-      spdlog::warn("classical: COLMAP left {} of {} images without a pose",
-                   control.num_images - control.num_registered, control.num_images);
+      spdlog::warn(fmt::format("classical: COLMAP left {} of {} images without a pose",
+                               control.num_images - control.num_registered, control.num_images));
     }
 
     nlohmann::json summary = control.ToJson();

@@ -63,9 +63,9 @@ class ColmapImportStage : public StageWithOptions<ColmapImportOptions> {
         const double scale = std::max(1.0, std::abs(a.params[p]));
         if (std::abs(a.params[p] - b.params[p]) > kIntrinsicsTolerance * scale) {
           spdlog::warn(
-              "colmap_import: {}: the database's camera differs from the dataset's "
-              "(parameter {}: {} vs {}); keeping the dataset's",
-              ours.name, p, b.params[p], a.params[p]);
+              fmt::format("colmap_import: {}: the database's camera differs from the dataset's "
+                          "(parameter {}: {} vs {}); keeping the dataset's",
+                          ours.name, p, b.params[p], a.params[p]));
           break;
         }
       }
@@ -79,10 +79,10 @@ class ColmapImportStage : public StageWithOptions<ColmapImportOptions> {
       num_verified += pair.geometry.inlier_matches.rows() > 0;
     }
     spdlog::info(
-        "colmap_import: {} images, {} keypoints, {} pairs ({} verified), {} matches, "
-        "{} inliers from {}",
-        images.images.size(), num_keypoints, db.pairs.size(), num_verified, num_matches,
-        num_inliers, options_.path);
+        fmt::format("colmap_import: {} images, {} keypoints, {} pairs ({} verified), {} matches, "
+                    "{} inliers from {}",
+                    images.images.size(), num_keypoints, db.pairs.size(), num_verified, num_matches,
+                    num_inliers, options_.path));
     Hdf5Writer writer(context.output_path);
     writer.WriteFeatures(db.features, MakeProvenance(*this));
     writer.WriteMatches(db.pairs, MakeProvenance(*this));

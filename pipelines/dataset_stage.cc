@@ -52,14 +52,15 @@ class DatasetStage : public StageWithOptions<DatasetOptions> {
     }
     const size_t num_capture = dataset.capture ? dataset.capture->size() : 0;
     const size_t num_ground_truth = dataset.ground_truth ? dataset.ground_truth->size() : 0;
-    spdlog::info("dataset: {} images, {} camera(s), ground truth: {}, capture poses: {}{}",
-                 dataset.images.images.size(), dataset.images.cameras.size(),
-                 dataset.ground_truth ? std::to_string(num_ground_truth) : "none",
-                 dataset.capture ? std::to_string(num_capture) : "none",
-                 dataset.num_poses_without_image > 0
-                     ? " (+" + std::to_string(dataset.num_poses_without_image) +
-                           " poses of frames without an image, not frames)"
-                     : "");
+    spdlog::info(
+        fmt::format("dataset: {} images, {} camera(s), ground truth: {}, capture poses: {}{}",
+                    dataset.images.images.size(), dataset.images.cameras.size(),
+                    dataset.ground_truth ? std::to_string(num_ground_truth) : "none",
+                    dataset.capture ? std::to_string(num_capture) : "none",
+                    dataset.num_poses_without_image > 0
+                        ? " (+" + std::to_string(dataset.num_poses_without_image) +
+                              " poses of frames without an image, not frames)"
+                        : ""));
     Hdf5Writer writer(context.output_path);
     writer.WriteImages(dataset.images);
     if (dataset.ground_truth) {

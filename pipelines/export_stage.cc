@@ -94,7 +94,7 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name, Wa
                        left_out,
                        {},
                        {{"pose_set", name}}});
-  spdlog::warn("export: {}", warnings->back().message);
+  spdlog::warn(fmt::format("export: {}", warnings->back().message));
   return poses;
 }
 
@@ -145,7 +145,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
         } else {
           WriteTumTrajectory(path, poses);
         }
-        spdlog::info("export: {} -> {}", name, path);
+        spdlog::info(fmt::format("export: {} -> {}", name, path));
         written.push_back(path);
       }
     }
@@ -198,7 +198,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
                          " image(s) lack a pose in some listed pose set and are left out of "
                          "every 3dgs export, so that all pose sets share images and split";
       warnings->push_back(left_out);
-      spdlog::warn("export (3dgs): {}", left_out.message);
+      spdlog::warn(fmt::format("export (3dgs): {}", left_out.message));
     }
 
     std::optional<RayTimeSource> source;
@@ -228,7 +228,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
              {},
              {},
              {{"points_from", from}}});
-        spdlog::warn("export (3dgs): {}", warnings->back().message);
+        spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
       }
     }
     // ExportForTrainers warns when it has no source; a stated reason above says it once.

@@ -62,12 +62,12 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
     std::vector<ImageFeatures> features;
     const FeatureExtractionSummary extraction =
         ExtractFeatures(images, options_.extraction, &features);
-    spdlog::info(
+    spdlog::info(fmt::format(
         "features: {} keypoints in {} images ({} to {} per image, budget {}; {} upsampled), "
         "{:.2f} s",
         extraction.num_keypoints, extraction.num_images, extraction.min_keypoints,
         extraction.max_keypoints, options_.extraction.max_features, extraction.num_upsampled,
-        extraction.seconds);
+        extraction.seconds));
     Hdf5Writer writer(context.output_path);
     // A video's frames exist only here: this file is where later stages find the image list.
     if (FromVideo()) writer.WriteImages(images);

@@ -74,10 +74,10 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
     const MatchingSummary summary =
         MatchImagePairs(images, features, options_.matching, candidates, &pairs);
     spdlog::info(
-        "matches: {} of {} pairs verified ({} dropped below {} inliers), {} inliers, "
-        "{:.2f} s",
-        summary.num_verified_pairs, summary.num_pairs, summary.num_dropped_pairs,
-        options_.matching.min_num_inliers, summary.num_inliers, summary.seconds);
+        fmt::format("matches: {} of {} pairs verified ({} dropped below {} inliers), {} inliers, "
+                    "{:.2f} s",
+                    summary.num_verified_pairs, summary.num_pairs, summary.num_dropped_pairs,
+                    options_.matching.min_num_inliers, summary.num_inliers, summary.seconds));
     Hdf5Writer writer(context.output_path);
     writer.WriteMatches(pairs, MakeProvenance(*this));
     writer.Commit();
@@ -99,7 +99,7 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
     const double percent = summary.num_exhaustive_pairs > 0
                                ? 100.0 * summary.num_pairs / summary.num_exhaustive_pairs
                                : 0.0;
-    spdlog::info(
+    spdlog::info(fmt::format(
         "matches: prior pairs from pose set '{}': {} of {} exhaustive pairs ({:.1f} %), {} by "
         "view overlap (the {} best per image, axes within {}°, overlap >= {}), {} more by a "
         "window of {}; partners per image {} to {} (median {}); scene depth {:.3g} ({}); {} of "
@@ -108,7 +108,7 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
         summary.num_overlap_pairs, o.prior_neighbors, o.prior_max_angle_deg, o.prior_min_overlap,
         summary.num_window_pairs, o.prior_window, summary.min_partners, summary.max_partners,
         summary.median_partners, summary.median_scene_depth, summary.scene_depth_source,
-        summary.num_images_with_pose, summary.num_images, summary.seconds);
+        summary.num_images_with_pose, summary.num_images, summary.seconds));
     // Every image's partners, for the log reader who wants to see the choice.
     std::vector<std::vector<std::string>> partners(images.images.size());
     for (const auto& [i, j] : pairs) {
@@ -118,8 +118,8 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
     for (size_t i = 0; i < images.images.size(); ++i) {
       std::string list;
       for (const auto& name : partners[i]) list += (list.empty() ? "" : " ") + name;
-      spdlog::debug("matches: prior pairs: {} <-> {}", images.images[i].name,
-                    list.empty() ? "(none)" : list);
+      spdlog::debug(fmt::format("matches: prior pairs: {} <-> {}", images.images[i].name,
+                                list.empty() ? "(none)" : list));
     }
     std::vector<std::string> unpaired;
     for (int i : summary.unpaired_images) unpaired.push_back(images.images[i].name);

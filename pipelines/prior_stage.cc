@@ -168,9 +168,9 @@ class PriorStage : public StageWithOptions<PriorOptions> {
         prior = PerturbPoses(ground_truth, options_.perturbation, &perturbation);
         summary["translation_m"] = perturbation.translation_m;
         summary["scene_distance_m"] = perturbation.scene_distance_m;
-        spdlog::info("prior: {} perturbation at {}° / {:.4f} m (seed {})",
-                     options_.perturbation.mode, options_.perturbation.level_deg,
-                     perturbation.translation_m, options_.perturbation.seed);
+        spdlog::info(fmt::format("prior: {} perturbation at {}° / {:.4f} m (seed {})",
+                                 options_.perturbation.mode, options_.perturbation.level_deg,
+                                 perturbation.translation_m, options_.perturbation.seed));
       }
     }
     if (options_.repair != "none") {
@@ -189,10 +189,10 @@ class PriorStage : public StageWithOptions<PriorOptions> {
                            {"scale", repair.scale},
                            {"median_rotation_change_deg", repair.median_rotation_change_deg}};
       spdlog::info(
-          "prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
-          "rotation change {:.2f}°",
-          repair.mode, repair.num_repaired, repair.num_kept_prior,
-          repair.median_rotation_change_deg);
+          fmt::format("prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
+                      "rotation change {:.2f}°",
+                      repair.mode, repair.num_repaired, repair.num_kept_prior,
+                      repair.median_rotation_change_deg));
     }
     ReportImagesWithoutPose(images, prior, &warnings);
     Hdf5Writer writer(context.output_path);

@@ -411,9 +411,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
                                      {"final_cost", summary.final_cost},
                                      {"guardrails_fired", summary.guardrails_fired},
                                      {"returned_prior", summary.returned_prior}});
-      spdlog::info("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
-                   summary.total_iterations, summary.total_seconds,
-                   summary.returned_prior ? " (guardrail fired: prior returned)" : "");
+      spdlog::info(fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
+                               summary.total_iterations, summary.total_seconds,
+                               summary.returned_prior ? " (guardrail fired: prior returned)" : ""));
     }
     // One verdict over the components: a check that fired anywhere is reported.
     result["guardrails"]["fired"] = std::vector<std::string>(fired.begin(), fired.end());

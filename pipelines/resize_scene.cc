@@ -49,8 +49,8 @@ int ResizeScene(const DatasetOptions& input, const std::string& output_root,
       camera.world_from_cam = dataset.ground_truth->world_from_cam.at(image.name);
       WriteStrechaCamera((fs::path(dir) / "gt_dense_cameras" / (image.name + ".camera")).string(),
                          camera);
-      spdlog::info("resize: {} {}x{} -> {}x{}", image.name, pixels.cols, pixels.rows, options.width,
-                   height);
+      spdlog::info(fmt::format("resize: {} {}x{} -> {}x{}", image.name, pixels.cols, pixels.rows,
+                               options.width, height));
     }
   });
   return static_cast<int>(dataset.images.images.size());

@@ -165,13 +165,15 @@ class SplatStage : public StageWithOptions<SplatStageOptions> {
                          previous.value("fingerprint", "") == fingerprint &&
                          fs::is_directory(job.result_dir);
 
-      spdlog::info("splat: {} on pose set '{}'{}", options_.run.trainer, name,
-                   job.reuse_result ? " (unchanged since its last successful run: reading it)"
-                                    : ", log " + job.log_path);
+      spdlog::info(fmt::format("splat: {} on pose set '{}'{}", options_.run.trainer, name,
+                               job.reuse_result
+                                   ? " (unchanged since its last successful run: reading it)"
+                                   : ", log " + job.log_path));
       SplatRunSummary run = RunSplatTrainer(options_.run, job);
       if (job.reuse_result && !run.ok()) {
-        spdlog::warn("splat: the earlier result of '{}' does not read ({}); training again", name,
-                     run.error);
+        spdlog::warn(
+            fmt::format("splat: the earlier result of '{}' does not read ({}); training again",
+                        name, run.error));
         job.reuse_result = false;
         run = RunSplatTrainer(options_.run, job);
       }
@@ -185,12 +187,12 @@ class SplatStage : public StageWithOptions<SplatStageOptions> {
       WriteTextFileAtomically(RecordPath(context, name).string(), record.dump(2));
 
       if (run.ok()) {
-        spdlog::info(
+        spdlog::info(fmt::format(
             "splat: {}: PSNR {:.2f} dB, SSIM {:.3f}, LPIPS {:.3f} ({}); raytime PSNR {:.2f} dB, "
             "SSIM {:.3f} over {} view(s){}; {:.0f} s",
             name, run.psnr, run.ssim, run.lpips, run.metrics_file, run.raytime_psnr,
             run.raytime_ssim, run.raytime_images,
-            run.raytime_note.empty() ? "" : " (" + run.raytime_note + ")", run.seconds);
+            run.raytime_note.empty() ? "" : " (" + run.raytime_note + ")", run.seconds));
       } else {
         ++failed;
         warnings.push_back({"splat_failed",

@@ -154,7 +154,8 @@ void CollectStage(const std::string& id, const json& stage_summary, json* summar
 void LogWarnings(const std::string& stage_id, const json& stage_summary) {
   if (!stage_summary.contains("warnings")) return;
   for (const json& warning : stage_summary["warnings"]) {
-    spdlog::warn("{}: {} [{}]", stage_id, warning.value("message", ""), warning.value("code", ""));
+    spdlog::warn(fmt::format("{}: {} [{}]", stage_id, warning.value("message", ""),
+                             warning.value("code", "")));
   }
 }
 
@@ -162,7 +163,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   const auto run_start = std::chrono::steady_clock::now();
   fs::create_directories(fs::path(workdir) / ".raytime");
   for (const auto& path : RemoveStaleTemporaryFiles(workdir)) {
-    spdlog::info("removed {} (left by an interrupted run)", path);
+    spdlog::info(fmt::format("removed {} (left by an interrupted run)", path));
   }
   if (!options.cache_dir.empty()) RemoveStaleTemporaryFiles(options.cache_dir);
 
@@ -194,8 +195,8 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           (summary.contains("stage") ? " during stage " + summary["stage"].get<std::string>()
                                      : std::string());
     });
-    spdlog::error("interrupted (signal {}); {}", signal,
-                  (fs::path(workdir) / "summary.json").string());
+    spdlog::error(fmt::format("interrupted (signal {}); {}", signal,
+                              (fs::path(workdir) / "summary.json").string()));
   });
 
   std::map<std::string, ArtifactSource> artifacts;
@@ -234,7 +235,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           unchanged = unchanged && fs::exists(fs::path(workdir) / extra);
         }
         if (unchanged && !stage->Complete(context)) {
-          spdlog::info("{}: the previous result is incomplete, running again", tag);
+          spdlog::info(fmt::format("{}: the previous result is incomplete, running again", tag));
           unchanged = false;
         }
       }
@@ -243,7 +244,8 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
         try {
           produced = ArtifactsIn(context.output_path);
         } catch (const InputError& e) {
-          spdlog::warn("{}: previous output is unreadable, rerunning ({})", tag, e.what());
+          spdlog::warn(
+              fmt::format("{}: previous output is unreadable, rerunning ({})", tag, e.what()));
           unchanged = false;
         }
       }
@@ -252,7 +254,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
                     {"key", key},
                     {"options", stage->OptionsJson()}};
       if (unchanged) {
-        spdlog::info("{}: inputs and options unchanged, skipped", tag);
+        spdlog::info(fmt::format("{}: inputs and options unchanged, skipped", tag));
         entry["status"] = "skipped";
         entry["seconds"] = 0.0;
         entry["previous_seconds"] = record["seconds"];
@@ -264,7 +266,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
         const fs::path cached = fs::path(options.cache_dir) / key;
         if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
         if (cacheable && !options.force && fs::exists(cached / "record.json")) {
-          spdlog::info("{}: computed by another run, taken from the cache", tag);
+          spdlog::info(fmt::format("{}: computed by another run, taken from the cache", tag));
           record = json::parse(ReadTextFile((cached / "record.json").string()));
           LinkOrCopy(cached / "output.h5", context.output_path);
           entry["status"] = "cached";
@@ -272,11 +274,11 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           entry["previous_seconds"] = record["seconds"];
         } else {
           // 3. Run it.
-          spdlog::info("{}: {}", tag, stage->description());
+          spdlog::info(fmt::format("{}: {}", tag, stage->description()));
           const auto start = std::chrono::steady_clock::now();
           const json stage_summary = stage->Run(context);
           const double seconds = SecondsSince(start);
-          spdlog::info("{}: done in {:.2f} s", tag, seconds);
+          spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
           record = {{"key", key},
                     {"summary", stage_summary},
                     {"seconds", seconds},
@@ -321,10 +323,10 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   });
   const json summary = run.Get();
   if (summary["status"] == "ok_with_warnings") {
-    spdlog::warn("finished with {} warning(s) (see {}/summary.json)", summary["warnings"].size(),
-                 workdir);
+    spdlog::warn(fmt::format("finished with {} warning(s) (see {}/summary.json)",
+                             summary["warnings"].size(), workdir));
   }
-  spdlog::info("summary: {}", (fs::path(workdir) / "summary.json").string());
+  spdlog::info(fmt::format("summary: {}", (fs::path(workdir) / "summary.json").string()));
   return summary;
 }
 

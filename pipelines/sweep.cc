@@ -125,7 +125,7 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
       options.cache_dir.empty() ? (fs::path(workdir) / "cache").string() : options.cache_dir;
   fs::create_directories(workdir);
   RemoveStaleTemporaryFiles(workdir);
-  spdlog::info("sweep: {} runs, {} at a time, cache {}", runs.size(), jobs, cache_dir);
+  spdlog::info(fmt::format("sweep: {} runs, {} at a time, cache {}", runs.size(), jobs, cache_dir));
 
   std::vector<std::string> run_dirs;
   for (const SweepRun& run : runs) {
@@ -166,8 +166,9 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
       finished[index] = true;
     }
     write("interrupted");
-    spdlog::error("sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
-                  std::count(finished.begin(), finished.end(), true), runs.size(), workdir);
+    spdlog::error(fmt::format(
+        "sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
+        std::count(finished.begin(), finished.end(), true), runs.size(), workdir));
   });
 
   size_t next = 0, done = 0;
@@ -190,11 +191,11 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     finished[index] = true;
     const SweepRow& row = rows[index];
     if (!row.Succeeded()) ++failures;
-    spdlog::info("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), row.run, row.status,
-                 row.seconds);
+    spdlog::info(fmt::format("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), row.run,
+                             row.status, row.seconds));
     if (!row.Succeeded()) {
-      spdlog::error("sweep run {} failed: {}", row.run,
-                    row.error.empty() ? std::string("see run.log") : row.error);
+      spdlog::error(fmt::format("sweep run {} failed: {}", row.run,
+                                row.error.empty() ? std::string("see run.log") : row.error));
     }
     write(done < runs.size() ? "running" : (failures ? "failed" : "ok"));
   }

@@ -24,9 +24,10 @@ class ProgressLog : public ceres::IterationCallback {
     const auto now = std::chrono::steady_clock::now();
     if (now - last_ >= kProgressInterval) {
       last_ = now;
-      spdlog::info("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
-                   stage_, num_stages_, scale_, summary.iteration, accepted_cost_,
-                   summary.cumulative_time_in_seconds);
+      spdlog::info(
+          fmt::format("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
+                      stage_, num_stages_, scale_, summary.iteration, accepted_cost_,
+                      summary.cumulative_time_in_seconds));
     }
     return ceres::SOLVER_CONTINUE;
   }
@@ -87,10 +88,10 @@ std::vector<GncStageSummary> SolveGnc(RayTimeProblem* problem, const GncSolverSe
                                     : ceres_summary.linear_solver_ordering_used.front();
     }
     spdlog::info(
-        "refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
-        "{:.2f} s ({})",
-        s + 1, settings.scales.size(), scale, stage.iterations, stage.initial_cost,
-        stage.final_cost, stage.seconds, stage.termination);
+        fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
+                    "{:.2f} s ({})",
+                    s + 1, settings.scales.size(), scale, stage.iterations, stage.initial_cost,
+                    stage.final_cost, stage.seconds, stage.termination));
     stages.push_back(stage);
     if (ceres_summary.termination_type == ceres::FAILURE) break;
   }

@@ -177,11 +177,11 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.num_matches_used = layout.num_matches_used;
   pass.num_residuals = static_cast<int>(layout.residuals.size());
   spdlog::info(
-      "refine: {}: {} cameras, {} of {} matches, {} residuals, {} ray times ({} init, "
-      "median depth {:.3g}), built in {:.2f} s",
-      pass.name, pass.num_cameras, pass.num_matches_used, pass.num_matches_input,
-      pass.num_residuals, pass.num_ray_times, pass.ray_time_init.mode,
-      pass.ray_time_init.median_depth, pass.build_seconds);
+      fmt::format("refine: {}: {} cameras, {} of {} matches, {} residuals, {} ray times ({} init, "
+                  "median depth {:.3g}), built in {:.2f} s",
+                  pass.name, pass.num_cameras, pass.num_matches_used, pass.num_matches_input,
+                  pass.num_residuals, pass.num_ray_times, pass.ray_time_init.mode,
+                  pass.ray_time_init.median_depth, pass.build_seconds));
 
   GncSolverSettings solver_settings;
   solver_settings.scales = settings.scales;
@@ -216,10 +216,10 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     std::nth_element(norms.begin(), norms.begin() + rank, norms.end());
     pass.residual_p90_px = norms[rank];
   }
-  spdlog::info(
+  spdlog::info(fmt::format(
       "refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px, mean "
       "match term {:.4g} px²",
-      pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2);
+      pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2));
   return pass;
 }
 
@@ -420,7 +420,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       removal.kept = kept;
       pruned->emplace(WithoutPairs(input, selected));
       active = &pruned->value();
-      spdlog::info(
+      spdlog::info(fmt::format(
           "refine: {} of {} pairs above {:.3g} px at the basin solution{}{}; solving the basin "
           "again from the prior without them (round {} of at most {})",
           selected.size(), residuals.size(), options.inconsistent_pair_px,
@@ -429,7 +429,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
                                          selected.front().image2, selected.front().median_px),
           kept.empty() ? std::string()
                        : fmt::format(", {} kept to hold the graph together", kept.size()),
-          removal.rounds, options.max_pair_removal_rounds);
+          removal.rounds, options.max_pair_removal_rounds));
       *state = start;
       PassSettings again = basin;
       again.name = "basin_round" + std::to_string(removal.rounds + 1);
@@ -475,11 +475,11 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   probe.free_match_cost_px2 = summary->passes.back().match_cost_px2;
   probe.prior_from_matches = input.prior_rotations_from_matches && options.orientation_weight > 0;
   if (probe.prior_from_matches) {
-    spdlog::info(
+    spdlog::info(fmt::format(
         "refine: orientation prior (λR = {:g}) not used: the prior's rotations were estimated "
         "from these matches (the bootstrap), so they add nothing but their own errors; the finish "
         "runs with λR = 0",
-        probe.weight);
+        probe.weight));
   } else if (options.orientation_weight > 0) {
     PassSettings probe_pass = basin;
     probe_pass.name = "orientation_probe";
@@ -499,19 +499,19 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
     }
     probe.kept = probe.increase <= probe.max_increase;
     if (probe.kept) {
-      spdlog::info(
+      spdlog::info(fmt::format(
           "refine: orientation prior (λR = {:g}) kept: the matches agree with the prior's "
           "rotations (median residual {:+.2f} % under it, threshold {:+.2f} %; rotations moved "
           "up to {:.3f}°)",
           probe.weight, 100 * probe.increase, 100 * probe.max_increase,
-          probe.max_rotation_change_deg);
+          probe.max_rotation_change_deg));
     } else {
-      spdlog::info(
+      spdlog::info(fmt::format(
           "refine: orientation prior (λR = {:g}) dropped: the matches contradict the prior's "
           "rotations (median residual {:+.2f} % under it, threshold {:+.2f} %; it moved rotations "
           "up to {:.3f}°); the finish runs with λR = 0 from the basin solve",
           probe.weight, 100 * probe.increase, 100 * probe.max_increase,
-          probe.max_rotation_change_deg);
+          probe.max_rotation_change_deg));
       *state = basin_state;
     }
   }
@@ -549,11 +549,11 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     summary.cameras.cameras_differ =
         summary.cameras.max_start_disagreement_px > kSharedCameraTolerancePx;
     if (summary.cameras.cameras_differ) {
-      spdlog::warn(
+      spdlog::warn(fmt::format(
           "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
           "started at their median (intrinsics_sharing: shared); their per-image values are "
           "replaced by one refined set",
-          summary.cameras.num_cameras, summary.cameras.max_start_disagreement_px);
+          summary.cameras.num_cameras, summary.cameras.max_start_disagreement_px));
     }
   } else {
     state.cameras = PerCameraBlocks(input);
@@ -598,13 +598,13 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     }
   }
   CountBlocks(state, &summary.cameras);
-  spdlog::info(
+  spdlog::info(fmt::format(
       "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: "
       "{}",
       summary.cameras.num_cameras, summary.cameras.num_blocks,
       options.SelfCalibrates() ? "self-calibrated, " : "fixed",
       options.SelfCalibrates() ? options.intrinsics_sharing : "",
-      summary.cameras.min_block_observations);
+      summary.cameras.min_block_observations));
   summary.initial_cost = summary.passes.front().stages.front().initial_cost;
   const RefinePassSummary& last = summary.passes.back();
   summary.final_cost = last.stages.back().final_cost -
@@ -645,27 +645,27 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
   summary.total_seconds = SecondsSince(start);
   if (summary.trust_region.enabled) {
-    spdlog::info(
+    spdlog::info(fmt::format(
         "refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
         "{:.4g}){}",
         summary.trust_region.max_rotation_deg, summary.trust_region.max_translation,
         summary.trust_region.rotation_threshold_deg, summary.trust_region.translation_threshold,
-        summary.trust_region.fired ? ": FIRED" : "");
+        summary.trust_region.fired ? ": FIRED" : ""));
   }
   if (summary.wander.enabled) {
     spdlog::info(
-        "refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
-        "{:.4g}){}",
-        summary.wander.median_displacement, summary.wander.threshold,
-        summary.wander.fired ? ": FIRED" : "");
+        fmt::format("refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
+                    "{:.4g}){}",
+                    summary.wander.median_displacement, summary.wander.threshold,
+                    summary.wander.fired ? ": FIRED" : ""));
   }
   const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
   if (pairs.enabled) {
-    spdlog::info(
+    spdlog::info(fmt::format(
         "refine: inconsistent pairs: {} of {} pairs above {:.3g} px (median pair {:.3g} px), "
         "fraction {:.3f} (threshold {:.3g}){}",
         pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
-        pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : "");
+        pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : ""));
   }
   const PairRemovalSummary& removal = summary.pair_removal;
   if (summary.returned_prior) {
@@ -678,28 +678,29 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     summary.decision = "accepted";
   }
   if (summary.returned_prior) {
-    spdlog::warn("refine: guardrail fired ({}): returning the prior",
-                 summary.guardrails_fired.front());
+    spdlog::warn(fmt::format("refine: guardrail fired ({}): returning the prior",
+                             summary.guardrails_fired.front()));
   }
   if (removal.enabled) {
-    spdlog::info("refine: pair removal: {} pair(s) removed in {} round(s), stopped: {}{}",
-                 removal.removed.size(), removal.rounds, removal.stop_reason,
-                 removal.kept.empty()
-                     ? std::string()
-                     : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
-                                   removal.kept.size()));
+    spdlog::info(
+        fmt::format("refine: pair removal: {} pair(s) removed in {} round(s), stopped: {}{}",
+                    removal.removed.size(), removal.rounds, removal.stop_reason,
+                    removal.kept.empty()
+                        ? std::string()
+                        : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
+                                      removal.kept.size())));
   }
   if (!removal.doubtful_images.empty()) {
     std::string listed;
     for (const int image : removal.doubtful_images) {
       listed += (listed.empty() ? "" : ", ") + std::to_string(image);
     }
-    spdlog::warn(
+    spdlog::warn(fmt::format(
         "refine: guardrail fired (doubtful_images): after removing inconsistent pairs, the poses "
         "of images {} rest on one pair that nothing else checks",
-        listed);
+        listed));
   }
-  spdlog::info("refine: decision: {}", summary.decision);
+  spdlog::info(fmt::format("refine: decision: {}", summary.decision));
   if (pairs.fired) {
     // The first few in the log; all of them in the summary.
     constexpr size_t kLogged = 8;
@@ -709,10 +710,10 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                             pairs.pairs[p].image2, pairs.pairs[p].median_px);
     }
     if (pairs.pairs.size() > kLogged) listed += ", ...";
-    spdlog::warn(
+    spdlog::warn(fmt::format(
         "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
         "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}",
-        pairs.num_inconsistent, pairs.num_pairs, listed);
+        pairs.num_inconsistent, pairs.num_pairs, listed));
   }
   return summary;
 }
