@@ -49,7 +49,33 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
       pose[kPoseCentreOffset + r] = initial_world_from_cam[i].translation[r];
   }
 
-  if (settings.use_evaluation_cache) {
+  const bool refined[kNumIntrinsics] = {
+      settings.refine_focal,           settings.refine_focal,      settings.refine_principal_point,
+      settings.refine_principal_point, settings.refine_distortion, settings.refine_distortion,
+      settings.refine_distortion,      settings.refine_distortion};
+  std::vector<int> held;
+  for (int c = 0; c < kNumIntrinsics; ++c) {
+    if (!refined[c]) held.push_back(c);
+  }
+  // Every intrinsic held: undistorted pixels and rays are constants of the solve, computed here
+  // once (the arithmetic of the cache's value pass), and the residuals hold them
+  // (FixedIntrinsicsCrossProjectionCost); the cache serves self-calibration.
+  fixed_intrinsics_residuals_ =
+      settings.use_evaluation_cache && held.size() == static_cast<size_t>(kNumIntrinsics);
+  std::vector<Eigen::Vector2d> undistorted;
+  std::vector<Eigen::Vector3d> rays;
+  if (fixed_intrinsics_residuals_) {
+    undistorted.resize(layout.observations.size());
+    rays.resize(layout.observations.size());
+    for (size_t o = 0; o < layout.observations.size(); ++o) {
+      const LayoutObservation& obs = layout.observations[o];
+      const double* intrinsics = intrinsics_block(cameras.camera_of_image[obs.image]);
+      const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                               input.keypoints[obs.image](obs.keypoint, 1)};
+      UndistortPixel(intrinsics, pixel, undistorted[o].data());
+      PixelToUnitRay(intrinsics, undistorted[o].data(), rays[o].data());
+    }
+  } else if (settings.use_evaluation_cache) {
     std::vector<ObservationCache::Source> sources(layout.observations.size());
     for (size_t o = 0; o < layout.observations.size(); ++o) {
       const LayoutObservation& obs = layout.observations[o];
@@ -73,9 +99,11 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   // Only the intrinsics blocks some residual reaches are in the problem: nothing else constrains
   // the others (cameras of images without matches keep their values).
   intrinsics_used_.assign(num_blocks, false);
-  for (const CrossProjection& residual : layout.residuals) {
-    intrinsics_used_[cameras.camera_of_image[layout.observations[residual.source].image]] = true;
-    intrinsics_used_[cameras.camera_of_image[layout.observations[residual.target].image]] = true;
+  if (!fixed_intrinsics_residuals_) {
+    for (const CrossProjection& residual : layout.residuals) {
+      intrinsics_used_[cameras.camera_of_image[layout.observations[residual.source].image]] = true;
+      intrinsics_used_[cameras.camera_of_image[layout.observations[residual.target].image]] = true;
+    }
   }
   pose_manifold_ = std::make_unique<PoseManifold>();
   for (int b = 0; b < num_blocks; ++b) {
@@ -106,7 +134,13 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
         input.keypoints[source.image].row(source.keypoint).transpose();
     const Eigen::Vector2d target_pixel =
         input.keypoints[target.image].row(target.keypoint).transpose();
-    if (source_camera == target_camera) {
+    if (fixed_intrinsics_residuals_) {
+      match_blocks_.push_back(problem_->AddResidualBlock(
+          FixedIntrinsicsCrossProjectionCost::Create(
+              rays[residual.source], undistorted[residual.target], intrinsics_block(target_camera)),
+          match_loss_.get(), pose_block(source.image), ray_time_block(source.ray_time),
+          pose_block(target.image)));
+    } else if (source_camera == target_camera) {
       // One block (Ceres refuses a residual holding a block twice).
       ceres::CostFunction* cost =
           cache_ ? CachedCrossProjectionCost::Create(cache_.get(), residual.source, residual.target)
@@ -139,14 +173,6 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
 
   // Self-calibration (§3.1): the intrinsics blocks are constant unless some intrinsics are
   // refined; the others are held by a subset manifold (one, shared by the blocks).
-  const bool refined[kNumIntrinsics] = {
-      settings.refine_focal,           settings.refine_focal,      settings.refine_principal_point,
-      settings.refine_principal_point, settings.refine_distortion, settings.refine_distortion,
-      settings.refine_distortion,      settings.refine_distortion};
-  std::vector<int> held;
-  for (int c = 0; c < kNumIntrinsics; ++c) {
-    if (!refined[c]) held.push_back(c);
-  }
   if (held.size() < kNumIntrinsics && !held.empty()) {
     intrinsics_manifold_ = std::make_unique<ceres::SubsetManifold>(kNumIntrinsics, held);
   }

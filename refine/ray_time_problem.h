@@ -1,8 +1,9 @@
 // The Ceres problem of paper §3.2–3.4 and §3.7, built once from a layout: parameter blocks
 // (intrinsics 8 per intrinsics block some residual reaches: one for shared intrinsics, one per
-// camera for per-image intrinsics, refine/camera_blocks.h; one 7-vector pose per image on the
-// quaternion × R³ manifold; one ray time per layout ray time bounded below at 1e-9), the
-// cross-projection residuals (the one- or two-block variant by the images' blocks,
+// camera for per-image intrinsics, refine/camera_blocks.h, none when every intrinsic is held; one
+// 7-vector pose per image on the quaternion × R³ manifold; one ray time per layout ray time
+// bounded below at 1e-9), the cross-projection residuals (the fixed-intrinsics variant when no
+// intrinsic is refined, else the one- or two-block variant by the images' blocks,
 // cross_projection_cost.h) under one shared arctan loss whose scale GNC changes between stages
 // without rebuilding, and the pose priors.
 //
@@ -63,7 +64,7 @@ class RayTimeProblem {
   // residual reaches).
   std::vector<CameraIntrinsics> Intrinsics() const;
   const std::vector<double>& ray_times() const { return ray_times_; }
-  // Null when the cache is off.
+  // Null when the cache is off or not needed (fixed_intrinsics_residuals()).
   ObservationCache* cache() { return cache_.get(); }
   // Parameter blocks, for tests.
   double* intrinsics_block(int camera) { return intrinsics_.data() + kNumIntrinsics * camera; }
@@ -76,8 +77,12 @@ class RayTimeProblem {
   double match_loss_weight() const { return match_loss_weight_; }
   // Per image: whether some residual reaches it (the others are held constant).
   const std::vector<bool>& camera_observed() const { return camera_observed_; }
-  // Per intrinsics block: whether some residual reaches it (only those are in the problem).
+  // Per intrinsics block: whether some residual reaches it (only those are in the problem; none
+  // with fixed-intrinsics residuals).
   const std::vector<bool>& intrinsics_used() const { return intrinsics_used_; }
+  // Whether the match residuals are FixedIntrinsicsCrossProjectionCost (every intrinsic held and
+  // the cache on): blocks source pose, ray time, target pose; no cache.
+  bool fixed_intrinsics_residuals() const { return fixed_intrinsics_residuals_; }
 
  private:
   std::vector<CameraIntrinsics> intrinsics_info_;
@@ -86,6 +91,7 @@ class RayTimeProblem {
   std::vector<double> ray_times_;
   std::vector<bool> camera_observed_;
   std::vector<bool> intrinsics_used_;
+  bool fixed_intrinsics_residuals_ = false;
   std::unique_ptr<ObservationCache> cache_;
   std::unique_ptr<ceres::Manifold> pose_manifold_;
   std::unique_ptr<ceres::Manifold> intrinsics_manifold_;

@@ -67,8 +67,11 @@ struct RefineOptions {
   std::string intrinsics_sharing = "per_camera";
 
   // Shared evaluation cache (§3.7): undistortion and ray points once per observation per
-  // evaluation point, copied into each residual's Jacobian. Off: every residual recomputes its
-  // chain with automatic differentiation (same values and Jacobians, slower).
+  // evaluation point, copied into each residual's Jacobian. With every intrinsic held (no
+  // self-calibration) the undistorted rays do not change, so they are computed once per solve and
+  // the residuals differentiate the rest in closed form (FixedIntrinsicsCrossProjectionCost). Off:
+  // every residual recomputes its chain with automatic differentiation (same values and
+  // Jacobians, slower).
   bool use_evaluation_cache = true;
   // Threads for the cache (and for Ceres when not deterministic); 0 = hardware concurrency.
   int num_threads = 0;
@@ -200,10 +203,12 @@ struct RefineOptions {
       "at their median (§3.1, §4.6 focal drift)",
       OneOf({"per_camera", "shared"}));
     v("use_evaluation_cache", use_evaluation_cache,
-      "Shared evaluation cache: undistortion and ray points once per observation (§3.7)");
+      "Shared evaluation cache: undistortion and ray points once per observation, once per solve "
+      "when no intrinsic is refined (§3.7); false = automatic differentiation of every residual");
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
     v("deterministic", deterministic,
-      "Bit-identical results whatever the thread count (Ceres on one thread, the cache parallel)");
+      "Bit-identical results whatever the thread count (Ceres on one thread, the self-calibration "
+      "cache parallel)");
     v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive());
     v("function_tolerance", function_tolerance,
       "Ceres relative cost-change tolerance per GNC stage", Positive());

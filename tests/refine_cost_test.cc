@@ -1,8 +1,9 @@
 // The refiner's objective (paper §3.2–3.3, §3.7): cross-projection residuals vanish at the ground
 // truth, Ceres' total cost is exactly the energy of eq. (energy), and the shared evaluation
-// cache's "gradient surgery" Jacobians equal both the uncached automatic derivatives and
-// numeric differentiation, with and without distortion, with self-calibration, and with
-// per-image intrinsics (the two-block cost variant of cross_projection_cost.h).
+// cache's "gradient surgery" Jacobians (self-calibration) and the fixed-intrinsics residual's
+// closed-form ones (every intrinsic held) equal both the uncached automatic derivatives and
+// numeric differentiation, with and without distortion, and with per-image intrinsics (the
+// two-block cost variant of cross_projection_cost.h).
 #include <ceres/crs_matrix.h>
 #include <ceres/numeric_diff_cost_function.h>
 #include <gtest/gtest.h>
@@ -200,7 +201,13 @@ TEST_P(RefineJacobianTest, CachedEqualsAutoDiffAndNumeric) {
                          JitterPoses(scene.ground_truth, 2.0, 0.3, 21), cameras,
                          JitterValues(TrueRayTimes(scene, layout), 0.2, 22),
                          Settings(true, c.perturb_intrinsics));
-  problem.cache()->PrepareForEvaluation(/*evaluate_jacobians=*/true, /*new_point=*/true);
+  // Self-calibration solves through the cache; held intrinsics through the fixed-intrinsics
+  // residual, whose blocks are the others' source pose, ray time and target pose.
+  const bool fixed = !c.perturb_intrinsics;
+  ASSERT_EQ(problem.fixed_intrinsics_residuals(), fixed);
+  ASSERT_EQ(problem.cache() == nullptr, fixed);
+  if (!fixed)
+    problem.cache()->PrepareForEvaluation(/*evaluate_jacobians=*/true, /*new_point=*/true);
 
   double worst_autodiff = 0.0, worst_numeric = 0.0;
   int two_block_residuals = 0;
@@ -240,14 +247,32 @@ TEST_P(RefineJacobianTest, CachedEqualsAutoDiffAndNumeric) {
                     problem.ray_time_block(s.ray_time), problem.intrinsics_block(target_camera),
                     problem.pose_block(t.image)};
     }
-    const Evaluation cached = Evaluate(*cost[0], parameters.data());
+    // The blocks cost[0] has, as indices into the autodiff variant's.
+    std::vector<size_t> blocks(parameters.size());
+    for (size_t b = 0; b < blocks.size(); ++b) blocks[b] = b;
+    std::vector<const double*> own_parameters = parameters;
+    if (fixed) {
+      const double* source_intrinsics = problem.intrinsics_block(source_camera);
+      const double* target_intrinsics = problem.intrinsics_block(target_camera);
+      Eigen::Vector2d source_undistorted, target_undistorted;
+      UndistortPixel(source_intrinsics, source_pixel.data(), source_undistorted.data());
+      UndistortPixel(target_intrinsics, target_pixel.data(), target_undistorted.data());
+      Eigen::Vector3d ray;
+      PixelToUnitRay(source_intrinsics, source_undistorted.data(), ray.data());
+      cost[0].reset(
+          FixedIntrinsicsCrossProjectionCost::Create(ray, target_undistorted, target_intrinsics));
+      blocks = {1, 2, parameters.size() - 1};
+      own_parameters = {parameters[1], parameters[2], parameters.back()};
+    }
+    const Evaluation cached = Evaluate(*cost[0], own_parameters.data());
     const Evaluation autodiff = Evaluate(*cost[1], parameters.data());
     const Evaluation numeric = Evaluate(*cost[2], parameters.data());
     EXPECT_NEAR(cached.residual[0], autodiff.residual[0], 1e-9);
     EXPECT_NEAR(cached.residual[1], autodiff.residual[1], 1e-9);
-    for (size_t b = 0; b < parameters.size(); ++b) {
-      const double ad = RelativeDifference(cached.jacobians[b], autodiff.jacobians[b]);
-      const double nd = RelativeDifference(cached.jacobians[b], numeric.jacobians[b]);
+    for (size_t k = 0; k < blocks.size(); ++k) {
+      const size_t b = blocks[k];
+      const double ad = RelativeDifference(cached.jacobians[k], autodiff.jacobians[b]);
+      const double nd = RelativeDifference(cached.jacobians[k], numeric.jacobians[b]);
       worst_autodiff = std::max(worst_autodiff, ad);
       worst_numeric = std::max(worst_numeric, nd);
       EXPECT_LT(ad, 1e-10) << "block " << b << " residual " << n;
@@ -324,8 +349,17 @@ TEST_P(RefineJacobianTest, CachedAndUncachedProblemsAgree) {
     RayTimeProblem problem(scene.input, layout, scene.ground_truth, start,
                            CaseCameras(scene, c.perturb_intrinsics), ray_times,
                            Settings(k == 0, c.perturb_intrinsics));
-    problem.problem().Evaluate(ceres::Problem::EvaluateOptions(), &cost[k], nullptr, &gradient[k],
-                               &jacobian[k]);
+    // Held intrinsics: the fixed-intrinsics problem has no intrinsics blocks, the uncached one
+    // has them constant; both are compared over the poses and ray times.
+    ceres::Problem::EvaluateOptions options;
+    if (!c.perturb_intrinsics) {
+      for (size_t i = 0; i < start.size(); ++i)
+        options.parameter_blocks.push_back(problem.pose_block(i));
+      for (size_t t = 0; t < ray_times.size(); ++t) {
+        options.parameter_blocks.push_back(problem.ray_time_block(static_cast<int>(t)));
+      }
+    }
+    problem.problem().Evaluate(options, &cost[k], nullptr, &gradient[k], &jacobian[k]);
   }
   EXPECT_NEAR(cost[0], cost[1], 1e-12 * cost[1]);
   EXPECT_LT(RelativeDifference(gradient[0], gradient[1]), 1e-10);
@@ -390,9 +424,10 @@ TEST(RefineCacheTest, UndistortionDerivativesMatchNumeric) {
 TEST(RefineCacheTest, RecomputesOnlyWhenNeeded) {
   const SyntheticScene scene = MakeSyntheticScene(SmallScene("distorted"));
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
+  // Self-calibrating: with every intrinsic held the problem needs no cache.
   RayTimeProblem problem(
       scene.input, layout, scene.ground_truth, JitterPoses(scene.ground_truth, 1.0, 0.1, 41),
-      PerCameraBlocks(scene.input), TrueRayTimes(scene, layout), Settings(true, false));
+      PerCameraBlocks(scene.input), TrueRayTimes(scene, layout), Settings(true, true));
   ObservationCache& cache = *problem.cache();
   cache.PrepareForEvaluation(false, true);
   EXPECT_EQ(cache.value_passes(), 1);
