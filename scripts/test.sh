@@ -15,7 +15,7 @@ echo "test.sh: tests done at ${SECONDS} s"
 # sanitizers' file:line stack traces.
 RAYTIME_TARGET=unit_tests scripts/build.sh build-asan -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_CXX_FLAGS_DEBUG=-g1 \
-  -DRAYTIME_SANITIZE=ON
+  -DRAYTIME_SANITIZE=ON -DRAYTIME_PRECOMPILED_HEADERS=ON
 echo "test.sh: sanitizer build done at ${SECONDS} s"
 (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --output-on-failure -j "$jobs" -L unit)
