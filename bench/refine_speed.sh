@@ -2,7 +2,8 @@
 # Speed of the ray-time refiner against itself and the COLMAP classical control, measured in one
 # run on one machine (issue 6; a benchmark, not a test). Runs bench/refine_speed.yaml and prints
 # per arm: matches used, iterations, Jacobian evaluations and time, solve time, error after
-# Sim(3); then the ratios: cache off / on (Jacobian time per evaluation, whole solve), GNC / plain,
+# Sim(3); then the ratios: cache off / on (Jacobian time per evaluation, whole solve; with the held
+# intrinsics of these arms "on" is the fixed-intrinsics residual, refine/README.md), GNC / plain,
 # all matches / cap 100, classical control / cap 100, and solve time against the number of matches.
 #
 #   bench/refine_speed.sh [SCENE]      (default ../shared/data/strecha/fountain-P11)
