@@ -29,6 +29,7 @@
 #include "refine/problem_layout.h"
 #include "refine/ray_geometry.h"
 #include "refine/ray_time_init.h"
+#include "refine/ray_time_lm_solver.h"
 #include "refine/ray_time_problem.h"
 
 namespace raytime {
@@ -101,6 +102,70 @@ std::vector<double> ResidualNorms(const RefineInput& input, const ProblemLayout&
   return norms;
 }
 
+// Per image: whether some residual of the layout reaches it (the others are held at their start:
+// their only term is the prior, whose minimum is the anchor).
+std::vector<bool> ObservedImages(const ProblemLayout& layout, int num_images) {
+  std::vector<bool> observed(num_images, false);
+  for (const CrossProjection& residual : layout.residuals) {
+    observed[layout.observations[residual.source].image] = true;
+    observed[layout.observations[residual.target].image] = true;
+  }
+  return observed;
+}
+
+// The fixed-intrinsics problem for the ray-time LM solver: what RayTimeProblem gives Ceres with
+// FixedIntrinsicsCrossProjectionCost (the same undistorted pixels and unit rays, computed once;
+// the same weights), residuals ordered by ray time.
+RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLayout& layout,
+                                       const std::vector<Rigid3>& prior_world_from_cam,
+                                       const std::vector<Rigid3>& initial_world_from_cam,
+                                       const CameraBlocks& cameras, double position_weight,
+                                       double orientation_weight, std::vector<double> ray_times) {
+  RayTimeLmProblem problem;
+  const int num_images = static_cast<int>(initial_world_from_cam.size());
+  problem.world_from_cam = initial_world_from_cam;
+  const std::vector<bool> observed = ObservedImages(layout, num_images);
+  problem.held.resize(num_images);
+  for (int i = 0; i < num_images; ++i) problem.held[i] = !observed[i];
+  problem.ray_times = std::move(ray_times);
+  problem.pinhole.resize(num_images);
+  for (int i = 0; i < num_images; ++i) {
+    const auto& p = cameras.Of(i).params;
+    problem.pinhole[i] << p[kFx], p[kFy], p[kCx], p[kCy];
+  }
+  std::vector<Eigen::Vector2d> undistorted(layout.observations.size());
+  std::vector<Eigen::Vector3d> rays(layout.observations.size());
+  for (size_t o = 0; o < layout.observations.size(); ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    const double* intrinsics = cameras.Of(obs.image).params.data();
+    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                             input.keypoints[obs.image](obs.keypoint, 1)};
+    UndistortPixel(intrinsics, pixel, undistorted[o].data());
+    PixelToUnitRay(intrinsics, undistorted[o].data(), rays[o].data());
+  }
+  problem.residuals.reserve(layout.residuals.size());
+  for (const CrossProjection& residual : layout.residuals) {
+    const LayoutObservation& source = layout.observations[residual.source];
+    RayTimeLmResidual r;
+    r.source_image = source.image;
+    r.ray_time = source.ray_time;
+    r.target_image = layout.observations[residual.target].image;
+    r.source_ray = rays[residual.source];
+    r.target_undistorted = undistorted[residual.target];
+    problem.residuals.push_back(r);
+  }
+  std::stable_sort(problem.residuals.begin(), problem.residuals.end(),
+                   [](const RayTimeLmResidual& a, const RayTimeLmResidual& b) {
+                     return a.ray_time < b.ray_time;
+                   });
+  const int num_scalar_residuals = 2 * static_cast<int>(layout.residuals.size());
+  problem.match_loss_weight = num_scalar_residuals > 0 ? 2.0 / num_scalar_residuals : 0.0;
+  problem.prior_world_from_cam = prior_world_from_cam;
+  problem.position_weight = position_weight / num_images;
+  problem.orientation_weight = orientation_weight / num_images;
+  return problem;
+}
+
 // What differs between the passes of one run.
 struct PassSettings {
   std::string name;
@@ -156,17 +221,33 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
         layout, input, state->world_from_cam, state->cameras, unsolved, &ray_times);
   }
 
-  RayTimeProblemSettings problem_settings;
-  problem_settings.position_weight = options.position_weight;
-  problem_settings.orientation_weight = settings.orientation_weight;
-  problem_settings.loss_scale_px2 = settings.scales.front();
-  problem_settings.refine_focal = settings.refine_focal;
-  problem_settings.refine_principal_point = settings.refine_principal_point;
-  problem_settings.refine_distortion = settings.refine_distortion;
-  problem_settings.use_evaluation_cache = options.use_evaluation_cache;
-  problem_settings.num_threads = options.Threads();
-  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
-                         problem_settings);
+  const bool self_calibration = pass.self_calibration;
+  pass.solver = options.solver == "auto" && !self_calibration && options.use_evaluation_cache
+                    ? "ray_time_lm"
+                    : "ceres";
+  std::vector<double> solved_ray_times;
+  std::vector<bool> camera_observed;
+  std::optional<RayTimeLmProblem> lm_problem;
+  std::optional<RayTimeProblem> ceres_problem;
+  if (pass.solver == "ray_time_lm") {
+    lm_problem.emplace(BuildRayTimeLmProblem(input, layout, anchor, state->world_from_cam,
+                                             state->cameras, options.position_weight,
+                                             settings.orientation_weight, std::move(ray_times)));
+    camera_observed = ObservedImages(layout, static_cast<int>(anchor.size()));
+  } else {
+    RayTimeProblemSettings problem_settings;
+    problem_settings.position_weight = options.position_weight;
+    problem_settings.orientation_weight = settings.orientation_weight;
+    problem_settings.loss_scale_px2 = settings.scales.front();
+    problem_settings.refine_focal = settings.refine_focal;
+    problem_settings.refine_principal_point = settings.refine_principal_point;
+    problem_settings.refine_distortion = settings.refine_distortion;
+    problem_settings.use_evaluation_cache = options.use_evaluation_cache;
+    problem_settings.num_threads = options.Threads();
+    ceres_problem.emplace(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
+                          problem_settings);
+    camera_observed = ceres_problem->camera_observed();
+  }
   pass.build_seconds = SecondsSince(build_start);
 
   pass.num_cameras = static_cast<int>(input.prior_world_from_cam.size());
@@ -178,26 +259,40 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.num_residuals = static_cast<int>(layout.residuals.size());
   spdlog::info(
       fmt::format("refine: {}: {} cameras, {} of {} matches, {} residuals, {} ray times ({} init, "
-                  "median depth {:.3g}), built in {:.2f} s",
+                  "median depth {:.3g}), built in {:.2f} s, solver {}",
                   pass.name, pass.num_cameras, pass.num_matches_used, pass.num_matches_input,
                   pass.num_residuals, pass.num_ray_times, pass.ray_time_init.mode,
-                  pass.ray_time_init.median_depth, pass.build_seconds));
+                  pass.ray_time_init.median_depth, pass.build_seconds, pass.solver));
 
-  GncSolverSettings solver_settings;
-  solver_settings.scales = settings.scales;
-  solver_settings.max_iterations = options.max_iterations;
-  solver_settings.function_tolerance = options.function_tolerance;
-  solver_settings.num_threads = options.deterministic ? 1 : options.Threads();
   const auto solve_start = std::chrono::steady_clock::now();
-  pass.stages = SolveGnc(&problem, solver_settings, &pass.elimination_group_size);
+  if (lm_problem) {
+    RayTimeLmSettings solver_settings;
+    solver_settings.scales = settings.scales;
+    solver_settings.max_iterations = options.max_iterations;
+    solver_settings.function_tolerance = options.function_tolerance;
+    solver_settings.num_threads = options.Threads();
+    pass.stages = SolveGncRayTimeLm(&*lm_problem, solver_settings);
+    // The eliminated group is every ray time (§3.4), by construction.
+    pass.elimination_group_size = pass.num_ray_times;
+    state->world_from_cam = lm_problem->world_from_cam;
+    solved_ray_times = std::move(lm_problem->ray_times);
+    lm_problem.reset();
+  } else {
+    GncSolverSettings solver_settings;
+    solver_settings.scales = settings.scales;
+    solver_settings.max_iterations = options.max_iterations;
+    solver_settings.function_tolerance = options.function_tolerance;
+    solver_settings.num_threads = options.deterministic ? 1 : options.Threads();
+    pass.stages = SolveGnc(&*ceres_problem, solver_settings, &pass.elimination_group_size);
+    state->world_from_cam = ceres_problem->WorldFromCam();
+    state->cameras.cameras = ceres_problem->Intrinsics();
+    solved_ray_times = ceres_problem->ray_times();
+    ceres_problem.reset();
+  }
   pass.solve_seconds = SecondsSince(solve_start);
-
-  state->world_from_cam = problem.WorldFromCam();
-  state->cameras.cameras = problem.Intrinsics();
-  std::vector<double> solved_ray_times = problem.ray_times();
-  pass.gauge_polish = PolishGauge(anchor, problem.camera_observed(), options.position_weight,
-                                  settings.orientation_weight, options.gauge_orientation_weight,
-                                  &state->world_from_cam, &solved_ray_times);
+  pass.gauge_polish =
+      PolishGauge(anchor, camera_observed, options.position_weight, settings.orientation_weight,
+                  options.gauge_orientation_weight, &state->world_from_cam, &solved_ray_times);
   for (size_t t = 0; t < solved_ray_times.size(); ++t) {
     state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
         solved_ray_times[t];

@@ -119,13 +119,16 @@ struct RefinePassSummary {
   // "finish" (basin_first)
   std::string name;
   int num_cameras = 0;
-  int num_observations = 0;        // distinct (image, keypoint) in the used matches
-  int num_ray_times = 0;           // = observations (per_observation) or tracks (anchored)
-  int num_tracks = 0;              // anchored only
-  int num_matches_input = 0;       // matches between distinct images in the input
-  int num_matches_used = 0;        // after the per-pair cap
-  int num_residuals = 0;           // 2-vector cross-projection residuals
-  int elimination_group_size = 0;  // Schur elimination group Ceres chose (should = ray times)
+  int num_observations = 0;   // distinct (image, keypoint) in the used matches
+  int num_ray_times = 0;      // = observations (per_observation) or tracks (anchored)
+  int num_tracks = 0;         // anchored only
+  int num_matches_input = 0;  // matches between distinct images in the input
+  int num_matches_used = 0;   // after the per-pair cap
+  int num_residuals = 0;      // 2-vector cross-projection residuals
+  // The eliminated group: the one Ceres' automatic ordering chose (should = ray times), or every
+  // ray time (the ray-time LM solver eliminates them by construction).
+  int elimination_group_size = 0;
+  std::string solver;  // "ray_time_lm" or "ceres" (RefineOptions::solver)
   double orientation_weight = 0.0;
   bool self_calibration = false;
   RayTimeInitSummary ray_time_init;
@@ -143,10 +146,10 @@ struct RefinePassSummary {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefinePassSummary, name, num_cameras, num_observations,
                                    num_ray_times, num_tracks, num_matches_input, num_matches_used,
-                                   num_residuals, elimination_group_size, orientation_weight,
-                                   self_calibration, ray_time_init, stages, gauge_polish,
-                                   residual_median_px, residual_p90_px, match_cost_px2,
-                                   build_seconds, solve_seconds)
+                                   num_residuals, elimination_group_size, solver,
+                                   orientation_weight, self_calibration, ray_time_init, stages,
+                                   gauge_polish, residual_median_px, residual_p90_px,
+                                   match_cost_px2, build_seconds, solve_seconds)
 
 // Prior trust region (§3.6): per-frame motion of the solution from the prior, prior's frame.
 struct TrustRegionVerdict {
@@ -236,8 +239,8 @@ struct PairRemovalSummary {
   std::vector<PairResidual> kept;
   // Images whose pose the removal leaves resting on evidence nothing else checks: the images of
   // the smaller part of the graph a kept pair alone connects, and an image that lost pairs and is
-  // left with at most one (its pairs disagreed: the one left may be the wrong one). The check "doubtful_images" fires
-  // (RefineSummary::guardrails_fired, flag only). Sorted.
+  // left with at most one (its pairs disagreed: the one left may be the wrong one). The check
+  // "doubtful_images" fires (RefineSummary::guardrails_fired, flag only). Sorted.
   std::vector<int> doubtful_images;
   // "consistent": no pair above the threshold at the last basin solution; "stable": exactly the
   // removed pairs are; "max_rounds": the bound was reached with another set above it.

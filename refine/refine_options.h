@@ -73,13 +73,20 @@ struct RefineOptions {
   // every residual recomputes its chain with automatic differentiation (same values and
   // Jacobians, slower).
   bool use_evaluation_cache = true;
-  // Threads for the cache (and for Ceres when not deterministic); 0 = hardware concurrency.
+  // The solver of each pass (§3.4, §3.7): "auto" = the ray-time Levenberg–Marquardt solver
+  // (refine/ray_time_lm_solver.h: the ray times eliminated in closed form, no Ceres, any thread
+  // count deterministic) when the pass holds every intrinsic and use_evaluation_cache is on, Ceres
+  // otherwise; "ceres" = Ceres' SPARSE_SCHUR for every pass (the paper's mapping). Both minimize
+  // the same objective with the same step rule; their paths differ in the last digits.
+  std::string solver = "auto";
+  // Threads for the cache and the ray-time LM solver (and for Ceres when not deterministic);
+  // 0 = hardware concurrency.
   int num_threads = 0;
   // Bit-identical results for the same inputs whatever the thread count and scheduling
-  // (DEVELOPERS.md): Ceres runs on one thread, since with more it sums the cost, the gradient and
-  // the Schur complement's blocks in the order its threads finish; the cache stays parallel (each
-  // observation's entry is computed on its own). false gives Ceres num_threads too: faster on many
-  // cores, last digits differ between runs.
+  // (DEVELOPERS.md; the ray-time LM solver always is): Ceres runs on one thread, since with more it
+  // sums the cost, the gradient and the Schur complement's blocks in the order its threads finish;
+  // the cache stays parallel (each observation's entry is computed on its own). false gives Ceres
+  // num_threads too: faster on many cores, last digits differ between runs.
   bool deterministic = true;
   // Per GNC stage: Ceres iteration limit and relative cost-change tolerance (Ceres defaults are
   // 50 and 1e-6; warm-started stages converge well before the limit).
@@ -205,10 +212,14 @@ struct RefineOptions {
     v("use_evaluation_cache", use_evaluation_cache,
       "Shared evaluation cache: undistortion and ray points once per observation, once per solve "
       "when no intrinsic is refined (§3.7); false = automatic differentiation of every residual");
+    v("solver", solver,
+      "Solver per pass: the ray-time LM (closed-form ray-time elimination) when no intrinsic is "
+      "refined, else Ceres (auto); or Ceres always",
+      OneOf({"auto", "ceres"}));
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
     v("deterministic", deterministic,
-      "Bit-identical results whatever the thread count (Ceres on one thread, the self-calibration "
-      "cache parallel)");
+      "Bit-identical results whatever the thread count (Ceres on one thread; the ray-time LM "
+      "solver and the self-calibration cache parallel)");
     v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive());
     v("function_tolerance", function_tolerance,
       "Ceres relative cost-change tolerance per GNC stage", Positive());

@@ -195,8 +195,6 @@ TEST_P(RefineRecoveryTest, GncRecoversAnEightDegreePrior) {
   } else {
     EXPECT_EQ(summary.passes[0].num_ray_times, summary.passes[0].num_observations);
   }
-  // §3.4: Ceres' automatic ordering eliminates exactly the ray times.
-  EXPECT_EQ(summary.passes[0].elimination_group_size, summary.passes[0].num_ray_times);
 }
 
 INSTANTIATE_TEST_SUITE_P(Parameterizations, RefineRecoveryTest,
@@ -259,11 +257,14 @@ TEST(RefineSolveTest, GncStagesAreVisibleAndWarmStarted) {
   EXPECT_EQ(appended.passes[0].stages[2].loss_scale_px2, 100.0);
 }
 
-// The cache changes the cost of an evaluation, not its result (§3.7).
+// The cache changes the cost of an evaluation, not its result (§3.7): on Ceres, the
+// fixed-intrinsics residual and the automatic differentiation of the whole chain take the same
+// steps.
 TEST(RefineSolveTest, CacheOffGivesTheSameSolve) {
   SyntheticScene scene = MakeSyntheticScene(SmallNoisyScene());
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 4.0, 2);
   RefineOptions options = BasinOptions();
+  options.solver = "ceres";
   options.num_threads = 1;
   RefineOutput cached, uncached;
   const RefineSummary a = RefinePoses(scene.input, options, &cached);
@@ -283,7 +284,7 @@ TEST(RefineSolveTest, CacheOffGivesTheSameSolve) {
 }
 
 // The default (deterministic) solve is bit-identical run to run and whatever the thread count:
-// only the cache, whose entries are computed independently, runs in parallel.
+// the ray-time LM solver sums fixed chunks in a fixed order (ray_time_lm_solver.h).
 TEST(RefineSolveTest, DeterministicWhateverTheThreadCount) {
   SyntheticScene scene = MakeSyntheticScene(SmallNoisyScene());
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 2.0, 4);
@@ -546,6 +547,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].num_matches_used",
       "passes[].num_residuals",
       "passes[].elimination_group_size",
+      "passes[].solver",
       "passes[].orientation_weight",
       "passes[].self_calibration",
       "passes[].ray_time_init",

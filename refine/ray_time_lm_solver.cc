@@ -1,0 +1,698 @@
+#include "refine/ray_time_lm_solver.h"
+
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <Eigen/Geometry>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+namespace raytime {
+namespace {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Matrix26d = Eigen::Matrix<double, 2, 6>;
+
+// Ceres' trust-region defaults (ceres::Solver::Options), so that an iteration limit or tolerance
+// set for gnc_solver.h means the same here.
+constexpr double kInitialRadius = 1e4;
+constexpr double kMaxRadius = 1e16;
+constexpr double kMinRadius = 1e-32;
+constexpr double kMinLmDiagonal = 1e-6;
+constexpr double kMaxLmDiagonal = 1e32;
+constexpr double kMinRelativeDecrease = 1e-3;
+constexpr double kGradientTolerance = 1e-10;
+constexpr double kParameterTolerance = 1e-8;
+// The linearization is split into this many chunks of ray times whatever the thread count, each
+// summed into its own copy of the reduced system, and the copies are added in chunk order: the
+// sums, hence the solve, are bit-identical on any number of threads.
+constexpr int kNumChunks = 8;
+constexpr std::chrono::seconds kProgressInterval{15};
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+double Clamp(double value) { return std::min(std::max(value, kMinLmDiagonal), kMaxLmDiagonal); }
+
+// Ceres' ArctanLoss(a) scaled by w: ρ(s) and ρ'(s).
+struct ArctanLoss {
+  double scale;
+  double weight;
+  double Value(double s) const { return weight * scale * std::atan2(s, scale); }
+  double Derivative(double s) const { return weight * scale * scale / (s * s + scale * scale); }
+};
+
+// The pose prior of one image (refine/pose_prior_cost.h) in the local parameters (φ, δO):
+// r = (sR·Log(R_priorᵀ R), sp·(O - O_prior)) with Jacobian blocks A = sR·Jr⁻¹(θ)·Rᵀ for φ and
+// sp·I for δO (R ← Exp(φ)·R gives Log(R_priorᵀ Exp(φ) R) ≈ θ + Jr⁻¹(θ)·Rᵀφ).
+struct PriorLinearization {
+  Eigen::Vector3d rotation_residual;
+  Eigen::Vector3d centre_residual;
+  Eigen::Matrix3d rotation_jacobian;
+  double centre_scale = 0.0;
+};
+
+PriorLinearization LinearizePrior(const Rigid3& pose, const Rigid3& prior, double rotation_scale,
+                                  double centre_scale) {
+  PriorLinearization out;
+  const Eigen::AngleAxisd log(prior.rotation.conjugate() * pose.rotation);
+  const Eigen::Vector3d theta = log.angle() * log.axis();
+  const double angle = log.angle();
+  // Jr⁻¹(θ) = I + ½[θ]× + c·[θ]×², c = (1 - (θ/2)·cot(θ/2)) / θ² (1/12 at 0).
+  const double c =
+      angle < 1e-4 ? 1.0 / 12.0 : (1.0 - 0.5 * angle / std::tan(0.5 * angle)) / (angle * angle);
+  const Eigen::Matrix3d skew = Skew(theta);
+  const Eigen::Matrix3d jr_inv = Eigen::Matrix3d::Identity() + 0.5 * skew + c * skew * skew;
+  out.rotation_residual = rotation_scale * theta;
+  out.rotation_jacobian = rotation_scale * jr_inv * pose.rotation.toRotationMatrix().transpose();
+  out.centre_residual = centre_scale * (pose.translation - prior.translation);
+  out.centre_scale = centre_scale;
+  return out;
+}
+
+// The reduced camera system's storage and the problem's fixed structure: the images that are
+// variables, each ray time's residual range, the camera pairs that couple (directly or through a
+// ray time) and the chunks of the parallel linearization.
+class ReducedCameraSystem {
+ public:
+  explicit ReducedCameraSystem(const RayTimeLmProblem& problem) {
+    const int num_images = static_cast<int>(problem.world_from_cam.size());
+    variable_.assign(num_images, -1);
+    for (int i = 0; i < num_images; ++i) {
+      if (!problem.held[i]) variable_[i] = num_variables_++;
+    }
+    const int num_ray_times = static_cast<int>(problem.ray_times.size());
+    residual_begin_.assign(num_ray_times + 1, 0);
+    for (const RayTimeLmResidual& r : problem.residuals) ++residual_begin_[r.ray_time + 1];
+    for (int t = 0; t < num_ray_times; ++t) residual_begin_[t + 1] += residual_begin_[t];
+
+    // Coupled pairs (c < d): every two variable images of one ray time's residuals.
+    std::vector<std::pair<int, int>> pairs;
+    std::vector<int> cameras;
+    for (int t = 0; t < num_ray_times; ++t) {
+      GroupCameras(problem, t, &cameras);
+      for (size_t i = 0; i < cameras.size(); ++i) {
+        for (size_t j = i + 1; j < cameras.size(); ++j) {
+          pairs.emplace_back(std::min(cameras[i], cameras[j]), std::max(cameras[i], cameras[j]));
+        }
+      }
+    }
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    neighbour_begin_.assign(num_variables_ + 1, 0);
+    for (const auto& [c, d] : pairs) ++neighbour_begin_[c + 1];
+    for (int c = 0; c < num_variables_; ++c) neighbour_begin_[c + 1] += neighbour_begin_[c];
+    neighbours_.reserve(pairs.size());
+    for (const auto& pair : pairs) neighbours_.push_back(pair.second);
+
+    // Chunks of ray times of about equal residual counts.
+    const size_t num_residuals = problem.residuals.size();
+    chunk_begin_.assign(kNumChunks + 1, num_ray_times);
+    chunk_begin_[0] = 0;
+    int t = 0;
+    for (int k = 1; k < kNumChunks; ++k) {
+      const size_t target = num_residuals * k / kNumChunks;
+      while (t < num_ray_times && static_cast<size_t>(residual_begin_[t]) < target) ++t;
+      chunk_begin_[k] = t;
+    }
+    partials_.resize(kNumChunks);
+  }
+
+  int num_variables() const { return num_variables_; }
+  int num_blocks() const { return num_variables_ + static_cast<int>(neighbours_.size()); }
+  int variable(int image) const { return variable_[image]; }
+  int residual_begin(int ray_time) const { return residual_begin_[ray_time]; }
+  int residual_end(int ray_time) const { return residual_begin_[ray_time + 1]; }
+  int chunk_begin(int chunk) const { return chunk_begin_[chunk]; }
+  int chunk_end(int chunk) const { return chunk_begin_[chunk + 1]; }
+
+  // The variable images a ray time's residuals reach, in first-seen order.
+  void GroupCameras(const RayTimeLmProblem& problem, int ray_time,
+                    std::vector<int>* cameras) const {
+    cameras->clear();
+    for (int k = residual_begin_[ray_time]; k < residual_begin_[ray_time + 1]; ++k) {
+      for (const int image :
+           {problem.residuals[k].source_image, problem.residuals[k].target_image}) {
+        const int c = variable_[image];
+        if (c >= 0 && std::find(cameras->begin(), cameras->end(), c) == cameras->end()) {
+          cameras->push_back(c);
+        }
+      }
+    }
+  }
+
+  // Block index of the coupling of variables c and d: c for c == d, else the pair's.
+  int Block(int c, int d) const {
+    if (c == d) return c;
+    const int lo = std::min(c, d);
+    const int hi = std::max(c, d);
+    const auto first = neighbours_.begin() + neighbour_begin_[lo];
+    const auto last = neighbours_.begin() + neighbour_begin_[lo + 1];
+    return num_variables_ +
+           static_cast<int>(std::lower_bound(first, last, hi) - neighbours_.begin());
+  }
+
+  // One chunk's (or the total's) share of the linear system: the 6x6 blocks (diagonal blocks
+  // first, then the pairs c < d as rows c, columns d), the cameras' gradient g, the elimination's
+  // share of the reduced right-hand side (which is -g + elimination), the undamped diagonal of JᵀJ
+  // (for the LM damping) and the ray times' projected gradient max norm.
+  struct Partial {
+    std::vector<Matrix6d> blocks;
+    std::vector<Vector6d> gradient;
+    std::vector<Vector6d> elimination;
+    std::vector<Vector6d> diagonal;
+    double gradient_max_norm = 0.0;
+    void Reset(int num_blocks, int num_variables) {
+      blocks.assign(num_blocks, Matrix6d::Zero());
+      gradient.assign(num_variables, Vector6d::Zero());
+      elimination.assign(num_variables, Vector6d::Zero());
+      diagonal.assign(num_variables, Vector6d::Zero());
+      gradient_max_norm = 0.0;
+    }
+  };
+
+  // Adds M (rows: c's parameters, columns: d's) to the coupling of c and d.
+  void AddCoupling(Partial* partial, int c, int d, const Matrix6d& m) const {
+    if (c <= d) {
+      partial->blocks[Block(c, d)] += m;
+    } else {
+      partial->blocks[Block(c, d)] += m.transpose();
+    }
+  }
+
+  std::vector<Partial>& partials() { return partials_; }
+
+  // Lower-triangle pattern of the scalar matrix: which (row, column) each block fills.
+  void Assemble(const Partial& total, const std::vector<Vector6d>& damping,
+                Eigen::SparseMatrix<double>* matrix) const {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(21 * num_variables_ + 36 * neighbours_.size());
+    for (int c = 0; c < num_variables_; ++c) {
+      for (int j = 0; j < 6; ++j) {
+        for (int i = j; i < 6; ++i) {
+          const double value = total.blocks[c](i, j) + (i == j ? damping[c](i) : 0.0);
+          triplets.emplace_back(6 * c + i, 6 * c + j, value);
+        }
+      }
+      for (int n = neighbour_begin_[c]; n < neighbour_begin_[c + 1]; ++n) {
+        const int d = neighbours_[n];
+        const Matrix6d& block = total.blocks[num_variables_ + n];
+        for (int j = 0; j < 6; ++j) {
+          for (int i = 0; i < 6; ++i) triplets.emplace_back(6 * d + i, 6 * c + j, block(j, i));
+        }
+      }
+    }
+    matrix->resize(6 * num_variables_, 6 * num_variables_);
+    matrix->setFromTriplets(triplets.begin(), triplets.end());
+  }
+
+ private:
+  int num_variables_ = 0;
+  std::vector<int> variable_;
+  std::vector<int> residual_begin_;
+  std::vector<int> neighbour_begin_;
+  std::vector<int> neighbours_;
+  std::vector<int> chunk_begin_;
+  std::vector<Partial> partials_;
+};
+
+template <typename Body>
+void ForEachChunk(int num_threads, Body&& body) {
+  tbb::task_arena arena(std::max(1, num_threads));
+  arena.execute([&] { tbb::parallel_for(0, kNumChunks, [&](int chunk) { body(chunk); }); });
+}
+
+// The current point: poses (with their rotation matrices) and ray times.
+struct State {
+  std::vector<Rigid3> world_from_cam;
+  std::vector<Eigen::Matrix3d> rotation;
+  std::vector<double> ray_times;
+
+  void UpdateRotations() {
+    rotation.resize(world_from_cam.size());
+    for (size_t i = 0; i < world_from_cam.size(); ++i) {
+      rotation[i] = world_from_cam[i].rotation.toRotationMatrix();
+    }
+  }
+};
+
+double ResidualOnly(const State& state, const Eigen::Vector4d& pinhole,
+                    const RayTimeLmResidual& r) {
+  const Eigen::Vector3d point =
+      state.world_from_cam[r.source_image].translation +
+      state.ray_times[r.ray_time] * (state.rotation[r.source_image] * r.source_ray);
+  const Eigen::Vector3d p = state.rotation[r.target_image].transpose() *
+                            (point - state.world_from_cam[r.target_image].translation);
+  const double inv_z = 1.0 / p.z();
+  const double e0 = pinhole[0] * p.x() * inv_z + pinhole[2] - r.target_undistorted.x();
+  const double e1 = pinhole[1] * p.y() * inv_z + pinhole[3] - r.target_undistorted.y();
+  return e0 * e0 + e1 * e1;
+}
+
+double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px2, int num_threads,
+            const ReducedCameraSystem& system) {
+  const ArctanLoss loss{scale_px2, problem.match_loss_weight};
+  std::vector<double> chunk_sums(kNumChunks, 0.0);
+  ForEachChunk(num_threads, [&](int chunk) {
+    double sum = 0.0;
+    const int begin = system.residual_begin(system.chunk_begin(chunk));
+    const int end = system.residual_begin(system.chunk_end(chunk));
+    for (int k = begin; k < end; ++k) {
+      const RayTimeLmResidual& r = problem.residuals[k];
+      sum += loss.Value(ResidualOnly(state, problem.pinhole[r.target_image], r));
+    }
+    chunk_sums[chunk] = sum;
+  });
+  double cost = 0.0;
+  for (const double sum : chunk_sums) cost += sum;
+  const double rotation_scale = std::sqrt(2.0 * problem.orientation_weight);
+  const double centre_scale = std::sqrt(2.0 * problem.position_weight);
+  double prior = 0.0;
+  for (size_t i = 0; i < state.world_from_cam.size(); ++i) {
+    const PriorLinearization p = LinearizePrior(
+        state.world_from_cam[i], problem.prior_world_from_cam[i], rotation_scale, centre_scale);
+    prior += p.rotation_residual.squaredNorm() + p.centre_residual.squaredNorm();
+  }
+  return 0.5 * (cost + prior);
+}
+
+// One residual's linearization with the IRLS weight of the loss (Ceres' corrector for ρ'' < 0).
+struct LinearizedResidual {
+  Eigen::Vector2d residual;
+  Matrix26d source;
+  Eigen::Vector2d ray_time;
+  Matrix26d target;
+  double weight = 0.0;
+};
+
+void Linearize(const RayTimeLmProblem& problem, const State& state, const ArctanLoss& loss,
+               const RayTimeLmResidual& r, LinearizedResidual* out) {
+  CrossProjectionJacobian(state.rotation[r.source_image],
+                          state.world_from_cam[r.source_image].translation,
+                          state.ray_times[r.ray_time], state.rotation[r.target_image],
+                          state.world_from_cam[r.target_image].translation,
+                          problem.pinhole[r.target_image], r.source_ray, r.target_undistorted,
+                          &out->residual, &out->source, &out->ray_time, &out->target);
+  out->weight = loss.Derivative(out->residual.squaredNorm());
+}
+
+class Solver {
+ public:
+  Solver(RayTimeLmProblem* problem, int num_threads)
+      : problem_(*problem), system_(*problem), num_threads_(num_threads) {
+    state_.world_from_cam = problem->world_from_cam;
+    for (Rigid3& pose : state_.world_from_cam) pose.rotation.normalize();
+    state_.ray_times = problem->ray_times;
+    state_.UpdateRotations();
+  }
+
+  GncStageSummary SolveStage(double scale_px2, int max_iterations, double function_tolerance,
+                             int stage, int num_stages);
+
+  void Store(RayTimeLmProblem* problem) const {
+    problem->world_from_cam = state_.world_from_cam;
+    problem->ray_times = state_.ray_times;
+  }
+
+ private:
+  // Builds the damped reduced camera system at the current point (radius μ: damping D/μ).
+  void BuildReducedSystem(const ArctanLoss& loss, double radius);
+  // From the cameras' step, the ray times' step (back-substitution) and the model's predicted
+  // cost decrease -(gᵀδ + ½ δᵀJᵀJδ).
+  double BackSubstitute(const ArctanLoss& loss, double radius, const Eigen::VectorXd& camera_step,
+                        std::vector<double>* ray_time_step) const;
+
+  const RayTimeLmProblem& problem_;
+  ReducedCameraSystem system_;
+  int num_threads_;
+  State state_;
+  ReducedCameraSystem::Partial total_;
+  std::vector<Vector6d> damping_;
+  Eigen::SparseMatrix<double> matrix_;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> factorization_;
+  bool pattern_analyzed_ = false;
+};
+
+void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
+  const int num_variables = system_.num_variables();
+  std::vector<ReducedCameraSystem::Partial>& partials = system_.partials();
+  ForEachChunk(num_threads_, [&](int chunk) {
+    ReducedCameraSystem::Partial& partial = partials[chunk];
+    partial.Reset(system_.num_blocks(), num_variables);
+    std::vector<int> cameras;
+    std::vector<Vector6d> coupling;  // per camera of the group: H_ct
+    LinearizedResidual lin;
+    for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
+      system_.GroupCameras(problem_, t, &cameras);
+      coupling.assign(cameras.size(), Vector6d::Zero());
+      double h_tt = 0.0;
+      double g_t = 0.0;
+      for (int k = system_.residual_begin(t); k < system_.residual_end(t); ++k) {
+        const RayTimeLmResidual& r = problem_.residuals[k];
+        Linearize(problem_, state_, loss, r, &lin);
+        const double w = lin.weight;
+        h_tt += w * lin.ray_time.squaredNorm();
+        g_t += w * lin.ray_time.dot(lin.residual);
+        const int c[2] = {system_.variable(r.source_image), system_.variable(r.target_image)};
+        const Matrix26d* jacobian[2] = {&lin.source, &lin.target};
+        for (int s = 0; s < 2; ++s) {
+          if (c[s] < 0) continue;
+          const Matrix26d& j = *jacobian[s];
+          const auto slot = std::find(cameras.begin(), cameras.end(), c[s]) - cameras.begin();
+          coupling[slot] += w * j.transpose() * lin.ray_time;
+          partial.gradient[c[s]] += w * j.transpose() * lin.residual;
+          partial.diagonal[c[s]] += w * j.colwise().squaredNorm().transpose();
+          partial.blocks[c[s]].noalias() += w * j.transpose() * j;
+        }
+        if (c[0] >= 0 && c[1] >= 0) {
+          const Matrix6d m = w * lin.source.transpose() * lin.target;
+          // One image on both sides (the layouts skip such matches) would couple it to itself.
+          system_.AddCoupling(&partial, c[0], c[1], c[0] == c[1] ? Matrix6d(m + m.transpose()) : m);
+        }
+      }
+      const double t_value = state_.ray_times[t];
+      const double projected = std::max(t_value - g_t, kRayTimeLowerBound);
+      partial.gradient_max_norm =
+          std::max(partial.gradient_max_norm, std::abs(t_value - projected));
+      // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g).
+      const double damped = h_tt + Clamp(h_tt) / radius;
+      for (size_t i = 0; i < cameras.size(); ++i) {
+        partial.elimination[cameras[i]] += coupling[i] * (g_t / damped);
+        for (size_t j = i; j < cameras.size(); ++j) {
+          system_.AddCoupling(&partial, cameras[i], cameras[j],
+                              -coupling[i] * coupling[j].transpose() / damped);
+        }
+      }
+    }
+  });
+
+  total_.Reset(system_.num_blocks(), num_variables);
+  for (const ReducedCameraSystem::Partial& partial : partials) {
+    for (int b = 0; b < system_.num_blocks(); ++b) total_.blocks[b] += partial.blocks[b];
+    for (int c = 0; c < num_variables; ++c) {
+      total_.gradient[c] += partial.gradient[c];
+      total_.elimination[c] += partial.elimination[c];
+      total_.diagonal[c] += partial.diagonal[c];
+    }
+    total_.gradient_max_norm = std::max(total_.gradient_max_norm, partial.gradient_max_norm);
+  }
+
+  // Pose priors: direct terms of each camera's diagonal block.
+  const double rotation_scale = std::sqrt(2.0 * problem_.orientation_weight);
+  const double centre_scale = std::sqrt(2.0 * problem_.position_weight);
+  for (size_t i = 0; i < state_.world_from_cam.size(); ++i) {
+    const int c = system_.variable(static_cast<int>(i));
+    if (c < 0) continue;
+    const PriorLinearization p = LinearizePrior(
+        state_.world_from_cam[i], problem_.prior_world_from_cam[i], rotation_scale, centre_scale);
+    const Eigen::Matrix3d a = p.rotation_jacobian;
+    total_.blocks[c].topLeftCorner<3, 3>() += a.transpose() * a;
+    total_.blocks[c].bottomRightCorner<3, 3>().diagonal().array() += centre_scale * centre_scale;
+    total_.diagonal[c].head<3>() += a.colwise().squaredNorm().transpose();
+    total_.diagonal[c].tail<3>().array() += centre_scale * centre_scale;
+    total_.gradient[c].head<3>() += a.transpose() * p.rotation_residual;
+    total_.gradient[c].tail<3>() += centre_scale * p.centre_residual;
+  }
+  damping_.resize(num_variables);
+  for (int c = 0; c < num_variables; ++c) {
+    damping_[c] = total_.diagonal[c].unaryExpr([&](double d) { return Clamp(d) / radius; });
+    total_.gradient_max_norm =
+        std::max(total_.gradient_max_norm, total_.gradient[c].lpNorm<Eigen::Infinity>());
+  }
+}
+
+double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
+                              const Eigen::VectorXd& camera_step,
+                              std::vector<double>* ray_time_step) const {
+  ray_time_step->resize(state_.ray_times.size());
+  std::vector<double> chunk_model(kNumChunks, 0.0);
+  ForEachChunk(num_threads_, [&](int chunk) {
+    std::vector<LinearizedResidual> group;
+    double model = 0.0;  // Σ w (rᵀJδ + ½|Jδ|²)
+    for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
+      const int begin = system_.residual_begin(t);
+      const int end = system_.residual_begin(t + 1);
+      group.resize(end - begin);
+      double h_tt = 0.0;
+      double rhs_t = 0.0;  // -g_t - H_tc δc
+      for (int k = begin; k < end; ++k) {
+        const RayTimeLmResidual& r = problem_.residuals[k];
+        LinearizedResidual& lin = group[k - begin];
+        Linearize(problem_, state_, loss, r, &lin);
+        const double w = lin.weight;
+        h_tt += w * lin.ray_time.squaredNorm();
+        Eigen::Vector2d camera_part = Eigen::Vector2d::Zero();
+        const int cs = system_.variable(r.source_image);
+        const int ct = system_.variable(r.target_image);
+        if (cs >= 0) camera_part += lin.source * camera_step.segment<6>(6 * cs);
+        if (ct >= 0) camera_part += lin.target * camera_step.segment<6>(6 * ct);
+        rhs_t -= w * lin.ray_time.dot(lin.residual + camera_part);
+      }
+      const double step = rhs_t / (h_tt + Clamp(h_tt) / radius);
+      (*ray_time_step)[t] = step;
+      for (int k = begin; k < end; ++k) {
+        const RayTimeLmResidual& r = problem_.residuals[k];
+        const LinearizedResidual& lin = group[k - begin];
+        Eigen::Vector2d jd = lin.ray_time * step;
+        const int cs = system_.variable(r.source_image);
+        const int ct = system_.variable(r.target_image);
+        if (cs >= 0) jd += lin.source * camera_step.segment<6>(6 * cs);
+        if (ct >= 0) jd += lin.target * camera_step.segment<6>(6 * ct);
+        model += lin.weight * (lin.residual.dot(jd) + 0.5 * jd.squaredNorm());
+      }
+    }
+    chunk_model[chunk] = model;
+  });
+  double model = 0.0;
+  for (const double m : chunk_model) model += m;
+  const double rotation_scale = std::sqrt(2.0 * problem_.orientation_weight);
+  const double centre_scale = std::sqrt(2.0 * problem_.position_weight);
+  for (size_t i = 0; i < state_.world_from_cam.size(); ++i) {
+    const int c = system_.variable(static_cast<int>(i));
+    if (c < 0) continue;
+    const PriorLinearization p = LinearizePrior(
+        state_.world_from_cam[i], problem_.prior_world_from_cam[i], rotation_scale, centre_scale);
+    const Eigen::Vector3d jr = p.rotation_jacobian * camera_step.segment<3>(6 * c);
+    const Eigen::Vector3d jc = centre_scale * camera_step.segment<3>(6 * c + 3);
+    model += p.rotation_residual.dot(jr) + 0.5 * jr.squaredNorm() + p.centre_residual.dot(jc) +
+             0.5 * jc.squaredNorm();
+  }
+  return -model;
+}
+
+GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double function_tolerance,
+                                   int stage, int num_stages) {
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  auto seconds_since = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
+  const ArctanLoss loss{scale_px2, problem_.match_loss_weight};
+  GncStageSummary summary;
+  summary.loss_scale_px2 = scale_px2;
+  auto timed_cost = [&](const State& state) {
+    const auto t0 = Clock::now();
+    const double cost = Cost(problem_, state, scale_px2, num_threads_, system_);
+    summary.residual_seconds += seconds_since(t0);
+    return cost;
+  };
+  double cost = timed_cost(state_);
+  summary.initial_cost = cost;
+  summary.termination = "NO_CONVERGENCE";
+  summary.message = "Maximum number of iterations reached.";
+  double radius = kInitialRadius;
+  double decrease_factor = 2.0;
+  auto last_progress = Clock::now();
+  std::vector<double> ray_time_step;
+  State candidate;
+  while (summary.iterations < max_iterations) {
+    auto t0 = Clock::now();
+    BuildReducedSystem(loss, radius);
+    ++summary.jacobian_evaluations;
+    summary.jacobian_seconds += seconds_since(t0);
+    // Ceres' gradient test: the max norm of the full gradient (cameras, and ray times projected
+    // onto their bound) at or below kGradientTolerance is a stationary point.
+    if (total_.gradient_max_norm <= kGradientTolerance) {
+      summary.termination = "CONVERGENCE";
+      summary.message = "Gradient tolerance reached.";
+      break;
+    }
+    t0 = Clock::now();
+    system_.Assemble(total_, damping_, &matrix_);
+    if (!pattern_analyzed_) {
+      factorization_.analyzePattern(matrix_);
+      pattern_analyzed_ = true;
+    }
+    factorization_.factorize(matrix_);
+    const bool solved = factorization_.info() == Eigen::Success;
+    Eigen::VectorXd camera_step;
+    double model_decrease = 0.0;
+    if (solved) {
+      Eigen::VectorXd rhs(6 * system_.num_variables());
+      for (int c = 0; c < system_.num_variables(); ++c) {
+        rhs.segment<6>(6 * c) = total_.elimination[c] - total_.gradient[c];
+      }
+      camera_step = factorization_.solve(rhs);
+      model_decrease = BackSubstitute(loss, radius, camera_step, &ray_time_step);
+    }
+    summary.linear_solver_seconds += seconds_since(t0);
+    ++summary.iterations;
+
+    bool accepted = false;
+    if (solved && std::isfinite(model_decrease) && model_decrease > 0.0) {
+      // Candidate point: x ⊕ δ, ray times projected onto their bound.
+      candidate.world_from_cam = state_.world_from_cam;
+      double step_norm2 = 0.0;
+      double x_norm2 = 0.0;
+      for (size_t i = 0; i < candidate.world_from_cam.size(); ++i) {
+        Rigid3& pose = candidate.world_from_cam[i];
+        x_norm2 += pose.rotation.coeffs().squaredNorm() + pose.translation.squaredNorm();
+        const int c = system_.variable(static_cast<int>(i));
+        if (c < 0) continue;
+        const Eigen::Vector3d phi = camera_step.segment<3>(6 * c);
+        const double angle = phi.norm();
+        if (angle > 0.0) {
+          pose.rotation =
+              (Eigen::Quaterniond(Eigen::AngleAxisd(angle, phi / angle)) * pose.rotation)
+                  .normalized();
+        }
+        pose.translation += camera_step.segment<3>(6 * c + 3);
+        step_norm2 += camera_step.segment<6>(6 * c).squaredNorm();
+      }
+      candidate.ray_times.resize(state_.ray_times.size());
+      for (size_t t = 0; t < state_.ray_times.size(); ++t) {
+        candidate.ray_times[t] =
+            std::max(state_.ray_times[t] + ray_time_step[t], kRayTimeLowerBound);
+        const double moved = candidate.ray_times[t] - state_.ray_times[t];
+        step_norm2 += moved * moved;
+        x_norm2 += state_.ray_times[t] * state_.ray_times[t];
+      }
+      if (std::sqrt(step_norm2) <=
+          kParameterTolerance * (std::sqrt(x_norm2) + kParameterTolerance)) {
+        summary.termination = "CONVERGENCE";
+        summary.message = "Parameter tolerance reached.";
+        break;
+      }
+      candidate.UpdateRotations();
+      const double candidate_cost = timed_cost(candidate);
+      const double cost_change = cost - candidate_cost;
+      const double relative_decrease = cost_change / model_decrease;
+      accepted = std::isfinite(candidate_cost) && relative_decrease > kMinRelativeDecrease;
+      if (std::isfinite(candidate_cost) && std::abs(cost_change) <= function_tolerance * cost) {
+        if (accepted) {
+          std::swap(state_, candidate);
+          cost = candidate_cost;
+          ++summary.successful_steps;
+        }
+        summary.termination = "CONVERGENCE";
+        summary.message = "Function tolerance reached.";
+        break;
+      }
+      if (accepted) {
+        std::swap(state_, candidate);
+        cost = candidate_cost;
+        ++summary.successful_steps;
+        const double q = 2.0 * relative_decrease - 1.0;
+        radius = std::min(kMaxRadius, radius / std::max(1.0 / 3.0, 1.0 - q * q * q));
+        decrease_factor = 2.0;
+      }
+    }
+    if (!accepted) {
+      radius /= decrease_factor;
+      decrease_factor *= 2.0;
+      if (radius < kMinRadius) {
+        summary.termination = solved ? "CONVERGENCE" : "FAILURE";
+        summary.message = solved ? "Minimum trust region radius reached."
+                                 : "The reduced camera system could not be factorized.";
+        break;
+      }
+    }
+    if (Clock::now() - last_progress >= kProgressInterval) {
+      last_progress = Clock::now();
+      spdlog::info(fmt::format(
+          "refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s", stage,
+          num_stages, scale_px2, summary.iterations, cost, seconds_since(start)));
+    }
+  }
+  summary.final_cost = cost;
+  summary.seconds = seconds_since(start);
+  return summary;
+}
+
+}  // namespace
+
+void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
+                             const Eigen::Vector3d& source_centre, double ray_time,
+                             const Eigen::Matrix3d& target_rotation,
+                             const Eigen::Vector3d& target_centre, const Eigen::Vector4d& pinhole,
+                             const Eigen::Vector3d& source_ray,
+                             const Eigen::Vector2d& target_undistorted, Eigen::Vector2d* residual,
+                             Eigen::Matrix<double, 2, 6>* source_jacobian,
+                             Eigen::Vector2d* ray_time_jacobian,
+                             Eigen::Matrix<double, 2, 6>* target_jacobian) {
+  const Eigen::Vector3d direction = source_rotation * source_ray;  // R_s d
+  const Eigen::Vector3d offset = ray_time * direction;             // X - O_s
+  const Eigen::Vector3d v = source_centre + offset - target_centre;
+  const Eigen::Vector3d p = target_rotation.transpose() * v;
+  const double inv_z = 1.0 / p.z();
+  const double xn = p.x() * inv_z;
+  const double yn = p.y() * inv_z;
+  const double fx = pinhole[0];
+  const double fy = pinhole[1];
+  (*residual) << fx * xn + pinhole[2] - target_undistorted.x(),
+      fy * yn + pinhole[3] - target_undistorted.y();
+  Eigen::Matrix<double, 2, 3> du_dp;
+  du_dp << fx * inv_z, 0.0, -fx * xn * inv_z, 0.0, fy * inv_z, -fy * yn * inv_z;
+  // du/dX = du/dp Rᵀ; X moves with the source pose as dX = δO - [t R_s d]× φ, and p with the
+  // target pose as dp = Rᵀ(-δO + [v]× φ) (R ← Exp(φ) R, so Rᵀ ← Rᵀ Exp(-φ)).
+  const Eigen::Matrix<double, 2, 3> du_dx = du_dp * target_rotation.transpose();
+  *ray_time_jacobian = du_dx * direction;
+  for (int a = 0; a < 2; ++a) {
+    const Eigen::Vector3d m = du_dx.row(a).transpose();
+    source_jacobian->row(a).head<3>() = offset.cross(m).transpose();
+    source_jacobian->row(a).tail<3>() = m.transpose();
+    target_jacobian->row(a).head<3>() = m.cross(v).transpose();
+    target_jacobian->row(a).tail<3>() = -m.transpose();
+  }
+}
+
+double RayTimeLmCost(const RayTimeLmProblem& problem, double scale_px2, int num_threads) {
+  State state;
+  state.world_from_cam = problem.world_from_cam;
+  for (Rigid3& pose : state.world_from_cam) pose.rotation.normalize();
+  state.ray_times = problem.ray_times;
+  state.UpdateRotations();
+  const ReducedCameraSystem system(problem);
+  return Cost(problem, state, scale_px2, num_threads, system);
+}
+
+std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
+                                               const RayTimeLmSettings& settings) {
+  Solver solver(problem, settings.num_threads);
+  std::vector<GncStageSummary> stages;
+  const int num_stages = static_cast<int>(settings.scales.size());
+  for (int s = 0; s < num_stages; ++s) {
+    const double scale = settings.scales[s];
+    GncStageSummary stage = solver.SolveStage(scale, settings.max_iterations,
+                                              settings.function_tolerance, s + 1, num_stages);
+    spdlog::info(
+        fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
+                    "{:.2f} s ({}, ray-time LM)",
+                    s + 1, num_stages, scale, stage.iterations, stage.initial_cost,
+                    stage.final_cost, stage.seconds, stage.termination));
+    stages.push_back(stage);
+    if (stage.termination == "FAILURE") break;
+  }
+  solver.Store(problem);
+  return stages;
+}
+
+}  // namespace raytime

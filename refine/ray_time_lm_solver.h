@@ -1,0 +1,90 @@
+// A Levenberg–Marquardt solver for the fixed-intrinsics ray-time problem (paper §3.2–3.5, §3.7)
+// that eliminates the one-dimensional ray times in closed form, without Ceres.
+//
+// Why: with every intrinsic held the problem is poses (6 local parameters each) and ray times
+// (one each, each in the residuals of one observation's matches only). The reduced camera system
+// after eliminating the ray times is what Ceres' SPARSE_SCHUR factorizes too (§3.4), but Ceres
+// reaches it through generic machinery that dominated the profile of a full-match solve (residual
+// block bookkeeping, the 2x7·7x6 manifold products, a Schur eliminator without a 1x1
+// specialization: ~0.43 s per iteration for 181k residuals where the arithmetic is a few ms).
+// Here each ray time's residuals are linearized, reduced into the camera system and dropped: no
+// Jacobian is stored, so memory is the problem's data (~60 bytes per residual) plus the reduced
+// system, and the linearization runs on any number of threads with bit-identical results (fixed
+// chunks summed in a fixed order).
+//
+// The objective is the one RayTimeProblem gives Ceres (its header): ½ Σ w ρ_a(|r|²) over the
+// cross-projection residuals with ρ_a(s) = a·atan(s/a) and w = 2/S, plus ½ Σ |prior residual|²
+// with the pose priors of refine/pose_prior_cost.h. The step is Ceres' LM step (trust-region
+// radius μ, diagonal D = diag(JᵀJ) clamped to [1e-6, 1e32], the robust loss as Ceres' corrector
+// applies a loss with ρ'' < 0: J and r scaled by sqrt(w ρ')), so the iteration and tolerances mean
+// what they mean in gnc_solver.h; the path differs in the last digits (no Jacobi scaling, a
+// rotation perturbation R ← Exp(φ)·R instead of Ceres' quaternion manifold).
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "core/geometry.h"
+#include "refine/refine.h"
+
+namespace raytime {
+
+// One cross-projection residual r = π_target(O_s + t·R_s·d) - û (paper eqs. rij, rji).
+struct RayTimeLmResidual {
+  int source_image = 0;
+  int ray_time = 0;
+  int target_image = 0;
+  Eigen::Vector3d source_ray;          // unit ray d in the source camera frame
+  Eigen::Vector2d target_undistorted;  // û, the target's undistorted pixel
+};
+
+struct RayTimeLmProblem {
+  // Variables: per image the pose world_from_cam (rotation camera to world, centre); `held`
+  // images keep theirs (no residual reaches them). One ray time per entry, bounded below at
+  // kRayTimeLowerBound.
+  std::vector<Rigid3> world_from_cam;
+  std::vector<bool> held;
+  std::vector<double> ray_times;
+  // Per image: fx, fy, cx, cy of the plain pinhole the residuals project with.
+  std::vector<Eigen::Vector4d> pinhole;
+  // Sorted by ray time (a ray time's residuals are contiguous): the solver reduces each ray time's
+  // residuals together.
+  std::vector<RayTimeLmResidual> residuals;
+  double match_loss_weight = 0.0;  // w = 2/S (RayTimeProblem::match_loss_weight)
+  // Pose priors (§3.3), per image: the anchor and the weights λp/N and λR/N.
+  std::vector<Rigid3> prior_world_from_cam;
+  double position_weight = 0.0;
+  double orientation_weight = 0.0;
+};
+
+inline constexpr double kRayTimeLowerBound = 1e-9;  // §3.3
+
+struct RayTimeLmSettings {
+  std::vector<double> scales;  // arctan scales a, px², in solve order (gnc_solver.h)
+  int max_iterations = 100;    // per stage, accepted and rejected steps
+  double function_tolerance = 1e-6;
+  int num_threads = 1;  // any count gives the same bits
+};
+
+// The residual and its Jacobians in the local parameters: source pose (φ, δO) with
+// R_s ← Exp(φ)·R_s and O_s ← O_s + δO, the ray time, the target pose likewise. Plain arguments so
+// it tests against numeric differentiation.
+void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
+                             const Eigen::Vector3d& source_centre, double ray_time,
+                             const Eigen::Matrix3d& target_rotation,
+                             const Eigen::Vector3d& target_centre, const Eigen::Vector4d& pinhole,
+                             const Eigen::Vector3d& source_ray,
+                             const Eigen::Vector2d& target_undistorted, Eigen::Vector2d* residual,
+                             Eigen::Matrix<double, 2, 6>* source_jacobian,
+                             Eigen::Vector2d* ray_time_jacobian,
+                             Eigen::Matrix<double, 2, 6>* target_jacobian);
+
+// The objective at arctan scale a (the value Ceres reports as cost for the same problem).
+double RayTimeLmCost(const RayTimeLmProblem& problem, double scale_px2, int num_threads);
+
+// Solves every stage of the schedule in place; stops after a stage that fails (the reduced system
+// could not be factorized at any damping). Logs one line per stage and progress on long stages.
+std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
+                                               const RayTimeLmSettings& settings);
+
+}  // namespace raytime
