@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -14,9 +15,11 @@
 namespace raytime {
 namespace {
 
-using Vector6d = Eigen::Matrix<double, 6, 1>;
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
-using Matrix26d = Eigen::Matrix<double, 2, 6>;
+// The hot loops (per residual) use plain arrays and scalar code: Eigen's fixed-size kernels are
+// templates whose out-of-line copies the linker may take from any other object instantiating them,
+// e.g. an unoptimized test in the sanitizer build, where they made the solver 25x slower.
+using Block6 = std::array<double, 36>;  // 6x6, row-major
+using Row6 = std::array<double, 6>;
 
 // Ceres' trust-region defaults (ceres::Solver::Options), so that an iteration limit or tolerance
 // set for gnc_solver.h means the same here.
@@ -165,48 +168,61 @@ class ReducedCameraSystem {
   // share of the reduced right-hand side (which is -g + elimination), the undamped diagonal of JᵀJ
   // (for the LM damping) and the ray times' projected gradient max norm.
   struct Partial {
-    std::vector<Matrix6d> blocks;
-    std::vector<Vector6d> gradient;
-    std::vector<Vector6d> elimination;
-    std::vector<Vector6d> diagonal;
+    std::vector<Block6> blocks;
+    std::vector<Row6> gradient;
+    std::vector<Row6> elimination;
+    std::vector<Row6> diagonal;
     double gradient_max_norm = 0.0;
     void Reset(int num_blocks, int num_variables) {
-      blocks.assign(num_blocks, Matrix6d::Zero());
-      gradient.assign(num_variables, Vector6d::Zero());
-      elimination.assign(num_variables, Vector6d::Zero());
-      diagonal.assign(num_variables, Vector6d::Zero());
+      blocks.assign(num_blocks, Block6{});
+      gradient.assign(num_variables, Row6{});
+      elimination.assign(num_variables, Row6{});
+      diagonal.assign(num_variables, Row6{});
       gradient_max_norm = 0.0;
     }
   };
 
-  // Adds M (rows: c's parameters, columns: d's) to the coupling of c and d.
-  void AddCoupling(Partial* partial, int c, int d, const Matrix6d& m) const {
-    if (c <= d) {
-      partial->blocks[Block(c, d)] += m;
-    } else {
-      partial->blocks[Block(c, d)] += m.transpose();
+  // Adds s·a·bᵀ (rows: c's parameters, columns: d's) to the coupling of c and d.
+  void AddOuter(Partial* partial, int c, int d, const double* a, const double* b, double s) const {
+    double* block = partial->blocks[Block(c, d)].data();
+    if (c > d) std::swap(a, b);
+    for (int i = 0; i < 6; ++i) {
+      const double ai = s * a[i];
+      for (int j = 0; j < 6; ++j) block[6 * i + j] += ai * b[j];
+    }
+  }
+
+  // Adds w·Jaᵀ·Jb for 2x6 row-major Ja (c's) and Jb (d's) to the coupling of c and d (both
+  // orders when c == d).
+  void AddProduct(Partial* partial, int c, int d, const double* ja, const double* jb,
+                  double w) const {
+    AddOuter(partial, c, d, ja, jb, w);
+    AddOuter(partial, c, d, ja + 6, jb + 6, w);
+    if (c == d && ja != jb) {
+      AddOuter(partial, c, d, jb, ja, w);
+      AddOuter(partial, c, d, jb + 6, ja + 6, w);
     }
   }
 
   std::vector<Partial>& partials() { return partials_; }
 
   // Lower-triangle pattern of the scalar matrix: which (row, column) each block fills.
-  void Assemble(const Partial& total, const std::vector<Vector6d>& damping,
+  void Assemble(const Partial& total, const std::vector<Row6>& damping,
                 Eigen::SparseMatrix<double>* matrix) const {
     std::vector<Eigen::Triplet<double>> triplets;
     triplets.reserve(21 * num_variables_ + 36 * neighbours_.size());
     for (int c = 0; c < num_variables_; ++c) {
       for (int j = 0; j < 6; ++j) {
         for (int i = j; i < 6; ++i) {
-          const double value = total.blocks[c](i, j) + (i == j ? damping[c](i) : 0.0);
+          const double value = total.blocks[c][6 * i + j] + (i == j ? damping[c][i] : 0.0);
           triplets.emplace_back(6 * c + i, 6 * c + j, value);
         }
       }
       for (int n = neighbour_begin_[c]; n < neighbour_begin_[c + 1]; ++n) {
         const int d = neighbours_[n];
-        const Matrix6d& block = total.blocks[num_variables_ + n];
+        const Block6& block = total.blocks[num_variables_ + n];
         for (int j = 0; j < 6; ++j) {
-          for (int i = 0; i < 6; ++i) triplets.emplace_back(6 * d + i, 6 * c + j, block(j, i));
+          for (int i = 0; i < 6; ++i) triplets.emplace_back(6 * d + i, 6 * c + j, block[6 * j + i]);
         }
       }
     }
@@ -225,36 +241,84 @@ class ReducedCameraSystem {
 };
 
 template <typename Body>
-void ForEachChunk(int num_threads, Body&& body) {
+void ForEachChunk(int num_threads, const Body& body) {
   tbb::task_arena arena(std::max(1, num_threads));
   arena.execute([&] { tbb::parallel_for(0, kNumChunks, [&](int chunk) { body(chunk); }); });
 }
 
-// The current point: poses (with their rotation matrices) and ray times.
+// The current point: poses (with their rotation matrices, row-major, and centres as plain arrays
+// for the hot loops) and ray times.
 struct State {
   std::vector<Rigid3> world_from_cam;
-  std::vector<Eigen::Matrix3d> rotation;
+  std::vector<std::array<double, 9>> rotation;
+  std::vector<std::array<double, 3>> centre;
   std::vector<double> ray_times;
 
   void UpdateRotations() {
     rotation.resize(world_from_cam.size());
+    centre.resize(world_from_cam.size());
     for (size_t i = 0; i < world_from_cam.size(); ++i) {
-      rotation[i] = world_from_cam[i].rotation.toRotationMatrix();
+      const Eigen::Matrix3d r = world_from_cam[i].rotation.toRotationMatrix();
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) rotation[i][3 * a + b] = r(a, b);
+        centre[i][a] = world_from_cam[i].translation[a];
+      }
     }
   }
 };
 
-double ResidualOnly(const State& state, const Eigen::Vector4d& pinhole,
-                    const RayTimeLmResidual& r) {
-  const Eigen::Vector3d point =
-      state.world_from_cam[r.source_image].translation +
-      state.ray_times[r.ray_time] * (state.rotation[r.source_image] * r.source_ray);
-  const Eigen::Vector3d p = state.rotation[r.target_image].transpose() *
-                            (point - state.world_from_cam[r.target_image].translation);
-  const double inv_z = 1.0 / p.z();
-  const double e0 = pinhole[0] * p.x() * inv_z + pinhole[2] - r.target_undistorted.x();
-  const double e1 = pinhole[1] * p.y() * inv_z + pinhole[3] - r.target_undistorted.y();
-  return e0 * e0 + e1 * e1;
+// r = π_t(O_s + t·R_s·d) - û and, when `source` is not null, its Jacobians (2x6 row-major in
+// (φ, δO) of each pose, 2x1 in the ray time); R row-major, K = fx, fy, cx, cy. X moves with the
+// source pose as dX = δO - [t R_s d]× φ, and p = R_tᵀ(X - O_t) with the target pose as
+// dp = R_tᵀ(-δO + [v]× φ) (R ← Exp(φ) R, so Rᵀ ← Rᵀ Exp(-φ)).
+void CrossProjectionKernel(const double* rs, const double* os, double t, const double* rt,
+                           const double* ot, const double* k, const double* d, const double* u,
+                           double* r, double* source, double* ray_time, double* target) {
+  double dir[3], off[3], v[3], p[3];
+  for (int a = 0; a < 3; ++a) {
+    dir[a] = rs[3 * a] * d[0] + rs[3 * a + 1] * d[1] + rs[3 * a + 2] * d[2];
+    off[a] = t * dir[a];
+    v[a] = os[a] + off[a] - ot[a];
+  }
+  for (int c = 0; c < 3; ++c) p[c] = rt[c] * v[0] + rt[3 + c] * v[1] + rt[6 + c] * v[2];
+  const double inv_z = 1.0 / p[2];
+  const double xn = p[0] * inv_z;
+  const double yn = p[1] * inv_z;
+  r[0] = k[0] * xn + k[2] - u[0];
+  r[1] = k[1] * yn + k[3] - u[1];
+  if (source == nullptr) return;
+  const double du_dp[2][3] = {{k[0] * inv_z, 0.0, -k[0] * xn * inv_z},
+                              {0.0, k[1] * inv_z, -k[1] * yn * inv_z}};
+  for (int a = 0; a < 2; ++a) {
+    double m[3];  // du_a/dX = du_a/dp · R_tᵀ
+    for (int c = 0; c < 3; ++c) {
+      m[c] = du_dp[a][0] * rt[3 * c] + du_dp[a][1] * rt[3 * c + 1] + du_dp[a][2] * rt[3 * c + 2];
+    }
+    ray_time[a] = m[0] * dir[0] + m[1] * dir[1] + m[2] * dir[2];
+    double* js = source + 6 * a;
+    double* jt = target + 6 * a;
+    js[0] = off[1] * m[2] - off[2] * m[1];  // off × m
+    js[1] = off[2] * m[0] - off[0] * m[2];
+    js[2] = off[0] * m[1] - off[1] * m[0];
+    jt[0] = m[1] * v[2] - m[2] * v[1];  // m × v
+    jt[1] = m[2] * v[0] - m[0] * v[2];
+    jt[2] = m[0] * v[1] - m[1] * v[0];
+    for (int c = 0; c < 3; ++c) {
+      js[3 + c] = m[c];
+      jt[3 + c] = -m[c];
+    }
+  }
+}
+
+double SquaredResidual(const RayTimeLmProblem& problem, const State& state,
+                       const RayTimeLmResidual& r) {
+  double e[2];
+  CrossProjectionKernel(state.rotation[r.source_image].data(), state.centre[r.source_image].data(),
+                        state.ray_times[r.ray_time], state.rotation[r.target_image].data(),
+                        state.centre[r.target_image].data(), problem.pinhole[r.target_image].data(),
+                        r.source_ray.data(), r.target_undistorted.data(), e, nullptr, nullptr,
+                        nullptr);
+  return e[0] * e[0] + e[1] * e[1];
 }
 
 double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px2, int num_threads,
@@ -266,8 +330,7 @@ double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px
     const int begin = system.residual_begin(system.chunk_begin(chunk));
     const int end = system.residual_begin(system.chunk_end(chunk));
     for (int k = begin; k < end; ++k) {
-      const RayTimeLmResidual& r = problem.residuals[k];
-      sum += loss.Value(ResidualOnly(state, problem.pinhole[r.target_image], r));
+      sum += loss.Value(SquaredResidual(problem, state, problem.residuals[k]));
     }
     chunk_sums[chunk] = sum;
   });
@@ -286,22 +349,31 @@ double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px
 
 // One residual's linearization with the IRLS weight of the loss (Ceres' corrector for ρ'' < 0).
 struct LinearizedResidual {
-  Eigen::Vector2d residual;
-  Matrix26d source;
-  Eigen::Vector2d ray_time;
-  Matrix26d target;
+  double residual[2];
+  double source[12];  // 2x6 row-major
+  double ray_time[2];
+  double target[12];
   double weight = 0.0;
 };
 
 void Linearize(const RayTimeLmProblem& problem, const State& state, const ArctanLoss& loss,
                const RayTimeLmResidual& r, LinearizedResidual* out) {
-  CrossProjectionJacobian(state.rotation[r.source_image],
-                          state.world_from_cam[r.source_image].translation,
-                          state.ray_times[r.ray_time], state.rotation[r.target_image],
-                          state.world_from_cam[r.target_image].translation,
-                          problem.pinhole[r.target_image], r.source_ray, r.target_undistorted,
-                          &out->residual, &out->source, &out->ray_time, &out->target);
-  out->weight = loss.Derivative(out->residual.squaredNorm());
+  CrossProjectionKernel(state.rotation[r.source_image].data(), state.centre[r.source_image].data(),
+                        state.ray_times[r.ray_time], state.rotation[r.target_image].data(),
+                        state.centre[r.target_image].data(), problem.pinhole[r.target_image].data(),
+                        r.source_ray.data(), r.target_undistorted.data(), out->residual,
+                        out->source, out->ray_time, out->target);
+  out->weight =
+      loss.Derivative(out->residual[0] * out->residual[0] + out->residual[1] * out->residual[1]);
+}
+
+// J·δ of a 2x6 row-major block and a camera's 6 step components.
+inline void AddTimes(const double* j, const double* step, double* out) {
+  for (int a = 0; a < 2; ++a) {
+    double sum = 0.0;
+    for (int c = 0; c < 6; ++c) sum += j[6 * a + c] * step[c];
+    out[a] += sum;
+  }
 }
 
 class Solver {
@@ -335,7 +407,7 @@ class Solver {
   int num_threads_;
   State state_;
   ReducedCameraSystem::Partial total_;
-  std::vector<Vector6d> damping_;
+  std::vector<Row6> damping_;
   Eigen::SparseMatrix<double> matrix_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> factorization_;
   bool pattern_analyzed_ = false;
@@ -348,35 +420,41 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
     ReducedCameraSystem::Partial& partial = partials[chunk];
     partial.Reset(system_.num_blocks(), num_variables);
     std::vector<int> cameras;
-    std::vector<Vector6d> coupling;  // per camera of the group: H_ct
+    std::vector<Row6> coupling;  // per camera of the group: H_ct
     LinearizedResidual lin;
     for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
       system_.GroupCameras(problem_, t, &cameras);
-      coupling.assign(cameras.size(), Vector6d::Zero());
+      coupling.assign(cameras.size(), Row6{});
       double h_tt = 0.0;
       double g_t = 0.0;
       for (int k = system_.residual_begin(t); k < system_.residual_end(t); ++k) {
         const RayTimeLmResidual& r = problem_.residuals[k];
         Linearize(problem_, state_, loss, r, &lin);
         const double w = lin.weight;
-        h_tt += w * lin.ray_time.squaredNorm();
-        g_t += w * lin.ray_time.dot(lin.residual);
+        const double* jd = lin.ray_time;
+        const double* e = lin.residual;
+        h_tt += w * (jd[0] * jd[0] + jd[1] * jd[1]);
+        g_t += w * (jd[0] * e[0] + jd[1] * e[1]);
         const int c[2] = {system_.variable(r.source_image), system_.variable(r.target_image)};
-        const Matrix26d* jacobian[2] = {&lin.source, &lin.target};
+        const double* jacobian[2] = {lin.source, lin.target};
         for (int s = 0; s < 2; ++s) {
           if (c[s] < 0) continue;
-          const Matrix26d& j = *jacobian[s];
+          const double* j = jacobian[s];
           const auto slot = std::find(cameras.begin(), cameras.end(), c[s]) - cameras.begin();
-          coupling[slot] += w * j.transpose() * lin.ray_time;
-          partial.gradient[c[s]] += w * j.transpose() * lin.residual;
-          partial.diagonal[c[s]] += w * j.colwise().squaredNorm().transpose();
-          partial.blocks[c[s]].noalias() += w * j.transpose() * j;
+          double* h_ct = coupling[slot].data();
+          double* gradient = partial.gradient[c[s]].data();
+          double* diagonal = partial.diagonal[c[s]].data();
+          for (int i = 0; i < 6; ++i) {
+            h_ct[i] += w * (j[i] * jd[0] + j[6 + i] * jd[1]);
+            gradient[i] += w * (j[i] * e[0] + j[6 + i] * e[1]);
+            diagonal[i] += w * (j[i] * j[i] + j[6 + i] * j[6 + i]);
+          }
+          system_.AddProduct(&partial, c[s], c[s], j, j, w);
         }
-        if (c[0] >= 0 && c[1] >= 0) {
-          const Matrix6d m = w * lin.source.transpose() * lin.target;
-          // One image on both sides (the layouts skip such matches) would couple it to itself.
-          system_.AddCoupling(&partial, c[0], c[1], c[0] == c[1] ? Matrix6d(m + m.transpose()) : m);
-        }
+        // One image on both sides (the layouts skip such matches) would couple it to itself:
+        // AddProduct adds both orders then.
+        if (c[0] >= 0 && c[1] >= 0)
+          system_.AddProduct(&partial, c[0], c[1], lin.source, lin.target, w);
       }
       const double t_value = state_.ray_times[t];
       const double projected = std::max(t_value - g_t, kRayTimeLowerBound);
@@ -385,10 +463,11 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
       // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g).
       const double damped = h_tt + Clamp(h_tt) / radius;
       for (size_t i = 0; i < cameras.size(); ++i) {
-        partial.elimination[cameras[i]] += coupling[i] * (g_t / damped);
+        double* elimination = partial.elimination[cameras[i]].data();
+        for (int a = 0; a < 6; ++a) elimination[a] += coupling[i][a] * (g_t / damped);
         for (size_t j = i; j < cameras.size(); ++j) {
-          system_.AddCoupling(&partial, cameras[i], cameras[j],
-                              -coupling[i] * coupling[j].transpose() / damped);
+          system_.AddOuter(&partial, cameras[i], cameras[j], coupling[i].data(), coupling[j].data(),
+                           -1.0 / damped);
         }
       }
     }
@@ -396,11 +475,15 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
 
   total_.Reset(system_.num_blocks(), num_variables);
   for (const ReducedCameraSystem::Partial& partial : partials) {
-    for (int b = 0; b < system_.num_blocks(); ++b) total_.blocks[b] += partial.blocks[b];
+    for (int b = 0; b < system_.num_blocks(); ++b) {
+      for (int a = 0; a < 36; ++a) total_.blocks[b][a] += partial.blocks[b][a];
+    }
     for (int c = 0; c < num_variables; ++c) {
-      total_.gradient[c] += partial.gradient[c];
-      total_.elimination[c] += partial.elimination[c];
-      total_.diagonal[c] += partial.diagonal[c];
+      for (int a = 0; a < 6; ++a) {
+        total_.gradient[c][a] += partial.gradient[c][a];
+        total_.elimination[c][a] += partial.elimination[c][a];
+        total_.diagonal[c][a] += partial.diagonal[c][a];
+      }
     }
     total_.gradient_max_norm = std::max(total_.gradient_max_norm, partial.gradient_max_norm);
   }
@@ -413,19 +496,25 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
     if (c < 0) continue;
     const PriorLinearization p = LinearizePrior(
         state_.world_from_cam[i], problem_.prior_world_from_cam[i], rotation_scale, centre_scale);
-    const Eigen::Matrix3d a = p.rotation_jacobian;
-    total_.blocks[c].topLeftCorner<3, 3>() += a.transpose() * a;
-    total_.blocks[c].bottomRightCorner<3, 3>().diagonal().array() += centre_scale * centre_scale;
-    total_.diagonal[c].head<3>() += a.colwise().squaredNorm().transpose();
-    total_.diagonal[c].tail<3>().array() += centre_scale * centre_scale;
-    total_.gradient[c].head<3>() += a.transpose() * p.rotation_residual;
-    total_.gradient[c].tail<3>() += centre_scale * p.centre_residual;
+    const Eigen::Matrix3d ata = p.rotation_jacobian.transpose() * p.rotation_jacobian;
+    const Eigen::Vector3d gradient = p.rotation_jacobian.transpose() * p.rotation_residual;
+    Block6& block = total_.blocks[c];
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 3; ++b) block[6 * a + b] += ata(a, b);
+      block[6 * (3 + a) + 3 + a] += centre_scale * centre_scale;
+      total_.diagonal[c][a] += ata(a, a);
+      total_.diagonal[c][3 + a] += centre_scale * centre_scale;
+      total_.gradient[c][a] += gradient[a];
+      total_.gradient[c][3 + a] += centre_scale * p.centre_residual[a];
+    }
   }
   damping_.resize(num_variables);
   for (int c = 0; c < num_variables; ++c) {
-    damping_[c] = total_.diagonal[c].unaryExpr([&](double d) { return Clamp(d) / radius; });
-    total_.gradient_max_norm =
-        std::max(total_.gradient_max_norm, total_.gradient[c].lpNorm<Eigen::Infinity>());
+    for (int a = 0; a < 6; ++a) {
+      damping_[c][a] = Clamp(total_.diagonal[c][a]) / radius;
+      total_.gradient_max_norm =
+          std::max(total_.gradient_max_norm, std::abs(total_.gradient[c][a]));
+    }
   }
 }
 
@@ -437,6 +526,7 @@ double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
   ForEachChunk(num_threads_, [&](int chunk) {
     std::vector<LinearizedResidual> group;
     double model = 0.0;  // Σ w (rᵀJδ + ½|Jδ|²)
+    const double* steps = camera_step.data();
     for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
       const int begin = system_.residual_begin(t);
       const int end = system_.residual_begin(t + 1);
@@ -448,25 +538,26 @@ double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
         LinearizedResidual& lin = group[k - begin];
         Linearize(problem_, state_, loss, r, &lin);
         const double w = lin.weight;
-        h_tt += w * lin.ray_time.squaredNorm();
-        Eigen::Vector2d camera_part = Eigen::Vector2d::Zero();
+        h_tt += w * (lin.ray_time[0] * lin.ray_time[0] + lin.ray_time[1] * lin.ray_time[1]);
+        double moved[2] = {lin.residual[0], lin.residual[1]};  // r + J_c δc
         const int cs = system_.variable(r.source_image);
         const int ct = system_.variable(r.target_image);
-        if (cs >= 0) camera_part += lin.source * camera_step.segment<6>(6 * cs);
-        if (ct >= 0) camera_part += lin.target * camera_step.segment<6>(6 * ct);
-        rhs_t -= w * lin.ray_time.dot(lin.residual + camera_part);
+        if (cs >= 0) AddTimes(lin.source, steps + 6 * cs, moved);
+        if (ct >= 0) AddTimes(lin.target, steps + 6 * ct, moved);
+        rhs_t -= w * (lin.ray_time[0] * moved[0] + lin.ray_time[1] * moved[1]);
       }
       const double step = rhs_t / (h_tt + Clamp(h_tt) / radius);
       (*ray_time_step)[t] = step;
       for (int k = begin; k < end; ++k) {
         const RayTimeLmResidual& r = problem_.residuals[k];
         const LinearizedResidual& lin = group[k - begin];
-        Eigen::Vector2d jd = lin.ray_time * step;
+        double jd[2] = {lin.ray_time[0] * step, lin.ray_time[1] * step};
         const int cs = system_.variable(r.source_image);
         const int ct = system_.variable(r.target_image);
-        if (cs >= 0) jd += lin.source * camera_step.segment<6>(6 * cs);
-        if (ct >= 0) jd += lin.target * camera_step.segment<6>(6 * ct);
-        model += lin.weight * (lin.residual.dot(jd) + 0.5 * jd.squaredNorm());
+        if (cs >= 0) AddTimes(lin.source, steps + 6 * cs, jd);
+        if (ct >= 0) AddTimes(lin.target, steps + 6 * ct, jd);
+        model += lin.weight * (lin.residual[0] * jd[0] + lin.residual[1] * jd[1] +
+                               0.5 * (jd[0] * jd[0] + jd[1] * jd[1]));
       }
     }
     chunk_model[chunk] = model;
@@ -538,7 +629,9 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
     if (solved) {
       Eigen::VectorXd rhs(6 * system_.num_variables());
       for (int c = 0; c < system_.num_variables(); ++c) {
-        rhs.segment<6>(6 * c) = total_.elimination[c] - total_.gradient[c];
+        for (int a = 0; a < 6; ++a) {
+          rhs[6 * c + a] = total_.elimination[c][a] - total_.gradient[c][a];
+        }
       }
       camera_step = factorization_.solve(rhs);
       model_decrease = BackSubstitute(loss, radius, camera_step, &ray_time_step);
@@ -638,29 +731,24 @@ void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
                              Eigen::Matrix<double, 2, 6>* source_jacobian,
                              Eigen::Vector2d* ray_time_jacobian,
                              Eigen::Matrix<double, 2, 6>* target_jacobian) {
-  const Eigen::Vector3d direction = source_rotation * source_ray;  // R_s d
-  const Eigen::Vector3d offset = ray_time * direction;             // X - O_s
-  const Eigen::Vector3d v = source_centre + offset - target_centre;
-  const Eigen::Vector3d p = target_rotation.transpose() * v;
-  const double inv_z = 1.0 / p.z();
-  const double xn = p.x() * inv_z;
-  const double yn = p.y() * inv_z;
-  const double fx = pinhole[0];
-  const double fy = pinhole[1];
-  (*residual) << fx * xn + pinhole[2] - target_undistorted.x(),
-      fy * yn + pinhole[3] - target_undistorted.y();
-  Eigen::Matrix<double, 2, 3> du_dp;
-  du_dp << fx * inv_z, 0.0, -fx * xn * inv_z, 0.0, fy * inv_z, -fy * yn * inv_z;
-  // du/dX = du/dp Rᵀ; X moves with the source pose as dX = δO - [t R_s d]× φ, and p with the
-  // target pose as dp = Rᵀ(-δO + [v]× φ) (R ← Exp(φ) R, so Rᵀ ← Rᵀ Exp(-φ)).
-  const Eigen::Matrix<double, 2, 3> du_dx = du_dp * target_rotation.transpose();
-  *ray_time_jacobian = du_dx * direction;
+  double rs[9], rt[9];
+  for (int a = 0; a < 3; ++a) {
+    for (int b = 0; b < 3; ++b) {
+      rs[3 * a + b] = source_rotation(a, b);
+      rt[3 * a + b] = target_rotation(a, b);
+    }
+  }
+  double r[2], source[12], ray[2], target[12];
+  CrossProjectionKernel(rs, source_centre.data(), ray_time, rt, target_centre.data(),
+                        pinhole.data(), source_ray.data(), target_undistorted.data(), r, source,
+                        ray, target);
+  *residual << r[0], r[1];
+  *ray_time_jacobian << ray[0], ray[1];
   for (int a = 0; a < 2; ++a) {
-    const Eigen::Vector3d m = du_dx.row(a).transpose();
-    source_jacobian->row(a).head<3>() = offset.cross(m).transpose();
-    source_jacobian->row(a).tail<3>() = m.transpose();
-    target_jacobian->row(a).head<3>() = m.cross(v).transpose();
-    target_jacobian->row(a).tail<3>() = -m.transpose();
+    for (int c = 0; c < 6; ++c) {
+      (*source_jacobian)(a, c) = source[6 * a + c];
+      (*target_jacobian)(a, c) = target[6 * a + c];
+    }
   }
 }
 
