@@ -1,0 +1,222 @@
+// A synthetic video-like capture of any length, written in raytime's HDF5 schema (issue 14), for
+// the refiner's scaling benchmark (bench/refine_scaling.sh): cameras walk a straight corridor at a
+// fixed spacing, looking sideways at a wall of points 3–6 m away (the depths of a room capture);
+// every point a camera sees is one keypoint (0.5 px noise by default), and every pair of frames at
+// most --window apart is matched on the points both see, a --outliers fraction of each pair's
+// matches replaced by a random keypoint of the second frame. The prior is the ground truth
+// perturbed by the ladder protocol (evaluate/perturbation.h: i.i.d., --level degrees per frame,
+// 1.25 % of the 4.5 m median depth per degree). Deterministic for a seed.
+//
+//   synthetic_capture --cameras N [--keypoints K] [--window W] [--noise PX] [--outliers F]
+//                     [--level DEG] [--seed S] --out DIR
+//
+// Writes DIR/dataset.h5 (images, cameras, ground_truth), DIR/features.h5 (keypoints, no
+// descriptors), DIR/matches.h5 (verified inlier matches) and DIR/prior.h5 (pose set "prior"), so
+// `raytime refine --in DIR/dataset.h5 DIR/features.h5 DIR/matches.h5 DIR/prior.h5` and `raytime
+// evaluate` run on them; prints one JSON line (cameras, points, keypoints, pairs, matches).
+#include <CLI/CLI.hpp>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <vector>
+
+#include "core/features.h"
+#include "core/hdf5_store.h"
+#include "core/types.h"
+#include "evaluate/perturbation.h"
+
+namespace raytime {
+namespace {
+
+struct CaptureOptions {
+  int cameras = 100;
+  int keypoints = 1000;  // points each frame sees, about
+  int window = 10;       // frames matched ahead of each frame
+  double noise_px = 0.5;
+  double outliers = 0.05;
+  double level_deg = 2.0;
+  int seed = 0;
+  std::string out;
+};
+
+// Image 1280 x 960, f = 1000 px (a phone's main camera, 65° across).
+constexpr int kWidth = 1280;
+constexpr int kHeight = 960;
+constexpr double kFocal = 1000.0;
+constexpr double kNearDepth = 3.0;  // metres
+constexpr double kFarDepth = 6.0;
+constexpr double kWallHalfHeight = 1.5;
+constexpr double kMedianDepth = 0.5 * (kNearDepth + kFarDepth);
+
+int Main(int argc, char** argv) {
+  CaptureOptions o;
+  CLI::App app("Synthetic corridor capture in raytime's HDF5 schema (issue 14 scaling benchmark)");
+  app.add_option("--cameras", o.cameras, "Frames")->check(CLI::PositiveNumber);
+  app.add_option("--keypoints", o.keypoints, "Points each frame sees, about")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--window", o.window, "Frames matched ahead of each frame")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--noise", o.noise_px, "Keypoint noise, pixels (standard deviation)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--outliers", o.outliers, "Fraction of each pair's matches made wrong")
+      ->check(CLI::Range(0.0, 0.99));
+  app.add_option("--level", o.level_deg, "Prior perturbation, degrees per frame (i.i.d.)")
+      ->check(CLI::Range(0.0, 180.0));
+  app.add_option("--seed", o.seed, "Seed of the scene, noise, outliers and prior");
+  app.add_option("--out", o.out, "Output directory")->required();
+  CLI11_PARSE(app, argc, argv);
+
+  // A frame's footprint on the wall at the median depth is kWidth / kFocal * depth wide; the
+  // spacing puts the last frame of the window half a footprint along, so neighbours share most
+  // points and the window's far end about half.
+  const double footprint = kWidth / kFocal * kMedianDepth;
+  const double spacing = footprint / (2.0 * o.window);
+  const double height = std::min(2.0 * kWallHalfHeight, kHeight / kFocal * kMedianDepth);
+  const double density = o.keypoints / (footprint * height);  // points per m² of wall
+  const double margin = footprint;
+  const double length = (o.cameras - 1) * spacing + 2 * margin;
+  std::mt19937_64 rng(o.seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, o.noise_px);
+  const int num_points = static_cast<int>(density * length * 2 * kWallHalfHeight);
+  std::vector<Eigen::Vector3d> points(num_points);
+  for (Eigen::Vector3d& p : points) {
+    p = Eigen::Vector3d(-margin + length * unit(rng),
+                        kNearDepth + (kFarDepth - kNearDepth) * unit(rng),
+                        kWallHalfHeight * (2 * unit(rng) - 1));
+  }
+  std::sort(points.begin(), points.end(),
+            [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.x() < b.x(); });
+
+  // Camera frame: x = world x, y = world -z (image down), z = world y (towards the wall).
+  Eigen::Matrix3d world_from_cam_rotation;
+  world_from_cam_rotation << 1, 0, 0, 0, 0, 1, 0, -1, 0;
+  ImageSet images;
+  CameraIntrinsics camera;
+  camera.params = {kFocal, kFocal, kWidth / 2.0, kHeight / 2.0, 0, 0, 0, 0};
+  images.cameras = {camera};
+  PoseSet ground_truth;
+  std::vector<ImageFeatures> features(o.cameras);
+  // Per frame: the keypoint of each point it sees, by point index (sorted).
+  std::vector<std::vector<std::pair<int, int>>> seen(o.cameras);
+  for (int i = 0; i < o.cameras; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", i);
+    images.images.push_back({name, kWidth, kHeight, 0});
+    const Rigid3 pose(Eigen::Quaterniond(world_from_cam_rotation),
+                      Eigen::Vector3d(i * spacing, 0, 0));
+    ground_truth.world_from_cam[name] = pose;
+    const Rigid3 cam_from_world = pose.Inverse();
+    const double x_min = pose.translation.x() - footprint;
+    const auto first =
+        std::lower_bound(points.begin(), points.end(), x_min,
+                         [](const Eigen::Vector3d& p, double x) { return p.x() < x; });
+    std::vector<Eigen::Vector2d> pixels;
+    for (auto it = first; it != points.end() && it->x() < pose.translation.x() + footprint; ++it) {
+      const Eigen::Vector3d p = cam_from_world * *it;
+      const Eigen::Vector2d u(kFocal * p.x() / p.z() + kWidth / 2.0,
+                              kFocal * p.y() / p.z() + kHeight / 2.0);
+      if (u.x() < 0 || u.x() >= kWidth || u.y() < 0 || u.y() >= kHeight) continue;
+      seen[i].emplace_back(static_cast<int>(it - points.begin()), static_cast<int>(pixels.size()));
+      pixels.push_back(u + Eigen::Vector2d(noise(rng), noise(rng)));
+    }
+    features[i].keypoints.resize(static_cast<Eigen::Index>(pixels.size()), 4);
+    for (size_t k = 0; k < pixels.size(); ++k) {
+      features[i].keypoints.row(static_cast<Eigen::Index>(k)) << static_cast<float>(pixels[k].x()),
+          static_cast<float>(pixels[k].y()), 2.0f, 0.0f;
+    }
+  }
+
+  std::vector<PairMatches> pairs;
+  long long num_matches = 0;
+  for (int i = 0; i < o.cameras; ++i) {
+    for (int j = i + 1; j <= std::min(o.cameras - 1, i + o.window); ++j) {
+      std::vector<std::pair<uint32_t, uint32_t>> matches;
+      auto a = seen[i].begin();
+      auto b = seen[j].begin();
+      while (a != seen[i].end() && b != seen[j].end()) {
+        if (a->first < b->first) {
+          ++a;
+        } else if (b->first < a->first) {
+          ++b;
+        } else {
+          matches.emplace_back(a->second, b->second);
+          ++a;
+          ++b;
+        }
+      }
+      if (matches.size() < 20) continue;
+      const auto keypoints_j = static_cast<uint32_t>(seen[j].size());
+      for (auto& m : matches) {
+        if (unit(rng) < o.outliers) m.second = static_cast<uint32_t>(unit(rng) * keypoints_j);
+      }
+      PairMatches pair;
+      pair.image1 = i;
+      pair.image2 = j;
+      pair.matches.resize(static_cast<Eigen::Index>(matches.size()), 2);
+      for (size_t m = 0; m < matches.size(); ++m) {
+        pair.matches.row(static_cast<Eigen::Index>(m)) << matches[m].first, matches[m].second;
+      }
+      pair.geometry.config = TwoViewConfig::kCalibrated;
+      pair.geometry.inlier_matches = pair.matches;
+      num_matches += static_cast<long long>(matches.size());
+      pairs.push_back(std::move(pair));
+    }
+  }
+
+  PerturbationOptions perturbation;
+  perturbation.level_deg = o.level_deg;
+  perturbation.translation_unit = "metres";
+  perturbation.translation_per_deg = 0.0125 * kMedianDepth;
+  perturbation.seed = o.seed;
+  const PoseSet prior = PerturbPoses(ground_truth, perturbation);
+
+  std::filesystem::create_directories(o.out);
+  Provenance provenance;
+  provenance.stage = "synthetic_capture";
+  provenance.options = {{"cameras", o.cameras},   {"keypoints", o.keypoints},
+                        {"window", o.window},     {"noise_px", o.noise_px},
+                        {"outliers", o.outliers}, {"level_deg", o.level_deg},
+                        {"seed", o.seed}};
+  {
+    Hdf5Writer writer(o.out + "/dataset.h5");
+    writer.WriteImages(images);
+    writer.WritePoseSet("ground_truth", ground_truth, PoseRole::kGroundTruth, provenance);
+    writer.Commit();
+  }
+  {
+    Hdf5Writer writer(o.out + "/features.h5");
+    writer.WriteFeatures(features, provenance);
+    writer.Commit();
+  }
+  {
+    Hdf5Writer writer(o.out + "/matches.h5");
+    writer.WriteMatches(pairs, provenance);
+    writer.Commit();
+  }
+  {
+    Hdf5Writer writer(o.out + "/prior.h5");
+    writer.WritePoseSet("prior", prior, PoseRole::kPrior, provenance);
+    writer.Commit();
+  }
+  long long num_keypoints = 0;
+  for (const ImageFeatures& f : features) num_keypoints += f.keypoints.rows();
+  std::printf("%s\n", nlohmann::json({{"cameras", o.cameras},
+                                      {"points", num_points},
+                                      {"keypoints", num_keypoints},
+                                      {"pairs", pairs.size()},
+                                      {"matches", num_matches},
+                                      {"spacing_m", spacing}})
+                          .dump()
+                          .c_str());
+  return 0;
+}
+
+}  // namespace
+}  // namespace raytime
+
+int main(int argc, char** argv) { return raytime::Main(argc, argv); }
