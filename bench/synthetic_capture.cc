@@ -1,6 +1,7 @@
 // A synthetic video-like capture of any length, written in raytime's HDF5 schema (issue 14), for
-// the refiner's scaling benchmark (bench/refine_scaling.sh): cameras walk a straight corridor at a
-// fixed spacing, looking sideways at a wall of points 3–6 m away (the depths of a room capture);
+// the refiner's scaling benchmark (bench/refine_scaling.sh): cameras walk along a corridor at a
+// fixed spacing (swaying ±10 cm), looking sideways at a wall of points 3–6 m away (the depths of a
+// room capture);
 // every point a camera sees is one keypoint (0.5 px noise by default), and every pair of frames at
 // most --window apart is matched on the points both see, a --outliers fraction of each pair's
 // matches replaced by a random keypoint of the second frame. The prior is the ground truth
@@ -107,8 +108,11 @@ int Main(int argc, char** argv) {
     char name[32];
     std::snprintf(name, sizeof(name), "%06d.png", i);
     images.images.push_back({name, kWidth, kHeight, 0});
-    const Rigid3 pose(Eigen::Quaterniond(world_from_cam_rotation),
-                      Eigen::Vector3d(i * spacing, 0, 0));
+    // A hand-held walk, not a rail: the centre sways ±10 cm in depth and height (collinear
+    // centres would leave the roll about the corridor to the gauge and Sim(3) alignment undefined).
+    const Rigid3 pose(
+        Eigen::Quaterniond(world_from_cam_rotation),
+        Eigen::Vector3d(i * spacing, 0.1 * std::sin(0.13 * i), 0.1 * std::sin(0.07 * i)));
     ground_truth.world_from_cam[name] = pose;
     const Rigid3 cam_from_world = pose.Inverse();
     const double x_min = pose.translation.x() - footprint;
