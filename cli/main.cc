@@ -22,6 +22,7 @@
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
 #include "pipelines/stage.h"
+#include "pipelines/sweep.h"
 
 namespace fs = std::filesystem;
 
@@ -210,6 +211,15 @@ int Main(int argc, char** argv) {
   run->add_option("--cache-dir", run_options.cache_dir,
                   "Stage outputs shared between runs, by content key (sweeps default to "
                   "WORKDIR/cache)");
+  run->add_option("--backend", run_options.backend,
+                  "Where a sweep's runs execute: processes on this machine, or job arrays on a "
+                  "Slurm cluster (work directory and cache on a path every node sees)")
+      ->check(CLI::IsMember({"local", "slurm"}))
+      ->capture_default_str();
+  run->add_option("--partition", run_options.partition,
+                  "Slurm partition of the sweep's jobs (default: the cluster's)");
+  run->add_flag("--wait", run_options.slurm_wait,
+                "Slurm backend: wait until every run has ended and the tables are collected");
   bool no_report = false;
   run->add_flag("--no-report", no_report,
                 "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
@@ -257,6 +267,10 @@ int Main(int argc, char** argv) {
   report->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)")
       ->required();
   report->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
+  bool collect = false;
+  report->add_flag("--collect", collect,
+                   "First rebuild DIR/sweep.csv, sweep.json and summary.json from the runs' "
+                   "summaries (what the Slurm backend's last job does)");
   report
       ->add_option("--success-deg", report_options.success_rotation_deg,
                    "Success threshold on the mean Sim(3) rotation error, degrees")
@@ -300,7 +314,9 @@ int Main(int argc, char** argv) {
     // A sweep ends with its campaign report, so one command reproduces a ladder's tables and
     // plots; failed runs are listed in it, and the failure is still the exit status.
     const std::string effective_workdir = workdir.empty() ? spec.workdir : workdir;
-    const bool report_after = !spec.sweep.empty() && !no_report;
+    // With the Slurm backend the collect job writes the report (unless the sweep is awaited).
+    const bool report_after = !spec.sweep.empty() && !no_report &&
+                              (run_options.backend == "local" || run_options.slurm_wait);
     try {
       RunPipeline(spec, run_options);
     } catch (...) {
@@ -319,7 +335,10 @@ int Main(int argc, char** argv) {
     return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align, success_deg,
                               as_json);
   }
-  if (report->parsed()) return RunReportCommand(sweep_dir, report_dir, report_options);
+  if (report->parsed()) {
+    if (collect) CollectSweep(sweep_dir);
+    return RunReportCommand(sweep_dir, report_dir, report_options);
+  }
   if (resize->parsed()) {
     const int count = ResizeScene(resize_input, resize_output, resize_options);
     spdlog::info(fmt::format("resize-scene: wrote {} images to {}", count, resize_output));

@@ -22,6 +22,11 @@ struct RunOptions {
   bool force = false;     // rerun every stage even when unchanged
   std::string cache_dir;  // content-addressed stage outputs shared between runs ("" = none)
   int jobs = 0;           // concurrent sweep runs; 0 = number of cores
+  // Where a sweep's runs execute: "local" (processes on this machine, up to `jobs` at once) or
+  // "slurm" (job arrays on a Slurm cluster, pipelines/slurm_backend.h).
+  std::string backend = "local";
+  std::string partition;    // Slurm partition ("" = the cluster's default)
+  bool slurm_wait = false;  // wait for the Slurm jobs and return the sweep's summary
 };
 
 // Runs `spec` (no sweep) in `workdir`; returns the summary written to WORKDIR/summary.json.

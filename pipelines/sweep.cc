@@ -16,6 +16,7 @@
 #include "core/process.h"
 #include "core/timing.h"
 #include "core/version.h"
+#include "pipelines/slurm_backend.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -116,6 +117,46 @@ SweepRow SweepRowFromRun(const std::string& label,
   return row;
 }
 
+json CollectSweep(const std::string& workdir) {
+  const std::string list_path = (fs::path(workdir) / "runs.json").string();
+  if (!fs::exists(list_path)) {
+    ThrowInput(list_path, 0,
+               "no run list: not the work directory of a sweep (raytime run with a "
+               "sweep section writes it)");
+  }
+  const json list = json::parse(ReadTextFile(list_path), nullptr, false);
+  if (list.is_discarded() || !list.is_array()) ThrowInput(list_path, 0, "not a JSON array of runs");
+  std::vector<SweepRow> rows;
+  int failures = 0;
+  double seconds = 0.0;
+  for (const json& run : list) {
+    if (!run.is_object() || !run.contains("label") || !run.contains("dir")) {
+      ThrowInput(list_path, 0, "a run entry needs 'label', 'swept' and 'dir'");
+    }
+    rows.push_back(SweepRowFromRun(
+        run["label"].get<std::string>(),
+        run.value("swept", json::array()).get<std::vector<std::pair<std::string, std::string>>>(),
+        run["dir"].get<std::string>()));
+    if (!rows.back().Succeeded()) ++failures;
+    seconds += rows.back().seconds;
+  }
+  WriteSweepTables(workdir, rows);
+  json rows_json = json::array();
+  for (const SweepRow& row : rows) rows_json.push_back(row.ToJson());
+  const json summary = {{"raytime_version", Version()},
+                        {"workdir", workdir},
+                        {"runs", rows_json},
+                        {"num_runs", rows.size()},
+                        {"failures", failures},
+                        {"status", failures ? "failed" : "ok"},
+                        {"collected", true},
+                        {"run_seconds", seconds}};
+  WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
+  spdlog::info(fmt::format("sweep: collected {} runs ({} failed) into {}/sweep.csv", rows.size(),
+                           failures, workdir));
+  return summary;
+}
+
 json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   const std::vector<SweepRun> runs = ExpandSweep(spec);
   const int jobs = options.jobs > 0
@@ -133,6 +174,18 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     fs::create_directories(run_dirs.back());
     WriteTextFileAtomically((fs::path(run_dirs.back()) / "pipeline.yaml").string(),
                             PipelineToYaml(run.spec));
+  }
+
+  json run_list = json::array();
+  for (size_t i = 0; i < runs.size(); ++i) {
+    run_list.push_back({{"label", runs[i].label}, {"swept", runs[i].swept}, {"dir", run_dirs[i]}});
+  }
+  WriteTextFileAtomically((fs::path(workdir) / "runs.json").string(), run_list.dump(2));
+  if (options.backend == "slurm") {
+    return SubmitSweepToSlurm(spec, workdir, runs, run_dirs, cache_dir, options);
+  }
+  if (options.backend != "local") {
+    throw InputError("sweep: unknown backend '" + options.backend + "' (local or slurm)");
   }
 
   const auto start = std::chrono::steady_clock::now();
