@@ -10,7 +10,6 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <limits>
 
 namespace raytime {
 namespace {
@@ -750,16 +749,6 @@ void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
       (*target_jacobian)(a, c) = target[6 * a + c];
     }
   }
-}
-
-double RayTimeLmCost(const RayTimeLmProblem& problem, double scale_px2, int num_threads) {
-  State state;
-  state.world_from_cam = problem.world_from_cam;
-  for (Rigid3& pose : state.world_from_cam) pose.rotation.normalize();
-  state.ray_times = problem.ray_times;
-  state.UpdateRotations();
-  const ReducedCameraSystem system(problem);
-  return Cost(problem, state, scale_px2, num_threads, system);
 }
 
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,

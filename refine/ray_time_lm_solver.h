@@ -79,9 +79,6 @@ void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
                              Eigen::Vector2d* ray_time_jacobian,
                              Eigen::Matrix<double, 2, 6>* target_jacobian);
 
-// The objective at arctan scale a (the value Ceres reports as cost for the same problem).
-double RayTimeLmCost(const RayTimeLmProblem& problem, double scale_px2, int num_threads);
-
 // Solves every stage of the schedule in place; stops after a stage that fails (the reduced system
 // could not be factorized at any damping). Logs one line per stage and progress on long stages.
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
