@@ -129,7 +129,8 @@ struct RefineOptions {
   // 2.5 px, and after the bootstrap's match filter 1 wrong pair of 87 is left; on the clean scenes
   // the 122 solves within 1° of the truth keep every pair at or below 1.9 px, and the 4 that end
   // 3.5–16° off (Herz-Jesus-P8 and entry-P10 from 32°) fire with 20–71 % of their pairs. 0.1
-  // tolerates one bad pair in 10.
+  // tolerates one bad pair in 10; the auto preset, whose wrong-pair removal runs first, tolerates
+  // none (configs/presets/refine/auto.yaml says why).
   bool inconsistent_pairs_test = true;
   double inconsistent_pair_px = 4.0;            // pixels, per-pair median
   double max_inconsistent_pair_fraction = 0.1;  // of the pairs with used matches, in [0, 1)
