@@ -5,6 +5,7 @@
 #include <string>
 #include <utility>
 
+#include "core/camera.h"
 #include "core/error.h"
 #include "core/graph.h"
 
@@ -157,6 +158,31 @@ ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_
       layout.residuals.begin(), layout.residuals.end(),
       [](const CrossProjection& x, const CrossProjection& y) { return x.source < y.source; });
   return layout;
+}
+
+std::vector<bool> ObservedImages(const ProblemLayout& layout, int num_images) {
+  std::vector<bool> observed(num_images, false);
+  for (const CrossProjection& residual : layout.residuals) {
+    observed[layout.observations[residual.source].image] = true;
+    observed[layout.observations[residual.target].image] = true;
+  }
+  return observed;
+}
+
+ObservationRays FixedObservationRays(const RefineInput& input, const ProblemLayout& layout,
+                                     const CameraBlocks& cameras) {
+  ObservationRays out;
+  out.undistorted.resize(layout.observations.size());
+  out.rays.resize(layout.observations.size());
+  for (size_t o = 0; o < layout.observations.size(); ++o) {
+    const LayoutObservation& obs = layout.observations[o];
+    const double* intrinsics = cameras.Of(obs.image).params.data();
+    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
+                             input.keypoints[obs.image](obs.keypoint, 1)};
+    UndistortPixel(intrinsics, pixel, out.undistorted[o].data());
+    PixelToUnitRay(intrinsics, out.undistorted[o].data(), out.rays[o].data());
+  }
+  return out;
 }
 
 }  // namespace raytime

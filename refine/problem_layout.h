@@ -5,6 +5,9 @@
 #include <cstdint>
 #include <vector>
 
+#include <Eigen/Core>
+
+#include "refine/camera_blocks.h"
 #include "refine/refine.h"
 
 namespace raytime {
@@ -57,5 +60,19 @@ ProblemLayout BuildPerObservationLayout(const RefineInput& input, int max_matche
 // ray time on its anchor (its first observation in (image, keypoint) order), and the anchor's
 // ray point is projected into every other observation of the track in another image.
 ProblemLayout BuildAnchoredLayout(const RefineInput& input, int max_matches_per_pair, int seed);
+
+// Per image: whether some residual of the layout reaches it (the solvers hold the others at their
+// start: their only term is the prior, whose minimum is the anchor).
+std::vector<bool> ObservedImages(const ProblemLayout& layout, int num_images);
+
+// With every intrinsic held, each observation's undistorted pixel and unit ray in its camera frame
+// are constants of the solve (§3.2): computed once here, with the image's intrinsics block, by the
+// arithmetic of the evaluation cache's value pass (UndistortPixel, PixelToUnitRay).
+struct ObservationRays {
+  std::vector<Eigen::Vector2d> undistorted;  // per layout observation
+  std::vector<Eigen::Vector3d> rays;
+};
+ObservationRays FixedObservationRays(const RefineInput& input, const ProblemLayout& layout,
+                                     const CameraBlocks& cameras);
 
 }  // namespace raytime

@@ -57,24 +57,14 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   for (int c = 0; c < kNumIntrinsics; ++c) {
     if (!refined[c]) held.push_back(c);
   }
-  // Every intrinsic held: undistorted pixels and rays are constants of the solve, computed here
-  // once (the arithmetic of the cache's value pass), and the residuals hold them
-  // (FixedIntrinsicsCrossProjectionCost); the cache serves self-calibration.
+  // Every intrinsic held: undistorted pixels and rays are constants of the solve, computed once
+  // (FixedObservationRays), and the residuals hold them (FixedIntrinsicsCrossProjectionCost); the
+  // cache serves self-calibration.
   fixed_intrinsics_residuals_ =
       settings.use_evaluation_cache && held.size() == static_cast<size_t>(kNumIntrinsics);
-  std::vector<Eigen::Vector2d> undistorted;
-  std::vector<Eigen::Vector3d> rays;
+  ObservationRays fixed;
   if (fixed_intrinsics_residuals_) {
-    undistorted.resize(layout.observations.size());
-    rays.resize(layout.observations.size());
-    for (size_t o = 0; o < layout.observations.size(); ++o) {
-      const LayoutObservation& obs = layout.observations[o];
-      const double* intrinsics = intrinsics_block(cameras.camera_of_image[obs.image]);
-      const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
-                               input.keypoints[obs.image](obs.keypoint, 1)};
-      UndistortPixel(intrinsics, pixel, undistorted[o].data());
-      PixelToUnitRay(intrinsics, undistorted[o].data(), rays[o].data());
-    }
+    fixed = FixedObservationRays(input, layout, cameras);
   } else if (settings.use_evaluation_cache) {
     std::vector<ObservationCache::Source> sources(layout.observations.size());
     for (size_t o = 0; o < layout.observations.size(); ++o) {
@@ -122,12 +112,11 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
   match_loss_weight_ = num_scalar_residuals > 0 ? 2.0 / num_scalar_residuals : 0.0;
   match_loss_ = std::make_unique<ceres::LossFunctionWrapper>(
       ScaledArctan(settings.loss_scale_px2, match_loss_weight_), ceres::TAKE_OWNERSHIP);
-  camera_observed_.assign(num_cameras, false);
+  camera_observed_ = ObservedImages(layout, num_cameras);
   match_blocks_.reserve(layout.residuals.size());
   for (const CrossProjection& residual : layout.residuals) {
     const LayoutObservation& source = layout.observations[residual.source];
     const LayoutObservation& target = layout.observations[residual.target];
-    camera_observed_[source.image] = camera_observed_[target.image] = true;
     const int source_camera = cameras.camera_of_image[source.image];
     const int target_camera = cameras.camera_of_image[target.image];
     const Eigen::Vector2d source_pixel =
@@ -136,8 +125,9 @@ RayTimeProblem::RayTimeProblem(const RefineInput& input, const ProblemLayout& la
         input.keypoints[target.image].row(target.keypoint).transpose();
     if (fixed_intrinsics_residuals_) {
       match_blocks_.push_back(problem_->AddResidualBlock(
-          FixedIntrinsicsCrossProjectionCost::Create(
-              rays[residual.source], undistorted[residual.target], intrinsics_block(target_camera)),
+          FixedIntrinsicsCrossProjectionCost::Create(fixed.rays[residual.source],
+                                                     fixed.undistorted[residual.target],
+                                                     intrinsics_block(target_camera)),
           match_loss_.get(), pose_block(source.image), ray_time_block(source.ray_time),
           pose_block(target.image)));
     } else if (source_camera == target_camera) {

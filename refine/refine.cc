@@ -102,17 +102,6 @@ std::vector<double> ResidualNorms(const RefineInput& input, const ProblemLayout&
   return norms;
 }
 
-// Per image: whether some residual of the layout reaches it (the others are held at their start:
-// their only term is the prior, whose minimum is the anchor).
-std::vector<bool> ObservedImages(const ProblemLayout& layout, int num_images) {
-  std::vector<bool> observed(num_images, false);
-  for (const CrossProjection& residual : layout.residuals) {
-    observed[layout.observations[residual.source].image] = true;
-    observed[layout.observations[residual.target].image] = true;
-  }
-  return observed;
-}
-
 // The fixed-intrinsics problem for the ray-time LM solver: what RayTimeProblem gives Ceres with
 // FixedIntrinsicsCrossProjectionCost (the same undistorted pixels and unit rays, computed once;
 // the same weights), residuals ordered by ray time.
@@ -133,16 +122,7 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
     const auto& p = cameras.Of(i).params;
     problem.pinhole[i] << p[kFx], p[kFy], p[kCx], p[kCy];
   }
-  std::vector<Eigen::Vector2d> undistorted(layout.observations.size());
-  std::vector<Eigen::Vector3d> rays(layout.observations.size());
-  for (size_t o = 0; o < layout.observations.size(); ++o) {
-    const LayoutObservation& obs = layout.observations[o];
-    const double* intrinsics = cameras.Of(obs.image).params.data();
-    const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
-                             input.keypoints[obs.image](obs.keypoint, 1)};
-    UndistortPixel(intrinsics, pixel, undistorted[o].data());
-    PixelToUnitRay(intrinsics, undistorted[o].data(), rays[o].data());
-  }
+  const ObservationRays fixed = FixedObservationRays(input, layout, cameras);
   problem.residuals.reserve(layout.residuals.size());
   for (const CrossProjection& residual : layout.residuals) {
     const LayoutObservation& source = layout.observations[residual.source];
@@ -150,8 +130,8 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
     r.source_image = source.image;
     r.ray_time = source.ray_time;
     r.target_image = layout.observations[residual.target].image;
-    r.source_ray = rays[residual.source];
-    r.target_undistorted = undistorted[residual.target];
+    r.source_ray = fixed.rays[residual.source];
+    r.target_undistorted = fixed.undistorted[residual.target];
     problem.residuals.push_back(r);
   }
   std::stable_sort(problem.residuals.begin(), problem.residuals.end(),
@@ -233,7 +213,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     lm_problem.emplace(BuildRayTimeLmProblem(input, layout, anchor, state->world_from_cam,
                                              state->cameras, options.position_weight,
                                              settings.orientation_weight, std::move(ray_times)));
-    camera_observed = ObservedImages(layout, static_cast<int>(anchor.size()));
+    for (const bool held : lm_problem->held) camera_observed.push_back(!held);
   } else {
     RayTimeProblemSettings problem_settings;
     problem_settings.position_weight = options.position_weight;
