@@ -80,6 +80,20 @@ PriorLinearization LinearizePrior(const Rigid3& pose, const Rigid3& prior, doubl
   return out;
 }
 
+// Every image's prior term at `world_from_cam`, with the weights of `problem` (λp/N, λR/N).
+std::vector<PriorLinearization> LinearizePriors(const RayTimeLmProblem& problem,
+                                                const std::vector<Rigid3>& world_from_cam) {
+  const double rotation_scale = std::sqrt(2.0 * problem.orientation_weight);
+  const double centre_scale = std::sqrt(2.0 * problem.position_weight);
+  std::vector<PriorLinearization> priors;
+  priors.reserve(world_from_cam.size());
+  for (size_t i = 0; i < world_from_cam.size(); ++i) {
+    priors.push_back(LinearizePrior(world_from_cam[i], problem.prior_world_from_cam[i],
+                                    rotation_scale, centre_scale));
+  }
+  return priors;
+}
+
 // The reduced camera system's storage and the problem's fixed structure: the images that are
 // variables, each ray time's residual range, the camera pairs that couple (directly or through a
 // ray time) and the chunks of the parallel linearization.
@@ -335,12 +349,8 @@ double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px
   });
   double cost = 0.0;
   for (const double sum : chunk_sums) cost += sum;
-  const double rotation_scale = std::sqrt(2.0 * problem.orientation_weight);
-  const double centre_scale = std::sqrt(2.0 * problem.position_weight);
   double prior = 0.0;
-  for (size_t i = 0; i < state.world_from_cam.size(); ++i) {
-    const PriorLinearization p = LinearizePrior(
-        state.world_from_cam[i], problem.prior_world_from_cam[i], rotation_scale, centre_scale);
+  for (const PriorLinearization& p : LinearizePriors(problem, state.world_from_cam)) {
     prior += p.rotation_residual.squaredNorm() + p.centre_residual.squaredNorm();
   }
   return 0.5 * (cost + prior);
@@ -397,7 +407,7 @@ class Solver {
   // Builds the damped reduced camera system at the current point (radius μ: damping D/μ).
   void BuildReducedSystem(const ArctanLoss& loss, double radius);
   // From the cameras' step, the ray times' step (back-substitution) and the model's predicted
-  // cost decrease -(gᵀδ + ½ δᵀJᵀJδ).
+  // cost decrease -(gᵀδ + ½ δᵀJᵀJδ), at the point BuildReducedSystem linearized.
   double BackSubstitute(const ArctanLoss& loss, double radius, const Eigen::VectorXd& camera_step,
                         std::vector<double>* ray_time_step) const;
 
@@ -407,6 +417,7 @@ class Solver {
   State state_;
   ReducedCameraSystem::Partial total_;
   std::vector<Row6> damping_;
+  std::vector<PriorLinearization> priors_;  // per image, at the point of the reduced system
   Eigen::SparseMatrix<double> matrix_;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> factorization_;
   bool pattern_analyzed_ = false;
@@ -488,13 +499,12 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
   }
 
   // Pose priors: direct terms of each camera's diagonal block.
-  const double rotation_scale = std::sqrt(2.0 * problem_.orientation_weight);
-  const double centre_scale = std::sqrt(2.0 * problem_.position_weight);
-  for (size_t i = 0; i < state_.world_from_cam.size(); ++i) {
+  priors_ = LinearizePriors(problem_, state_.world_from_cam);
+  for (size_t i = 0; i < priors_.size(); ++i) {
     const int c = system_.variable(static_cast<int>(i));
     if (c < 0) continue;
-    const PriorLinearization p = LinearizePrior(
-        state_.world_from_cam[i], problem_.prior_world_from_cam[i], rotation_scale, centre_scale);
+    const PriorLinearization& p = priors_[i];
+    const double centre_scale = p.centre_scale;
     const Eigen::Matrix3d ata = p.rotation_jacobian.transpose() * p.rotation_jacobian;
     const Eigen::Vector3d gradient = p.rotation_jacobian.transpose() * p.rotation_residual;
     Block6& block = total_.blocks[c];
@@ -563,15 +573,12 @@ double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
   });
   double model = 0.0;
   for (const double m : chunk_model) model += m;
-  const double rotation_scale = std::sqrt(2.0 * problem_.orientation_weight);
-  const double centre_scale = std::sqrt(2.0 * problem_.position_weight);
-  for (size_t i = 0; i < state_.world_from_cam.size(); ++i) {
+  for (size_t i = 0; i < priors_.size(); ++i) {
     const int c = system_.variable(static_cast<int>(i));
     if (c < 0) continue;
-    const PriorLinearization p = LinearizePrior(
-        state_.world_from_cam[i], problem_.prior_world_from_cam[i], rotation_scale, centre_scale);
+    const PriorLinearization& p = priors_[i];
     const Eigen::Vector3d jr = p.rotation_jacobian * camera_step.segment<3>(6 * c);
-    const Eigen::Vector3d jc = centre_scale * camera_step.segment<3>(6 * c + 3);
+    const Eigen::Vector3d jc = p.centre_scale * camera_step.segment<3>(6 * c + 3);
     model += p.rotation_residual.dot(jr) + 0.5 * jr.squaredNorm() + p.centre_residual.dot(jc) +
              0.5 * jc.squaredNorm();
   }
