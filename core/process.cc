@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -18,8 +19,14 @@ extern char** environ;
 namespace raytime {
 namespace {
 
+// A word the shell reads back unchanged: as is when every character is one the shell never
+// interprets, else in single quotes.
 std::string Quoted(const std::string& s) {
-  if (!s.empty() && s.find_first_of(" \t'\"\\$`") == std::string::npos) return s;
+  const auto plain = [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) ||
+           (c != '\0' && std::strchr("_-./=:,@%+", c) != nullptr);
+  };
+  if (!s.empty() && std::all_of(s.begin(), s.end(), plain)) return s;
   std::string quoted = "'";
   for (const char c : s) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return quoted + "'";

@@ -40,7 +40,8 @@ struct ProcessStatus {
   std::string Describe() const;
 };
 
-// The arguments as one shell-quoted line, for logs and error messages.
+// The arguments as one shell-quoted line (each word read back unchanged by a POSIX shell), for
+// logs, error messages and generated scripts.
 std::string CommandLine(const std::vector<std::string>& argv);
 
 // Starts argv[0] (looked up in PATH when it has no '/') with `argv` and returns its process id

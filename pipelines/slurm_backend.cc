@@ -27,18 +27,6 @@ std::string SceneKey(const SweepRun& run) {
   return key;
 }
 
-std::string ShellQuote(const std::string& text) {
-  std::string quoted = "'";
-  for (const char c : text) {
-    if (c == '\'') {
-      quoted += "'\\''";
-    } else {
-      quoted += c;
-    }
-  }
-  return quoted + "'";
-}
-
 // Runs sbatch with `args` and returns the job id it prints (--parsable: "ID" or "ID;cluster").
 std::string Submit(const std::vector<std::string>& args, const std::string& slurm_dir,
                    const std::string& what) {
@@ -108,9 +96,9 @@ json SubmitSweepToSlurm(const PipelineSpec& spec, const std::string& workdir,
       "set -euo pipefail\n"
       "run=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" \"$1\")\n"
       "exec " +
-      ShellQuote(exe) + " run \"$run/pipeline.yaml\" --workdir \"$run\" --cache-dir " +
-      ShellQuote(fs::absolute(cache_dir).string()) + (options.force ? " --force" : "") +
-      " > \"$run/run.log\" 2>&1\n";
+      CommandLine({exe, "run"}) + " \"$run/pipeline.yaml\" --workdir \"$run\" " +
+      CommandLine({"--cache-dir", fs::absolute(cache_dir).string()}) +
+      (options.force ? " --force" : "") + " > \"$run/run.log\" 2>&1\n";
   WriteTextFileAtomically(task_script, script);
   fs::permissions(task_script, fs::perms::owner_all, fs::perm_options::add);
 
@@ -152,8 +140,8 @@ json SubmitSweepToSlurm(const PipelineSpec& spec, const std::string& workdir,
     args.push_back(dependency);
   }
   if (options.slurm_wait) args.push_back("--wait");
-  args.push_back("--wrap=" + ShellQuote(exe) + " report --sweep " +
-                 ShellQuote(fs::absolute(workdir).string()) + " --collect");
+  args.push_back("--wrap=" + CommandLine({exe, "report", "--sweep", fs::absolute(workdir).string(),
+                                          "--collect"}));
   spdlog::info(fmt::format(
       "sweep: submitting {} runs to Slurm ({} scene leaders, {} followers; {} done already), "
       "scripts and Slurm output in {}",

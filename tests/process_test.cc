@@ -19,6 +19,23 @@
 namespace raytime {
 namespace {
 
+// A command line the shell reads back word for word, whatever the words hold (scripts are
+// generated from it: the Slurm backend's task script).
+TEST(Process, CommandLineWordsSurviveTheShell) {
+  TempDir dir("process");
+  const std::vector<std::string> words = {
+      "plain-word_1.yaml", "a b", "it's", "$HOME", "x;y", "*", "a|b&c", "(x)", "~", "", "k=v,w"};
+  ProcessOptions options;
+  options.output_path = dir / "words.txt";
+  options.append_output = false;
+  ASSERT_TRUE(
+      RunProcess({"/bin/sh", "-c", "printf '<%s>\\n' " + CommandLine(words)}, options).Succeeded());
+  std::string expected;
+  for (const std::string& word : words) expected += "<" + word + ">\n";
+  EXPECT_EQ(ReadTextFile(options.output_path), expected);
+  EXPECT_EQ(CommandLine({"raytime", "run", "a.yaml"}), "raytime run a.yaml");
+}
+
 TEST(Process, ExitCodeAndOutputFile) {
   TempDir dir("process");
   ProcessOptions options;
