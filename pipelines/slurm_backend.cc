@@ -157,11 +157,7 @@ json SubmitSweepToSlurm(const PipelineSpec& spec, const std::string& workdir,
       fmt::format("sweep: Slurm jobs {} (then `raytime report --sweep {}`)", jobs.dump(), workdir));
   if (!options.slurm_wait) return submission;
   const json summary = CollectSweep(workdir);
-  const int failures = summary.value("failures", 0);
-  if (failures > 0) {
-    throw InputError(std::to_string(failures) + " of " + std::to_string(runs.size()) +
-                     " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
-  }
+  ThrowIfRunsFailed(summary.value("failures", 0), runs.size(), workdir);
   return summary;
 }
 

@@ -53,6 +53,20 @@ std::vector<std::string> FiredChecks(const json& verdict) {
   return fired;
 }
 
+// The sweep's tables (sweep.csv, sweep.json) and summary.json from the rows of its finished runs;
+// `fields` are the summary's own keys (status, counts, times). Returns the summary.
+json WriteSweepOutputs(const std::string& workdir, const std::vector<SweepRow>& table,
+                       json fields) {
+  WriteSweepTables(workdir, table);
+  json rows_json = json::array();
+  for (const SweepRow& row : table) rows_json.push_back(row.ToJson());
+  fields["raytime_version"] = Version();
+  fields["workdir"] = workdir;
+  fields["runs"] = rows_json;
+  WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), fields.dump(2));
+  return fields;
+}
+
 }  // namespace
 
 SweepRow SweepRowFromRun(const std::string& label,
@@ -140,21 +154,21 @@ json CollectSweep(const std::string& workdir) {
     if (!rows.back().Succeeded()) ++failures;
     seconds += rows.back().seconds;
   }
-  WriteSweepTables(workdir, rows);
-  json rows_json = json::array();
-  for (const SweepRow& row : rows) rows_json.push_back(row.ToJson());
-  const json summary = {{"raytime_version", Version()},
-                        {"workdir", workdir},
-                        {"runs", rows_json},
-                        {"num_runs", rows.size()},
-                        {"failures", failures},
-                        {"status", failures ? "failed" : "ok"},
-                        {"collected", true},
-                        {"run_seconds", seconds}};
-  WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
+  const json summary = WriteSweepOutputs(workdir, rows,
+                                         {{"num_runs", rows.size()},
+                                          {"failures", failures},
+                                          {"status", failures ? "failed" : "ok"},
+                                          {"collected", true},
+                                          {"run_seconds", seconds}});
   spdlog::info(fmt::format("sweep: collected {} runs ({} failed) into {}/sweep.csv", rows.size(),
                            failures, workdir));
   return summary;
+}
+
+void ThrowIfRunsFailed(int failures, size_t num_runs, const std::string& workdir) {
+  if (failures == 0) return;
+  throw InputError(std::to_string(failures) + " of " + std::to_string(num_runs) +
+                   " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
 }
 
 json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
@@ -199,14 +213,13 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     for (size_t i = 0; i < runs.size(); ++i) {
       if (finished[i]) table.push_back(rows[i]);
     }
-    WriteSweepTables(workdir, table);
-    json rows_json = json::array();
-    for (const SweepRow& row : table) rows_json.push_back(row.ToJson());
-    const json summary = {
-        {"raytime_version", Version()}, {"pipeline", spec.path}, {"name", spec.name},
-        {"workdir", workdir},           {"runs", rows_json},     {"num_runs", runs.size()},
-        {"failures", failures},         {"status", status},      {"seconds", SecondsSince(start)}};
-    WriteTextFileAtomically((fs::path(workdir) / "summary.json").string(), summary.dump(2));
+    WriteSweepOutputs(workdir, table,
+                      {{"pipeline", spec.path},
+                       {"name", spec.name},
+                       {"num_runs", runs.size()},
+                       {"failures", failures},
+                       {"status", status},
+                       {"seconds", SecondsSince(start)}});
   };
   // On SIGINT/SIGTERM: stop the running children (each writes its own "interrupted" summary),
   // keep every row finished so far, and say the sweep was interrupted.
@@ -252,10 +265,7 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     }
     write(done < runs.size() ? "running" : (failures ? "failed" : "ok"));
   }
-  if (failures) {
-    throw InputError(std::to_string(failures) + " of " + std::to_string(runs.size()) +
-                     " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
-  }
+  ThrowIfRunsFailed(failures, runs.size(), workdir);
   return json::parse(ReadTextFile((fs::path(workdir) / "summary.json").string()));
 }
 

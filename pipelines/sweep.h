@@ -25,6 +25,9 @@ nlohmann::json RunSweep(const PipelineSpec& spec, const std::string& workdir,
 // row. Returns the sweep's summary (status "ok" or "failed", "failures").
 nlohmann::json CollectSweep(const std::string& workdir);
 
+// The sweep's exit: an InputError saying how many of its runs failed, when any did.
+void ThrowIfRunsFailed(int failures, size_t num_runs, const std::string& workdir);
+
 // A run's row from its summary.json (a missing or unreadable one makes a failed row).
 SweepRow SweepRowFromRun(const std::string& label,
                          const std::vector<std::pair<std::string, std::string>>& swept,
