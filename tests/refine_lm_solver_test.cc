@@ -12,6 +12,7 @@
 #include "refine/refine.h"
 #include "tests/random_draws.h"
 #include "tests/refine_synthetic.h"
+#include "tests/refine_test_util.h"
 
 namespace raytime {
 namespace {
@@ -97,21 +98,6 @@ SyntheticSceneOptions NoisyScene() {
   return options;
 }
 
-std::vector<Rigid3> Jittered(const std::vector<Rigid3>& poses, double degrees, double metres,
-                             uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const auto draw = [&] { return u(rng); };
-  std::vector<Rigid3> out = poses;
-  for (Rigid3& pose : out) {
-    pose.rotation = Eigen::Quaterniond(
-                        Eigen::AngleAxisd(degrees * M_PI / 180.0, DrawVector3(draw).normalized())) *
-                    pose.rotation;
-    pose.translation += metres * DrawVector3(draw).normalized();
-  }
-  return out;
-}
-
 double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
   return Eigen::AngleAxisd(a.conjugate() * b).angle();
 }
@@ -121,7 +107,7 @@ double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
 // for both parameterizations.
 TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
-  scene.input.prior_world_from_cam = Jittered(scene.ground_truth, 3.0, 0.3, 11);
+  scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 3.0, 0.3, 11);
   for (const std::string parameterization : {"per_observation", "anchored"}) {
     for (const double orientation_weight : {0.0, 1e3}) {
       RefineOptions options;
@@ -174,7 +160,7 @@ TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
 // is there), and the others still converge; a held image does not enter the reduced system.
 TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
-  const std::vector<Rigid3> start = Jittered(scene.ground_truth, 1.0, 0.1, 5);
+  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.1, 5);
   RayTimeLmProblem problem;
   problem.world_from_cam = start;
   problem.prior_world_from_cam = start;
@@ -230,7 +216,7 @@ TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
 // times.
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
-  scene.input.prior_world_from_cam = Jittered(scene.ground_truth, 4.0, 0.4, 3);
+  scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 4.0, 0.4, 3);
   RefineOptions options;
   options.trust_region = false;
   options.orientation_weight = 0.0;

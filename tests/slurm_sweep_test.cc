@@ -15,19 +15,13 @@
 #include <string>
 #include <vector>
 
+#include "core/atomic_file.h"
 #include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
-
-std::string ReadFile(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream text;
-  text << in.rdbuf();
-  return text.str();
-}
 
 // sweep.csv without its timing columns ("seconds", "seconds.<stage>"), which differ run to run.
 std::string WithoutTimings(const std::string& csv) {
@@ -99,18 +93,19 @@ sweep:
   const CommandResult slurm_run = RunRaytime("run " + pipeline.string() + " --workdir " +
                                              slurm.string() + " --backend slurm --wait");
   ASSERT_EQ(slurm_run.exit_code, 0) << slurm_run.output;
-  const std::string local_table = WithoutTimings(ReadFile(local / "sweep.csv"));
+  const std::string local_table = WithoutTimings(ReadTextFile(local / "sweep.csv"));
   ASSERT_FALSE(local_table.empty());
-  EXPECT_EQ(WithoutTimings(ReadFile(slurm / "sweep.csv")), local_table);
+  EXPECT_EQ(WithoutTimings(ReadTextFile(slurm / "sweep.csv")), local_table);
   EXPECT_TRUE(fs::exists(slurm / "report.md")) << "the collect job writes the campaign report";
 
-  const nlohmann::json jobs = nlohmann::json::parse(ReadFile(slurm / "slurm" / "jobs.json"));
+  const nlohmann::json jobs = nlohmann::json::parse(ReadTextFile(slurm / "slurm" / "jobs.json"));
   EXPECT_EQ(jobs["jobs"]["leaders"]["runs"], 1);
   EXPECT_EQ(jobs["jobs"]["followers"]["runs"], 3);
   // The followers found the leader's features in the cache.
   int features_ran = 0;
   for (const auto& entry : fs::directory_iterator(slurm / "runs")) {
-    const nlohmann::json summary = nlohmann::json::parse(ReadFile(entry.path() / "summary.json"));
+    const nlohmann::json summary =
+        nlohmann::json::parse(ReadTextFile(entry.path() / "summary.json"));
     for (const auto& stage : summary["stages"]) {
       if (stage["id"] == "features" && stage["status"] == "ran") ++features_ran;
     }
@@ -124,10 +119,11 @@ sweep:
   const CommandResult again = RunRaytime("run " + pipeline.string() + " --workdir " +
                                          slurm.string() + " --backend slurm --wait");
   ASSERT_EQ(again.exit_code, 0) << again.output;
-  const nlohmann::json resubmitted = nlohmann::json::parse(ReadFile(slurm / "slurm" / "jobs.json"));
+  const nlohmann::json resubmitted =
+      nlohmann::json::parse(ReadTextFile(slurm / "slurm" / "jobs.json"));
   EXPECT_EQ(resubmitted["submitted"], 1);
   EXPECT_EQ(resubmitted["skipped"], 3);
-  EXPECT_EQ(WithoutTimings(ReadFile(slurm / "sweep.csv")), local_table);
+  EXPECT_EQ(WithoutTimings(ReadTextFile(slurm / "sweep.csv")), local_table);
   fs::remove_all(dir);
 }
 
