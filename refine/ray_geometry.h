@@ -14,6 +14,8 @@ namespace raytime {
 
 inline constexpr int kPoseBlockSize = 7;     // quaternion x, y, z, w + centre
 inline constexpr int kPoseCentreOffset = 4;  // index of O_i in the pose block
+// Paper §3.3: a ray time is a positive depth, bounded below at 1e-9 (both solvers).
+inline constexpr double kRayTimeLowerBound = 1e-9;
 
 // Row-major rotation matrix of a unit quaternion (x, y, z, w), the formula Eigen's
 // toRotationMatrix uses. Written out so the analytic derivative in the cached residual

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "refine/ray_geometry.h"
 #include "refine/refine.h"
 
 namespace raytime {
@@ -56,8 +57,6 @@ struct RayTimeLmProblem {
   double position_weight = 0.0;
   double orientation_weight = 0.0;
 };
-
-inline constexpr double kRayTimeLowerBound = 1e-9;  // §3.3
 
 struct RayTimeLmSettings {
   std::vector<double> scales;  // arctan scales a, px², in solve order (gnc_solver.h)

@@ -10,8 +10,7 @@
 namespace raytime {
 namespace {
 
-// Paper §3.3: ray times are bounded below at 1e-9, focal lengths positive.
-constexpr double kRayTimeLowerBound = 1e-9;
+// Paper §3.3: focal lengths positive (ray times: kRayTimeLowerBound).
 constexpr double kFocalLowerBound = 1e-9;  // pixels
 
 using PoseManifold =
