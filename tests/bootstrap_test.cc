@@ -31,7 +31,7 @@ Eigen::Matrix3d RandomRotation(std::mt19937& rng, double max_angle_rad) {
 }
 
 // Camera looking from `centre` towards `target` (camera-to-world; y roughly down).
-Eigen::Matrix3d LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
+Eigen::Matrix3d LookAtRotation(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
   const Eigen::Vector3d z = (target - centre).normalized();
   const Eigen::Vector3d x = Eigen::Vector3d::UnitZ().cross(z).normalized();
   const Eigen::Vector3d y = z.cross(x);
@@ -40,7 +40,7 @@ Eigen::Matrix3d LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& tar
   return r;
 }
 
-struct Scene {
+struct BootstrapScene {
   std::vector<Eigen::Matrix3d> rotations;  // world_from_cam
   std::vector<Eigen::Vector3d> centres;
   std::vector<Eigen::Vector3d> points;
@@ -48,14 +48,14 @@ struct Scene {
 
 // An orbit of cameras around a box of points near the origin (an object capture), camera height
 // and aim jittered so no configuration is special.
-Scene OrbitScene(int num_cameras, int num_points, std::mt19937& rng) {
-  Scene scene;
+BootstrapScene OrbitScene(int num_cameras, int num_points, std::mt19937& rng) {
+  BootstrapScene scene;
   std::uniform_real_distribution<double> jitter(-0.3, 0.3);
   for (int i = 0; i < num_cameras; ++i) {
     const double angle = 1.6 * M_PI * i / num_cameras;
     const Eigen::Vector3d centre(6 * std::cos(angle), 6 * std::sin(angle), 1.0 + jitter(rng));
     scene.centres.push_back(centre);
-    scene.rotations.push_back(LookAt(centre, DrawVector3([&] { return jitter(rng); })));
+    scene.rotations.push_back(LookAtRotation(centre, DrawVector3([&] { return jitter(rng); })));
   }
   std::uniform_real_distribution<double> box(-1.5, 1.5);
   for (int k = 0; k < num_points; ++k)
@@ -63,7 +63,7 @@ Scene OrbitScene(int num_cameras, int num_points, std::mt19937& rng) {
   return scene;
 }
 
-ViewGraphEdge TrueEdge(const Scene& scene, int i, int j) {
+ViewGraphEdge TrueEdge(const BootstrapScene& scene, int i, int j) {
   ViewGraphEdge e;
   e.image1 = i;
   e.image2 = j;
@@ -76,7 +76,7 @@ ViewGraphEdge TrueEdge(const Scene& scene, int i, int j) {
   return e;
 }
 
-std::vector<ViewGraphEdge> AllPairs(const Scene& scene) {
+std::vector<ViewGraphEdge> AllPairs(const BootstrapScene& scene) {
   std::vector<ViewGraphEdge> edges;
   const int n = static_cast<int>(scene.rotations.size());
   for (int i = 0; i < n; ++i) {
@@ -86,7 +86,8 @@ std::vector<ViewGraphEdge> AllPairs(const Scene& scene) {
 }
 
 // Largest angle between the estimated rotations and the truth after the best global rotation.
-double MaxRotationErrorDeg(const Scene& scene, const std::vector<Eigen::Matrix3d>& estimate,
+double MaxRotationErrorDeg(const BootstrapScene& scene,
+                           const std::vector<Eigen::Matrix3d>& estimate,
                            const std::vector<bool>& registered) {
   std::vector<Eigen::Matrix3d> offsets;
   for (size_t i = 0; i < estimate.size(); ++i) {
@@ -103,7 +104,8 @@ double MaxRotationErrorDeg(const Scene& scene, const std::vector<Eigen::Matrix3d
 }
 
 // Largest centre error after the Sim(3) fit, relative to the scene's spread.
-double MaxCentreErrorRelative(const Scene& scene, const std::vector<Eigen::Vector3d>& estimate) {
+double MaxCentreErrorRelative(const BootstrapScene& scene,
+                              const std::vector<Eigen::Vector3d>& estimate) {
   const Sim3 fit = FitAlignment(estimate, scene.centres, AlignmentKind::kSim3);
   double worst = 0;
   for (size_t i = 0; i < estimate.size(); ++i) {
@@ -121,7 +123,7 @@ TEST(ViewGraph, ComponentsAreOrderedBySize) {
 
 TEST(RotationAveraging, ExactOnNoiseFreeGraph) {
   std::mt19937 rng(1);
-  const Scene scene = OrbitScene(12, 0, rng);
+  const BootstrapScene scene = OrbitScene(12, 0, rng);
   const std::vector<ViewGraphEdge> edges = AllPairs(scene);
   std::vector<int> all(edges.size());
   for (size_t k = 0; k < all.size(); ++k) all[k] = static_cast<int>(k);
@@ -135,7 +137,7 @@ TEST(RotationAveraging, ExactOnNoiseFreeGraph) {
 
 TEST(RotationAveraging, RegistersOnlyTheLargestComponent) {
   std::mt19937 rng(2);
-  const Scene scene = OrbitScene(6, 0, rng);
+  const BootstrapScene scene = OrbitScene(6, 0, rng);
   const std::vector<ViewGraphEdge> edges = {TrueEdge(scene, 0, 1), TrueEdge(scene, 1, 2),
                                             TrueEdge(scene, 3, 4)};
   const RotationAveragingResult result =
@@ -149,7 +151,7 @@ TEST(RotationAveraging, RegistersOnlyTheLargestComponent) {
 
 TEST(TranslationAveraging, ExactOnNoiseFreeGraphUpToSimilarity) {
   std::mt19937 rng(3);
-  const Scene scene = OrbitScene(10, 0, rng);
+  const BootstrapScene scene = OrbitScene(10, 0, rng);
   std::vector<RelativeDirection> directions;
   for (int i = 0; i < 10; ++i) {
     for (int j = i + 1; j < 10; ++j) {
@@ -176,7 +178,7 @@ TEST(TranslationAveraging, RejectsNonUnitDirections) {
 // by gross outliers: random relative rotations and translation directions.
 TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
   std::mt19937 rng(4);
-  const Scene scene = OrbitScene(16, 0, rng);
+  const BootstrapScene scene = OrbitScene(16, 0, rng);
   BootstrapResult result;
   result.edges = AllPairs(scene);
   std::vector<bool> outlier(result.edges.size(), false);
@@ -217,7 +219,7 @@ TEST(Bootstrap, RobustToTwentyPercentOutlierPairs) {
 
 TEST(Bootstrap, FragilityIsSmallOnCleanGraph) {
   std::mt19937 rng(5);
-  const Scene scene = OrbitScene(12, 0, rng);
+  const BootstrapScene scene = OrbitScene(12, 0, rng);
   BootstrapResult result;
   result.edges = AllPairs(scene);
   std::normal_distribution<double> normal;
@@ -232,7 +234,7 @@ TEST(Bootstrap, FragilityIsSmallOnCleanGraph) {
 
 TEST(Bootstrap, PureRotationPairsServeRotationsOnly) {
   std::mt19937 rng(6);
-  const Scene scene = OrbitScene(8, 0, rng);
+  const BootstrapScene scene = OrbitScene(8, 0, rng);
   BootstrapResult result;
   result.edges = AllPairs(scene);
   for (auto& e : result.edges) {
@@ -293,7 +295,7 @@ Eigen::Vector3d Noisy(const Eigen::Vector3d& ray, double sigma_rad, std::mt19937
 
 TEST(RelativePose, FivePointRecoversPoseWithOutliers) {
   std::mt19937 rng(7);
-  const Scene scene = OrbitScene(8, 300, rng);
+  const BootstrapScene scene = OrbitScene(8, 300, rng);
   const int i = 1, j = 3;
   Eigen::Matrix3Xd b1(3, 300), b2(3, 300);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -365,7 +367,7 @@ TEST(LookAtSeed, NeverDegenerate) {
   }
   // An orbit: each camera at unit distance behind its optical axis, which passes the origin.
   std::mt19937 rng(9);
-  const Scene scene = OrbitScene(8, 0, rng);
+  const BootstrapScene scene = OrbitScene(8, 0, rng);
   const LookAtSeedResult orbit = LookAtSeed(scene.rotations, options);
   EXPECT_FALSE(orbit.spread_fallback);
   for (size_t i = 0; i < scene.rotations.size(); ++i) {
@@ -376,13 +378,13 @@ TEST(LookAtSeed, NeverDegenerate) {
 
 // Features and matches of a synthetic orbit seen by a pinhole camera with distortion.
 struct SyntheticCapture {
-  Scene scene;
+  BootstrapScene scene;
   ImageSet images;
   std::vector<ImageFeatures> features;
   std::vector<PairMatches> matches;
 };
 
-SyntheticCapture MakeCapture(const Scene& scene, const CameraIntrinsics& camera,
+SyntheticCapture MakeCapture(const BootstrapScene& scene, const CameraIntrinsics& camera,
                              std::mt19937& rng) {
   SyntheticCapture capture;
   capture.scene = scene;
@@ -442,22 +444,22 @@ SyntheticCapture MakeCapture(const Scene& scene, const CameraIntrinsics& camera,
 
 SyntheticCapture MakeCapture(int num_cameras, int num_points, const CameraIntrinsics& camera,
                              std::mt19937& rng) {
-  const Scene scene = OrbitScene(num_cameras, num_points, rng);
+  const BootstrapScene scene = OrbitScene(num_cameras, num_points, rng);
   return MakeCapture(scene, camera, rng);
 }
 
 // A slow hand-held sweep like issue 13's desk capture: the camera turns by `step_deg` per frame
 // about a centre that drifts by `baseline` per frame, facing points 3 to 6 units away, so every
 // pair is a near-pure rotation (here at most 0.4° of parallax).
-Scene SweepScene(int num_cameras, double step_deg, double baseline, int num_points,
-                 std::mt19937& rng) {
-  Scene scene;
+BootstrapScene SweepScene(int num_cameras, double step_deg, double baseline, int num_points,
+                          std::mt19937& rng) {
+  BootstrapScene scene;
   for (int i = 0; i < num_cameras; ++i) {
     const double yaw = RadiansFromDegrees(step_deg * i);
     const Eigen::Vector3d centre(baseline * i, 0.0, 0.0);
     scene.centres.push_back(centre);
     scene.rotations.push_back(
-        LookAt(centre, centre + Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.05)));
+        LookAtRotation(centre, centre + Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.05)));
   }
   std::uniform_real_distribution<double> azimuth(RadiansFromDegrees(-30.0),
                                                  RadiansFromDegrees(step_deg * num_cameras + 30));
@@ -596,7 +598,7 @@ TEST(FocalSearch, FindsTheFocalOfAnUndistortedCamera) {
 
 TEST(PriorRepair, RotationsOnlyAndFullReplacement) {
   std::mt19937 rng(13);
-  const Scene scene = OrbitScene(8, 0, rng);
+  const BootstrapScene scene = OrbitScene(8, 0, rng);
   // Bootstrap poses in their own gauge: a similarity away from the truth.
   Sim3 gauge;
   gauge.scale = 0.3;

@@ -14,18 +14,13 @@
 #include "core/formats/dataset.h"
 #include "core/formats/npz.h"
 #include "tests/capture_fixtures.h"
+#include "tests/expect_pose.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
-
-void ExpectPoseNear(const Rigid3& actual, const Rigid3& expected, double tolerance,
-                    const std::string& what) {
-  EXPECT_LT(RotationDistance(actual.rotation, expected.rotation), tolerance) << what;
-  EXPECT_LT((actual.translation - expected.translation).norm(), tolerance) << what;
-}
 
 // The intrinsics the reader gives image `name` equal the fixture's K.
 void ExpectCamera(const ImageSet& images, const std::string& name, const Eigen::Matrix3d& K,

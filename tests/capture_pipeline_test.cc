@@ -18,18 +18,13 @@
 #include "frontend/video_frames.h"
 #include "pipelines/stage.h"
 #include "tests/capture_fixtures.h"
+#include "tests/expect_pose.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
-
-void ExpectPoseNear(const Rigid3& actual, const Rigid3& expected, double tolerance,
-                    const std::string& what) {
-  EXPECT_LT(RotationDistance(actual.rotation, expected.rotation), tolerance) << what;
-  EXPECT_LT((actual.translation - expected.translation).norm(), tolerance) << what;
-}
 
 // The geodesic between two poses, independent of core/timestamps.
 Rigid3 Between(const Rigid3& a, const Rigid3& b, double fraction) {

@@ -71,15 +71,15 @@ Eigen::Matrix3d RandomMatrix(std::mt19937& rng) {
 
 // Four images over two cameras (one with distortion), keypoints on a 1/256 px grid (so the 0.5
 // px shift is exact in float32), random descriptors, five pairs including an empty one.
-struct Scene {
+struct DatabaseScene {
   ImageSet images;
   std::vector<ImageFeatures> features;
   std::vector<PairMatches> pairs;
 };
 
-Scene MakeScene() {
+DatabaseScene MakeDatabaseScene() {
   std::mt19937 rng(7);
-  Scene s;
+  DatabaseScene s;
   CameraIntrinsics pinhole;
   pinhole.width = 768;
   pinhole.height = 512;
@@ -164,7 +164,7 @@ TEST(ColmapDatabase, PairIdsAreColmaps) {
 
 TEST(ColmapDatabase, RoundTripIsLossless) {
   TempDir dir("colmapdb");
-  const Scene s = MakeScene();
+  const DatabaseScene s = MakeDatabaseScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
   const ColmapDatabase db = ReadColmapDatabase(path);
@@ -208,7 +208,7 @@ TEST(ColmapDatabase, KeypointShiftLosesAtMostOneUlp) {
   // Arbitrary float32 coordinates: x + 0.5 is exact unless it needs a bit more than x has (x < 1,
   // or x within 0.5 px under a power of two).
   TempDir dir("colmapdb");
-  Scene s = MakeScene();
+  DatabaseScene s = MakeDatabaseScene();
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(-0.5f, 1919.5f);
   int exact = 0, total = 0;
@@ -317,7 +317,7 @@ TEST(ColmapDatabase, ExportShiftsKeypointsPrincipalPointAndFundamentalMatrix) {
 
 TEST(ColmapDatabase, OpencvCameraModelOnRequest) {
   TempDir dir("colmapdb");
-  const Scene s = MakeScene();
+  const DatabaseScene s = MakeDatabaseScene();
   WriteColmapDatabase(dir / "database.db", s.images, s.features, s.pairs, "OPENCV");
   const std::string params = SqlBlob(dir / "database.db", "SELECT params FROM cameras");
   EXPECT_EQ(params.size(), 8 * sizeof(double));
@@ -338,7 +338,7 @@ TEST(ColmapDatabase, OpencvCameraModelOnRequest) {
 // image ids that do not follow name order, so the pair must be turned around on import.
 TEST(ColmapDatabase, ImportsAffineKeypointsAndSwappedPairs) {
   TempDir dir("colmapdb");
-  const Scene s = MakeScene();
+  const DatabaseScene s = MakeDatabaseScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
   // Image ids 1 and 2 exchange names: "a/0000.jpg" becomes id 2 (with id 2's keypoints).
@@ -428,7 +428,7 @@ TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
       << other;
   EXPECT_NE(other.find("tables found: images, notes"), std::string::npos) << other;
 
-  const Scene s = MakeScene();
+  const DatabaseScene s = MakeDatabaseScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
   const std::string copy = dir / "corrupt.db";
@@ -466,7 +466,7 @@ TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
 
 TEST(ColmapDatabase, ExportIsAtomicAndChecksItsInput) {
   TempDir dir("colmapdb");
-  const Scene s = MakeScene();
+  const DatabaseScene s = MakeDatabaseScene();
   const std::string path = dir / "database.db";
   WriteColmapDatabase(path, s.images, s.features, s.pairs);
   const auto size = fs::file_size(path);

@@ -67,18 +67,18 @@ double ExactlyShiftable(std::mt19937_64& rng) {
   return c;
 }
 
-struct Scene {
+struct DatasetScene {
   ImageSet images;
   PoseSet poses;
 };
 
 // Random rotations (uniform on SO(3) via normalized Gaussian quaternions) and centres; three
 // cameras, one with OpenCV distortion.
-Scene MakeScene(int num_images, int num_cameras, uint64_t seed) {
+DatasetScene MakeDatasetScene(int num_images, int num_cameras, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal;
   std::uniform_real_distribution<double> uniform(-10.0, 10.0);
-  Scene scene;
+  DatasetScene scene;
   for (int c = 0; c < num_cameras; ++c) {
     CameraIntrinsics k;
     k.width = 1536 + 64 * c;
@@ -138,7 +138,7 @@ void ExpectImagesEqual(const ImageSet& expected, const ImageSet& actual) {
 }
 
 TEST(Formats, ColmapTextBinaryAndTransformsJsonRoundTrip) {
-  const Scene scene = MakeScene(12, 3, 1);
+  const DatasetScene scene = MakeDatasetScene(12, 3, 1);
   TempDir tmp("formats");
 
   WriteColmapModelText(ToColmapModel(scene.images, scene.poses), tmp / "text");
@@ -167,7 +167,7 @@ TEST(Formats, ColmapTextBinaryAndTransformsJsonRoundTrip) {
 }
 
 TEST(Formats, ColmapCameraConventions) {
-  const Scene scene = MakeScene(2, 2, 2);
+  const DatasetScene scene = MakeDatasetScene(2, 2, 2);
   const ColmapModel model = ToColmapModel(scene.images, scene.poses);
   const ColmapCamera& pinhole = model.cameras.at(1);
   const ColmapCamera& opencv = model.cameras.at(2);
@@ -270,7 +270,7 @@ TEST(Formats, ColmapReaderPrefersBinaryAndNormalizesQuaternions) {
 }
 
 TEST(Formats, TumRoundTrip) {
-  const Scene scene = MakeScene(6, 1, 3);
+  const DatasetScene scene = MakeDatasetScene(6, 1, 3);
   TempDir tmp("formats");
   WriteTumTrajectory(tmp / "poses.txt", scene.poses);
   ExpectPosesEqual(scene.poses, ReadTumTrajectory(tmp / "poses.txt"));
@@ -354,7 +354,7 @@ TEST(Formats, StrechaReadsRealScene) {
 }
 
 TEST(Formats, StrechaRoundTrip) {
-  const Scene scene = MakeScene(1, 1, 4);
+  const DatasetScene scene = MakeDatasetScene(1, 1, 4);
   const StrechaCamera camera{scene.images.cameras[0], scene.poses.world_from_cam.begin()->second};
   TempDir tmp("formats");
   WriteStrechaCamera(tmp / "a.jpg.camera", camera);
@@ -380,7 +380,7 @@ TEST(FormatsBadInput, StrechaWrongNumberCount) {
 }
 
 TEST(FormatsBadInput, StrechaSceneMissingImage) {
-  const Scene scene = MakeScene(2, 1, 5);
+  const DatasetScene scene = MakeDatasetScene(2, 1, 5);
   TempDir tmp("formats");
   for (const auto& [name, pose] : scene.poses.world_from_cam) {
     WriteStrechaCamera(tmp / ("scene/gt_dense_cameras/" + name + ".camera"),
@@ -412,7 +412,7 @@ TEST(FormatsBadInput, TransformsJson3x3Matrix) {
 }
 
 TEST(FormatsBadInput, ColmapMalformedTextLine) {
-  const Scene scene = MakeScene(3, 1, 6);
+  const DatasetScene scene = MakeDatasetScene(3, 1, 6);
   TempDir tmp("formats");
   const std::string dir = tmp / "model";
   WriteColmapModelText(ToColmapModel(scene.images, scene.poses), dir);
@@ -444,7 +444,7 @@ TEST(FormatsBadInput, ColmapMalformedTextLine) {
 }
 
 TEST(FormatsBadInput, ColmapTruncatedBinary) {
-  const Scene scene = MakeScene(3, 2, 7);
+  const DatasetScene scene = MakeDatasetScene(3, 2, 7);
   TempDir tmp("formats");
   const std::string dir = tmp / "model";
   WriteColmapModelBinary(ToColmapModel(scene.images, scene.poses), dir);
@@ -485,7 +485,7 @@ TEST(FormatsBadInput, ColmapTruncatedBinary) {
 }
 
 TEST(FormatsBadInput, NameMismatchIsReported) {
-  Scene scene = MakeScene(3, 1, 8);
+  DatasetScene scene = MakeDatasetScene(3, 1, 8);
   scene.poses.world_from_cam["stray.jpg"] = Rigid3();
   TempDir tmp("formats");
   for (const auto& write : std::vector<std::function<void()>>{
@@ -498,7 +498,7 @@ TEST(FormatsBadInput, NameMismatchIsReported) {
 }
 
 TEST(FormatsBadInput, WritersLeaveNoPartialFiles) {
-  const Scene scene = MakeScene(3, 1, 9);
+  const DatasetScene scene = MakeDatasetScene(3, 1, 9);
   TempDir tmp("formats");
   const std::string dir = tmp / "model";
   const ColmapModel model = ToColmapModel(scene.images, scene.poses);

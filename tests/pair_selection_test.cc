@@ -22,7 +22,7 @@ namespace {
 using Pairs = std::vector<std::pair<int, int>>;
 
 // A camera at `centre` looking at `target` (y down, roughly along the world's -z).
-PairSelectionView LookAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
+PairSelectionView ViewLookingAt(const Eigen::Vector3d& centre, const Eigen::Vector3d& target) {
   PairSelectionView view;
   view.has_pose = true;
   const Eigen::Vector3d z = (target - centre).normalized();
@@ -46,7 +46,8 @@ std::vector<PairSelectionView> Ring(int n, double radius = 5.0) {
   std::vector<PairSelectionView> views;
   for (int i = 0; i < n; ++i) {
     const double a = 2 * M_PI * i / n;
-    views.push_back(LookAt(radius * Eigen::Vector3d(std::cos(a), std::sin(a), 0), {0, 0, 0}));
+    views.push_back(
+        ViewLookingAt(radius * Eigen::Vector3d(std::cos(a), std::sin(a), 0), {0, 0, 0}));
   }
   return views;
 }
@@ -77,7 +78,7 @@ TEST(PairSelection, OverlapIsSymmetricAndFallsWithAngle) {
     previous = overlap;
   }
   // A camera looking away from the object sees none of it.
-  const PairSelectionView away = LookAt({0, 0, 20}, {0, 0, 40});
+  const PairSelectionView away = ViewLookingAt({0, 0, 20}, {0, 0, 40});
   EXPECT_EQ(ViewOverlap(ring[0], 5, away, 5, 4, 75), 0.0);
 }
 
@@ -93,7 +94,7 @@ TEST(PairSelection, AutoSceneDepthIsTheRingRadius) {
 TEST(PairSelection, ParallelAxesFallBackToTheCaptureExtent) {
   // A sideways sweep: cameras on a line, all looking the same way (no converging axes).
   std::vector<PairSelectionView> line;
-  for (int i = 0; i < 5; ++i) line.push_back(LookAt({i - 2.0, 0, 0}, {i - 2.0, 10, 0}));
+  for (int i = 0; i < 5; ++i) line.push_back(ViewLookingAt({i - 2.0, 0, 0}, {i - 2.0, 10, 0}));
   std::string source;
   const std::vector<double> depths = SceneDepths(line, 0.0, &source);
   EXPECT_EQ(source, "extent");
@@ -128,7 +129,7 @@ TEST(PairSelection, KBoundsEachImagesOwnChoiceOnAnIrregularRing) {
   const int n = 40;
   for (int i = 0; i < n; ++i) {
     const double a = 2 * M_PI * (i + jitter(rng)) / n;
-    views.push_back(LookAt(5 * Eigen::Vector3d(std::cos(a), std::sin(a), 0), {0, 0, 0}));
+    views.push_back(ViewLookingAt(5 * Eigen::Vector3d(std::cos(a), std::sin(a), 0), {0, 0, 0}));
   }
   PriorPairOptions options;
   options.prior_neighbors = 3;
@@ -143,7 +144,7 @@ TEST(PairSelection, OppositeAndFarCamerasAreNeverPaired) {
   std::vector<PairSelectionView> views = Ring(n);
   // Camera 20 looks at the object from 10x the distance, behind camera 0: it sees the object at a
   // tenth of the resolution.
-  views.push_back(LookAt(views[0].centre * 10.0, {0, 0, 0}));
+  views.push_back(ViewLookingAt(views[0].centre * 10.0, {0, 0, 0}));
   PriorPairOptions options;
   options.prior_neighbors = n;  // everything that passes the gates
   options.prior_min_overlap = 0;
@@ -235,7 +236,7 @@ TEST(PairSelection, ImagesWithoutAPoseArePairedByTheWindowOnly) {
 TEST(PairSelection, AnIsolatedCameraIsReportedUnpaired) {
   std::vector<PairSelectionView> views = Ring(12);
   // Camera 12 looks away from the object, up at the sky.
-  views.push_back(LookAt({0, 0, 20}, {0, 0, 40}));
+  views.push_back(ViewLookingAt({0, 0, 20}, {0, 0, 40}));
   PairSelectionSummary summary;
   SelectPriorPairs(views, PriorPairOptions(), &summary);
   EXPECT_EQ(summary.unpaired_images, std::vector<int>({12}));

@@ -111,7 +111,7 @@ TEST(PipelineOptionsTest, TextThatIsNotUtf8IsRefusedWhereItIsRead) {
   std::ofstream(latin1_option) << "name: d\xc3\xa9mo \xe2\x82\xac \xf0\x9f\x93\xb7\n"
                                << "dataset: {format: strecha, root: r\xc3\xa9}\n";
   EXPECT_EQ(LoadPipeline(latin1_option).name, "d\xc3\xa9mo \xe2\x82\xac \xf0\x9f\x93\xb7");
-  EXPECT_EQ(InvalidUtf8Offset("\xed\xa0\x80"), 0u);      // a surrogate
+  EXPECT_EQ(InvalidUtf8Offset("\xed\xa0\x80"), 0u);        // a surrogate
   EXPECT_EQ(InvalidUtf8Offset("ab\xf4\x90\x80\x80"), 2u);  // beyond U+10FFFF
   EXPECT_EQ(InvalidUtf8Offset("abc\xe2\x82"), 3u);         // cut short
 }

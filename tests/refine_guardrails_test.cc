@@ -25,8 +25,7 @@
 namespace raytime {
 namespace {
 
-double MeanRotationErrorDeg(const std::vector<Rigid3>& estimate,
-                            const std::vector<Rigid3>& truth) {
+double MeanRotationErrorDeg(const std::vector<Rigid3>& estimate, const std::vector<Rigid3>& truth) {
   PoseErrorOptions options;
   options.alignment = "sim3";
   return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options).mean_rotation_deg;

@@ -13,11 +13,10 @@
 #include <string>
 
 #include "core/error.h"
-#include "evaluate/perturbation.h"
-#include "evaluate/pose_errors.h"
 #include "refine/camera_blocks.h"
 #include "refine/refine.h"
 #include "tests/refine_synthetic.h"
+#include "tests/refine_test_util.h"
 
 namespace raytime {
 namespace {
@@ -37,21 +36,6 @@ SyntheticSceneOptions Scene(bool drift) {
     options.principal_point_drift_px = 8.0;
   }
   return options;
-}
-
-PoseErrorSummary Errors(const std::vector<Rigid3>& estimate, const std::vector<Rigid3>& truth,
-                        const std::string& alignment) {
-  PoseErrorOptions options;
-  options.alignment = alignment;
-  return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options);
-}
-
-std::vector<Rigid3> PerturbedPrior(const SyntheticScene& scene, double level_deg, int seed) {
-  PerturbationOptions perturbation;
-  perturbation.level_deg = level_deg;
-  perturbation.seed = seed;
-  return FromPoseSet(PerturbPoses(ToPoseSet(scene.ground_truth), perturbation),
-                     static_cast<int>(scene.ground_truth.size()));
 }
 
 // GNC without the object-scale trust region (these scenes are 16 m deep) and, as the basin

@@ -87,7 +87,7 @@ TEST(RayTimeLmSolverTest, JacobiansMatchNumericDifferentiation) {
   }
 }
 
-SyntheticSceneOptions NoisyScene() {
+SyntheticSceneOptions DistortedNoisyScene() {
   SyntheticSceneOptions options;
   options.num_cameras = 8;
   options.num_points = 250;
@@ -106,7 +106,7 @@ double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
 // rounding), and, converged tightly, the same minimum, with and without the orientation prior and
 // for both parameterizations.
 TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
-  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 3.0, 0.3, 11);
   for (const std::string parameterization : {"per_observation", "anchored"}) {
     for (const double orientation_weight : {0.0, 1e3}) {
@@ -159,7 +159,7 @@ TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
 // An image no residual reaches is held at its start (its only term is the prior, whose minimum
 // is there), and the others still converge; a held image does not enter the reduced system.
 TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
-  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.1, 5);
   RayTimeLmProblem problem;
   problem.world_from_cam = start;
@@ -215,7 +215,7 @@ TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
 // Bit-identical on any thread count (fixed chunks summed in a fixed order), including the ray
 // times.
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
-  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 4.0, 0.4, 3);
   RefineOptions options;
   options.trust_region = false;

@@ -11,8 +11,6 @@
 #include <set>
 #include <string>
 
-#include "evaluate/perturbation.h"
-#include "evaluate/pose_errors.h"
 #include "refine/gauge_polish.h"
 #include "refine/refine.h"
 #include "tests/refine_synthetic.h"
@@ -42,13 +40,6 @@ SyntheticSceneOptions SmallNoisyScene() {
   return options;
 }
 
-PoseErrorSummary Errors(const std::vector<Rigid3>& estimate, const std::vector<Rigid3>& truth,
-                        const std::string& alignment) {
-  PoseErrorOptions options;
-  options.alignment = alignment;
-  return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options);
-}
-
 // The `basin` configuration of the paper's ladders (§4.8): trust region off, λR = 0, cap 100.
 RefineOptions BasinOptions() {
   RefineOptions options;
@@ -57,14 +48,6 @@ RefineOptions BasinOptions() {
   options.max_matches_per_pair = 100;
   options.num_threads = 2;
   return options;
-}
-
-std::vector<Rigid3> PerturbedPrior(const SyntheticScene& scene, double level_deg, int seed) {
-  PerturbationOptions perturbation;
-  perturbation.level_deg = level_deg;
-  perturbation.seed = seed;
-  return FromPoseSet(PerturbPoses(ToPoseSet(scene.ground_truth), perturbation),
-                     static_cast<int>(scene.ground_truth.size()));
 }
 
 // SPEC §3 "Ray point": from an exact prior, "auto" does not drift; the paper's constant 1 m start

@@ -177,9 +177,9 @@ TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
   const std::string options = "{preset: auto, num_threads: 1}";
   for (const bool from_bootstrap : {false, true}) {
     TempDir dir("refine_stage");
-    const Provenance provenance =
-        from_bootstrap ? Provenance{"prior", {{"source", "bootstrap"}}, "", ""}
-                       : Provenance{"prior", {{"source", "capture"}}, "", ""};
+    const Provenance provenance = from_bootstrap
+                                      ? Provenance{"prior", {{"source", "bootstrap"}}, "", ""}
+                                      : Provenance{"prior", {{"source", "capture"}}, "", ""};
     PoseSet refined;
     const nlohmann::json summary = RunRefine(scene, dir, &refined, options, provenance);
     const nlohmann::json& probe = summary["orientation_prior"];

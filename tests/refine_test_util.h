@@ -1,13 +1,17 @@
 // Helpers shared by the refiner's tests: true ray times of a synthetic scene and perturbed
-// problem states, so residuals and Jacobians are checked away from the optimum.
+// problem states, so residuals and Jacobians are checked away from the optimum; errors against
+// the ground truth and ladder-perturbed priors for the solve tests.
 #pragma once
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
+#include "evaluate/perturbation.h"
+#include "evaluate/pose_errors.h"
 #include "refine/problem_layout.h"
 #include "tests/random_draws.h"
 #include "tests/refine_synthetic.h"
@@ -51,6 +55,23 @@ inline std::vector<double> JitterValues(const std::vector<double>& values, doubl
   std::vector<double> out = values;
   for (double& v : out) v *= 1.0 + relative * u(rng);
   return out;
+}
+
+// Errors of `estimate` against `truth` after the named alignment (sim3, se3, none).
+inline PoseErrorSummary Errors(const std::vector<Rigid3>& estimate,
+                               const std::vector<Rigid3>& truth, const std::string& alignment) {
+  PoseErrorOptions options;
+  options.alignment = alignment;
+  return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options);
+}
+
+// The scene's ground truth perturbed by the ladder protocol (§4.8) at `level_deg`.
+inline std::vector<Rigid3> PerturbedPrior(const SyntheticScene& scene, double level_deg, int seed) {
+  PerturbationOptions perturbation;
+  perturbation.level_deg = level_deg;
+  perturbation.seed = seed;
+  return FromPoseSet(PerturbPoses(ToPoseSet(scene.ground_truth), perturbation),
+                     static_cast<int>(scene.ground_truth.size()));
 }
 
 }  // namespace raytime

@@ -23,7 +23,8 @@ namespace fs = std::filesystem;
 // pipelines (PresetsNameOnlyValidOptions).
 std::vector<std::string> PipelineFiles(const std::string& folder) {
   std::vector<std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(fs::path(RAYTIME_SOURCE_DIR) / folder)) {
+  for (const auto& entry :
+       fs::recursive_directory_iterator(fs::path(RAYTIME_SOURCE_DIR) / folder)) {
     const fs::path& path = entry.path();
     if (path.extension() != ".yaml") continue;
     if (path.string().find("/presets/") != std::string::npos) continue;
@@ -39,8 +40,8 @@ std::vector<std::string> PipelineFiles(const std::string& folder) {
 void LoadAndValidate(const std::string& path) {
   PipelineSpec spec = LoadPipeline(path);
   if (spec.stages.front().options["root"].as<std::string>("").empty()) {
-    ApplyOverride(&spec, std::string("dataset.root=") + RAYTIME_SOURCE_DIR +
-                             "/data/sample/fountain-P11");
+    ApplyOverride(&spec,
+                  std::string("dataset.root=") + RAYTIME_SOURCE_DIR + "/data/sample/fountain-P11");
   }
   ValidatePipeline(spec);
   if (!spec.sweep.empty()) {

@@ -9,6 +9,7 @@
 
 #include "core/geometry.h"
 #include "core/timestamps.h"
+#include "tests/expect_pose.h"
 
 namespace raytime {
 namespace {
@@ -23,11 +24,6 @@ Rigid3 Geodesic(const Rigid3& a, const Rigid3& b, double fraction) {
   const Eigen::Matrix3d ra = a.RotationMatrix(), rb = b.RotationMatrix();
   const Eigen::Matrix3d r = ra * ExpSO3(fraction * LogSO3(ra.transpose() * rb));
   return Rigid3(Eigen::Quaterniond(r), a.translation + fraction * (b.translation - a.translation));
-}
-
-void ExpectPoseNear(const Rigid3& actual, const Rigid3& expected, double tolerance) {
-  EXPECT_LE(RotationDistance(actual.rotation, expected.rotation), tolerance);
-  EXPECT_LE((actual.translation - expected.translation).norm(), tolerance);
 }
 
 const std::vector<StampedPose> kTrajectory = {
