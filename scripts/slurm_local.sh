@@ -46,6 +46,9 @@ start() {
   local host cpus
   host=$(hostname -s)
   cpus=$(nproc)
+  # A one-node cluster of short jobs: the main scheduler every second (default 60 s), at most
+  # every 0.1 s (2 s), batch jobs not held back (3 s), so a dependent job starts about a second
+  # after its dependency ends instead of three (the Slurm test: 37 -> 20 s).
   cat > "$conf.tmp" << EOF
 $marker
 ClusterName=raytime-local
@@ -58,6 +61,7 @@ ProctrackType=proctrack/linuxproc
 TaskPlugin=task/none
 MpiDefault=none
 SchedulerType=sched/backfill
+SchedulerParameters=sched_interval=1,sched_min_interval=100000,batch_sched_delay=0
 SelectType=select/cons_tres
 SelectTypeParameters=CR_CPU
 ReturnToService=2
