@@ -71,8 +71,8 @@ void WaitForJob(const std::string& id, const std::string& slurm_dir) {
   while (true) {
     std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
     interval_s = std::min(1.5 * interval_s, 10.0);
-    const ProcessStatus status = RunProcess({"squeue", "--noheader", "--jobs=" + id, "--format=%T"},
-                                            process);
+    const ProcessStatus status =
+        RunProcess({"squeue", "--noheader", "--jobs=" + id, "--format=%T"}, process);
     const std::string text = fs::exists(output) ? ReadTextFile(output) : std::string();
     if (!status.Succeeded()) {
       // A job purged from the controller's memory (MinJobAge after it ended) is unknown.
