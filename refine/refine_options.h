@@ -168,6 +168,15 @@ struct RefineOptions {
   // separates castle-P19's 44 wrong pairs from its correct ones at the basin solution from an
   // exact and an 8° prior alike.
   int max_pair_removal_rounds = 0;
+  // Basin-first finish anneal (issue 12, beyond the paper's fixed nominal scale): after the
+  // nominal-scale finish, one more pass (`finish_anneal`, λR = 0) continues the GNC schedule below
+  // loss_scale_px2 with one stage at a = (k m)² px², where m is the basin solve's median
+  // cross-projection residual (px) and k this multiple, at least 0.25 px² (keypoints are located
+  // to about half a pixel); 0 (or a not below loss_scale_px2) = no such pass. At a = 100 px² a
+  // wrong match 10-30 px off still pulls (weight 1/(1 + (r²/a)²) = 0.5-0.01); repeated structure
+  // leaves such matches inside correct pairs (castle-P19), and a scale matched to the measured
+  // noise discounts them while a capture with larger residuals keeps a wider scale.
+  double finish_noise_multiple = 0.0;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
@@ -266,6 +275,10 @@ struct RefineOptions {
       "Relative rise of the median residual under the orientation prior above which the finish "
       "drops it",
       NonNegative());
+    v("finish_noise_multiple", finish_noise_multiple,
+      "Basin-first: after the finish, a pass (λR 0) at arctan scale (this x the basin's median "
+      "residual)² px²; 0 = none",
+      NonNegative());
     v("max_pair_removal_rounds", max_pair_removal_rounds,
       "Basin-first: times the pairs the basin solve leaves above inconsistent_pair_px are removed "
       "and the basin solve rerun; 0 keeps every pair",
@@ -281,6 +294,8 @@ struct RefineOptions {
             "(intrinsics_sharing: per_camera)");
     require(!(staged && basin_first),
             "staged and basin_first are two different multi-pass recipes; choose one");
+    require(finish_noise_multiple == 0 || basin_first,
+            "finish_noise_multiple needs basin_first (the finish anneals from the basin solve)");
     require(max_pair_removal_rounds == 0 || basin_first,
             "max_pair_removal_rounds needs basin_first (the pairs are judged at the basin solve)");
   }

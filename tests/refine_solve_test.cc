@@ -400,6 +400,58 @@ TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
   EXPECT_TRUE(summary.guardrails_fired.empty());
 }
 
+// Every fourth match of every pair gets, in its second image, the keypoint of a copy of its point
+// `shift` away (repeated structure inside correct pairs, castle-P19): a few pixels to tens off.
+void MatchEveryFourthToACopy(SyntheticScene* scene, const Eigen::Vector3d& shift) {
+  const CameraIntrinsics& camera = scene->input.cameras.at(0);
+  for (PairMatchIndices& pair : scene->input.pairs) {
+    const std::vector<int>& map = scene->keypoint_of_point[pair.image1];
+    Keypoints& keypoints = scene->input.keypoints[pair.image2];
+    for (Eigen::Index m = 0; m < pair.matches.rows(); m += 4) {
+      const auto point = std::find(map.begin(), map.end(), pair.matches(m, 0)) - map.begin();
+      const Eigen::Vector3d c =
+          scene->ground_truth[pair.image2].Inverse() * (scene->points[point] + shift);
+      double undistorted[2], distorted[2];
+      ProjectPinhole(camera.params.data(), c.data(), undistorted);
+      DistortPixel(camera.params.data(), undistorted, distorted);
+      const Eigen::Index row = keypoints.rows();
+      keypoints.conservativeResize(row + 1, 2);
+      keypoints.row(row) << distorted[0], distorted[1];
+      pair.matches(m, 1) = static_cast<uint32_t>(row);
+    }
+  }
+}
+
+// With a quarter of the matches on a copy 0.15 m away (9-23 px off), the nominal-scale finish
+// (a = 100 px²) is still pulled by them; the finish anneal (finish_noise_multiple) solves again at
+// (2 x the basin's median residual)² with λR = 0 and discounts them.
+TEST(RefineSolveTest, BasinFirstFinishAnnealDiscountsMatchesAFewPixelsOff) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  MatchEveryFourthToACopy(&scene, Eigen::Vector3d(0.15, 0.0, 0.0));
+  scene.input.prior_world_from_cam = PerturbedPrior(scene, 4.0, 2);
+  RefineOptions options = BasinFirstOptions();
+  RefineOutput nominal;
+  const RefineSummary without = RefinePoses(scene.input, options, &nominal);
+  ASSERT_EQ(without.passes.size(), 3u);
+  options.finish_noise_multiple = 2.0;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  ASSERT_EQ(summary.passes.size(), 4u);
+  const RefinePassSummary& anneal = summary.passes[3];
+  EXPECT_EQ(anneal.name, "finish_anneal");
+  EXPECT_EQ(anneal.orientation_weight, 0.0);
+  EXPECT_EQ(anneal.num_matches_used, summary.passes[2].num_matches_used);
+  const double median = summary.orientation_prior.free_residual_median_px;
+  ASSERT_EQ(anneal.stages.size(), 1u);
+  ASSERT_GT(median, 0.25) << "above the floor of the anneal's scale";
+  EXPECT_DOUBLE_EQ(anneal.stages[0].loss_scale_px2, std::pow(2 * median, 2));
+  const double error = Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
+  const double error_without =
+      Errors(nominal.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
+  EXPECT_LT(error, 0.5 * error_without);
+  EXPECT_LT(error, 0.05);
+}
+
 // From a prior 8° off, holding the rotations to it costs the matches: the probe's median residual
 // rises far above the threshold, the finish drops λR and starts from the basin solve, and the
 // result is as accurate as from an exact prior, where the same finish with the prior kept would not
