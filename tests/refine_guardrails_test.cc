@@ -467,50 +467,11 @@ TEST(RefineGuardrailTest, InconsistentPairsStaysQuietOnAHealthySolve) {
   }
 }
 
-// Repeated structure (§4.11; castle-P19's walls): in pair `p` (i, j), image j's side of each
-// match is replaced by a new keypoint of j, the projection of the point moved by `shift` (e.g.
-// 1.5 m along the vertical axis: the same window one storey over). The pair's matches agree with
-// each other and with a wrong relative pose (camera j moved by -shift), not with the scene.
-void CorruptPair(SyntheticScene* scene, size_t p, const Eigen::Vector3d& shift) {
-  const CameraIntrinsics& intrinsics = scene->input.cameras.at(0);  // one shared camera
-  {
-    PairMatchIndices& pair = scene->input.pairs[p];
-    const int i = pair.image1;
-    const int j = pair.image2;
-    Keypoints& keypoints = scene->input.keypoints[j];
-    std::vector<std::pair<uint32_t, uint32_t>> rows;
-    for (Eigen::Index m = 0; m < pair.matches.rows(); ++m) {
-      const std::vector<int>& map = scene->keypoint_of_point[i];
-      const int point =
-          static_cast<int>(std::find(map.begin(), map.end(), pair.matches(m, 0)) - map.begin());
-      const Eigen::Vector3d copy = scene->points[point] + shift;
-      const Eigen::Vector3d c = scene->ground_truth[j].Inverse() * copy;
-      if (c.z() < 1.0) continue;
-      double undistorted[2], distorted[2];
-      ProjectPinhole(intrinsics.params.data(), c.data(), undistorted);
-      DistortPixel(intrinsics.params.data(), undistorted, distorted);
-      if (distorted[0] < 0 || distorted[1] < 0 || distorted[0] > intrinsics.width ||
-          distorted[1] > intrinsics.height) {
-        continue;
-      }
-      const Eigen::Index row = keypoints.rows();
-      keypoints.conservativeResize(row + 1, 2);
-      keypoints.row(row) << distorted[0], distorted[1];
-      rows.emplace_back(pair.matches(m, 0), static_cast<uint32_t>(row));
-    }
-    pair.matches.resize(static_cast<Eigen::Index>(rows.size()), 2);
-    for (size_t m = 0; m < rows.size(); ++m) {
-      pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
-      pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
-    }
-  }
-}
-
 // Every third pair corrupted one storey over (1.5 m, 130 px off the scene). Returns them.
 std::set<std::pair<int, int>> CorruptEveryThirdPair(SyntheticScene* scene) {
   std::set<std::pair<int, int>> corrupted;
   for (size_t p = 1; p < scene->input.pairs.size(); p += 3) {
-    CorruptPair(scene, p, Eigen::Vector3d(0.0, -1.5, 0.0));
+    MatchToACopy(scene, p, Eigen::Vector3d(0.0, -1.5, 0.0));
     corrupted.emplace(scene->input.pairs[p].image1, scene->input.pairs[p].image2);
   }
   return corrupted;
@@ -631,8 +592,8 @@ TEST(RefineGuardrailTest, BasinFirstFlagsACameraLeftOnOneUncheckedPair) {
     if (pairs[p].image2 == last) last_pairs.push_back(p);
   }
   ASSERT_EQ(last_pairs.size(), 2u);
-  CorruptPair(&scene, last_pairs[0], Eigen::Vector3d(0.0, -1.5, 0.0));
-  CorruptPair(&scene, last_pairs[1], Eigen::Vector3d(2.0, 0.0, 0.0));
+  MatchToACopy(&scene, last_pairs[0], Eigen::Vector3d(0.0, -1.5, 0.0));
+  MatchToACopy(&scene, last_pairs[1], Eigen::Vector3d(2.0, 0.0, 0.0));
   RefineOptions options;
   options.basin_first = true;
   options.trust_region = false;

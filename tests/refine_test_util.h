@@ -1,6 +1,7 @@
 // Helpers shared by the refiner's tests: true ray times of a synthetic scene and perturbed
 // problem states, so residuals and Jacobians are checked away from the optimum; errors against
-// the ground truth and ladder-perturbed priors for the solve tests.
+// the ground truth and ladder-perturbed priors for the solve tests; wrong matches to a copy of
+// the scene (repeated structure).
 #pragma once
 
 #include <Eigen/Geometry>
@@ -8,8 +9,10 @@
 #include <cmath>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "core/camera.h"
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
 #include "refine/problem_layout.h"
@@ -72,6 +75,46 @@ inline std::vector<Rigid3> PerturbedPrior(const SyntheticScene& scene, double le
   perturbation.seed = seed;
   return FromPoseSet(PerturbPoses(ToPoseSet(scene.ground_truth), perturbation),
                      static_cast<int>(scene.ground_truth.size()));
+}
+
+// Repeated structure (§4.11; castle-P19's walls): in pair `p` (i, j), image j's side of every
+// `every`-th match (all by default) is replaced by a new keypoint of j, the projection of the point
+// moved by `shift` (e.g. 1.5 m along the vertical axis: the same window one storey over); a match
+// whose copy j does not see is dropped. With every match moved the pair agrees with itself and with
+// a wrong relative pose (camera j moved by -shift), not with the scene.
+inline void MatchToACopy(SyntheticScene* scene, size_t p, const Eigen::Vector3d& shift,
+                         int every = 1) {
+  const CameraIntrinsics& intrinsics = scene->input.cameras.at(0);  // one shared camera
+  PairMatchIndices& pair = scene->input.pairs[p];
+  const std::vector<int>& map = scene->keypoint_of_point[pair.image1];
+  Keypoints& keypoints = scene->input.keypoints[pair.image2];
+  std::vector<std::pair<uint32_t, uint32_t>> rows;
+  for (Eigen::Index m = 0; m < pair.matches.rows(); ++m) {
+    if (m % every != 0) {
+      rows.emplace_back(pair.matches(m, 0), pair.matches(m, 1));
+      continue;
+    }
+    const auto point = std::find(map.begin(), map.end(), pair.matches(m, 0)) - map.begin();
+    const Eigen::Vector3d c =
+        scene->ground_truth[pair.image2].Inverse() * (scene->points[point] + shift);
+    if (c.z() < 1.0) continue;
+    double undistorted[2], distorted[2];
+    ProjectPinhole(intrinsics.params.data(), c.data(), undistorted);
+    DistortPixel(intrinsics.params.data(), undistorted, distorted);
+    if (distorted[0] < 0 || distorted[1] < 0 || distorted[0] > intrinsics.width ||
+        distorted[1] > intrinsics.height) {
+      continue;
+    }
+    const Eigen::Index row = keypoints.rows();
+    keypoints.conservativeResize(row + 1, 2);
+    keypoints.row(row) << distorted[0], distorted[1];
+    rows.emplace_back(pair.matches(m, 0), static_cast<uint32_t>(row));
+  }
+  pair.matches.resize(static_cast<Eigen::Index>(rows.size()), 2);
+  for (size_t m = 0; m < rows.size(); ++m) {
+    pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
+    pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
+  }
 }
 
 }  // namespace raytime
