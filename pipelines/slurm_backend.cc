@@ -30,17 +30,25 @@ std::string SceneKey(const SweepRun& run) {
   return key;
 }
 
+// Runs `argv` with its output (stdout and stderr) to `output_path`, which it also returns in *text.
+ProcessStatus RunWithOutput(const std::vector<std::string>& argv, const std::string& output_path,
+                            std::string* text) {
+  ProcessOptions process;
+  process.output_path = output_path;
+  process.append_output = false;
+  const ProcessStatus status = RunProcess(argv, process);
+  *text = fs::exists(output_path) ? ReadTextFile(output_path) : std::string();
+  return status;
+}
+
 // Runs sbatch with `args` and returns the job id it prints (--parsable: "ID" or "ID;cluster").
 std::string Submit(const std::vector<std::string>& args, const std::string& slurm_dir,
                    const std::string& what) {
   std::vector<std::string> argv = {"sbatch", "--parsable"};
   argv.insert(argv.end(), args.begin(), args.end());
-  const std::string output = (fs::path(slurm_dir) / ("sbatch_" + what + ".out")).string();
-  ProcessOptions process;
-  process.output_path = output;
-  process.append_output = false;
-  const ProcessStatus status = RunProcess(argv, process);
-  const std::string text = fs::exists(output) ? ReadTextFile(output) : std::string();
+  std::string text;
+  const ProcessStatus status =
+      RunWithOutput(argv, (fs::path(slurm_dir) / ("sbatch_" + what + ".out")).string(), &text);
   if (!status.Succeeded()) {
     throw InputError("sweep: sbatch " + status.Describe() + " submitting the " + what + ": " +
                      text + " (command: " + CommandLine(argv) +
@@ -63,17 +71,14 @@ std::string Submit(const std::vector<std::string>& args, const std::string& slur
 // each poll to 10 s: one squeue call every 10 s on a long campaign.
 void WaitForJob(const std::string& id, const std::string& slurm_dir) {
   const std::string output = (fs::path(slurm_dir) / "squeue_wait.out").string();
-  ProcessOptions process;
-  process.output_path = output;
-  process.append_output = false;
   double interval_s = 1.0;
   int failures = 0;
   while (true) {
     std::this_thread::sleep_for(std::chrono::duration<double>(interval_s));
     interval_s = std::min(1.5 * interval_s, 10.0);
+    std::string text;
     const ProcessStatus status =
-        RunProcess({"squeue", "--noheader", "--jobs=" + id, "--format=%T"}, process);
-    const std::string text = fs::exists(output) ? ReadTextFile(output) : std::string();
+        RunWithOutput({"squeue", "--noheader", "--jobs=" + id, "--format=%T"}, output, &text);
     if (!status.Succeeded()) {
       // A job purged from the controller's memory (MinJobAge after it ended) is unknown.
       if (text.find("Invalid job id") != std::string::npos) return;
