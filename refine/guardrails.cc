@@ -54,19 +54,22 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
 }
 
 InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
-                                                double pair_threshold_px, double max_fraction) {
+                                                double pair_threshold_px, double median_multiple,
+                                                double max_fraction) {
   InconsistentPairsVerdict verdict;
   verdict.enabled = true;
   verdict.pair_threshold_px = pair_threshold_px;
+  verdict.median_multiple = median_multiple;
   verdict.fraction_threshold = max_fraction;
   verdict.num_pairs = static_cast<int>(pairs.size());
   if (pairs.empty()) return verdict;
   std::vector<double> medians;
-  for (const PairResidual& pair : pairs) {
-    medians.push_back(pair.median_px);
-    if (pair.median_px > pair_threshold_px) verdict.pairs.push_back(pair);
-  }
+  for (const PairResidual& pair : pairs) medians.push_back(pair.median_px);
   verdict.median_pair_px = UpperMedian(medians, 0.0);
+  verdict.pair_threshold_px = std::max(pair_threshold_px, median_multiple * verdict.median_pair_px);
+  for (const PairResidual& pair : pairs) {
+    if (pair.median_px > verdict.pair_threshold_px) verdict.pairs.push_back(pair);
+  }
   verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
   verdict.fraction = static_cast<double>(verdict.num_inconsistent) / verdict.num_pairs;
   verdict.fired = verdict.fraction > max_fraction;

@@ -27,7 +27,10 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
 
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): a pair whose
 // median positive-ray epipolar distance at the solve (PairResidualMedians, pair_consistency.h)
-// exceeds `pair_threshold_px` is inconsistent; fires when the inconsistent fraction of `pairs`
+// exceeds max(`pair_threshold_px`, `median_multiple` x the median over the pairs of that measure)
+// is inconsistent (the second term scales the threshold to a capture whose keypoints are noisier
+// as a whole, e.g. a phone's rolling shutter, while a wrong pair stays off by many times the
+// healthy pairs' noise); fires when the inconsistent fraction of `pairs`
 // exceeds `max_fraction`. Prior-independent and blind to the ray times: correct solved poses
 // explain every correct pair to the keypoint noise whatever prior the solve started from and
 // wherever its ray times ended, while the matches of a wrong pair (repeated structure matched to
@@ -35,6 +38,7 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
 // two. A handful of such pairs is the front end's usual residue; many of them pull the
 // solution off (castle-P19). Quiet on no pairs.
 InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
-                                                double pair_threshold_px, double max_fraction);
+                                                double pair_threshold_px, double median_multiple,
+                                                double max_fraction);
 
 }  // namespace raytime

@@ -611,25 +611,35 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   finish.orientation_weight = probe.kept ? options.orientation_weight : 0.0;
   finish.start_unsolved_at_closest_approach = true;
   summary->passes.push_back(RunPass(*active, options, finish, prior, state));
-  // The finish anneal (RefineOptions::finish_noise_multiple) holds no orientation prior: as the
-  // scale shrinks, matches a few pixels off stop pulling while λR keeps its whole pull, so a prior
-  // the probe kept but that is slightly wrong (a 1° ladder prior: +4.8 % median residual, just
-  // under the threshold) takes the rotations back (measured: 1.0-2.2° on 4 of 24 ladder runs at
-  // 1-2°, one of them unflagged). The nominal-scale finish has already fixed what the prior was
-  // kept for, and the anneal moves the solution only locally: in one stage, straight to its scale
-  // (through the decade between, as GNC would, the same errors to 0.001° on the four Strecha
-  // scenes at 0° and 8°, with 35 % more iterations).
+  // The finish anneal (RefineOptions::finish_noise_multiple) keeps the finish's orientation prior
+  // but not its anchor: after a λR = 0 finish none; after a finish that kept λR, the same λR
+  // towards the finish's own rotations. Towards the prior's (λR as it is), a prior the probe kept
+  // but that is slightly wrong (a 1° ladder prior: +4.8 % median residual, just under the
+  // threshold) took the rotations back as the shrinking scale weakened the matches' pull: 1.0-2.2°
+  // on 4 of 24 ladder runs at 1-2°, one of them unflagged. With no prior at all, the long Record3D
+  // desk sweep drifted 0.196° (median relative rotation) from the finish, unflagged: the mode of
+  // docs/real_captures.md that made the probe keep λR there; held at the finish it moved 0.012°.
+  // The hold costs castle-P19 from an exact prior (0.124° against 0.039° without it). One stage,
+  // straight to its scale: through the decade between, as GNC would, the same errors to 0.001° on
+  // the four Strecha scenes at 0° and 8°, with 35 % more iterations.
   const double anneal_scale = FinishAnnealScale(options, probe.free_residual_median_px);
   if (anneal_scale > 0) {
     PassSettings anneal = finish;
     anneal.name = "finish_anneal";
     anneal.scales = {anneal_scale};
-    anneal.orientation_weight = 0.0;
+    // Only the rotations: the centres' terms and the gauge stay the prior's, as in every pass.
+    std::vector<Rigid3> anchor = prior;
+    for (size_t i = 0; i < anchor.size(); ++i) {
+      anchor[i].rotation = state->world_from_cam[i].rotation;
+    }
     spdlog::info(fmt::format(
         "refine: the finish anneals on to {:.3g} px² ({:g} x the basin's median residual {:.3f} "
-        "px, squared), λR = 0",
-        anneal_scale, options.finish_noise_multiple, probe.free_residual_median_px));
-    summary->passes.push_back(RunPass(*active, options, anneal, prior, state));
+        "px, squared), {}",
+        anneal_scale, options.finish_noise_multiple, probe.free_residual_median_px,
+        anneal.orientation_weight > 0
+            ? fmt::format("λR = {:g} towards the finish's rotations", anneal.orientation_weight)
+            : std::string("λR = 0")));
+    summary->passes.push_back(RunPass(*active, options, anneal, anchor, state));
   }
 }
 
@@ -738,7 +748,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   if (options.inconsistent_pairs_test) {
     summary.inconsistent_pairs = CheckInconsistentPairs(
         SolvedPairResiduals(pruned ? *pruned : input, state), options.inconsistent_pair_px,
-        options.max_inconsistent_pair_fraction);
+        options.inconsistent_pair_median_multiple, options.max_inconsistent_pair_fraction);
     if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
   }
   // After the removal, a pose resting on one pair nothing else checks looks consistent whether

@@ -192,15 +192,17 @@ struct InconsistentPairsVerdict {
   bool fired = false;
   int num_pairs = 0;  // image pairs with used matches
   int num_inconsistent = 0;
-  double fraction = 0.0;            // num_inconsistent / num_pairs
-  double median_pair_px = 0.0;      // median (upper) over the pairs of their medians, pixels
-  double pair_threshold_px = 0.0;   // inconsistent_pair_px
+  double fraction = 0.0;        // num_inconsistent / num_pairs
+  double median_pair_px = 0.0;  // median (upper) over the pairs of their medians, pixels
+  // max(inconsistent_pair_px, median_multiple x median_pair_px) (inconsistent_pair_median_multiple)
+  double pair_threshold_px = 0.0;
+  double median_multiple = 0.0;
   double fraction_threshold = 0.0;  // max_inconsistent_pair_fraction
   std::vector<PairResidual> pairs;  // the inconsistent pairs, in input order
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num_pairs,
                                    num_inconsistent, fraction, median_pair_px, pair_threshold_px,
-                                   fraction_threshold, pairs)
+                                   median_multiple, fraction_threshold, pairs)
 
 // The basin-first solve's orientation-prior probe (RefineOptions::basin_first): whether the
 // matches agree with the prior's rotations, and so whether the finish keeps λR.

@@ -132,7 +132,11 @@ struct RefineOptions {
   // tolerates one bad pair in 10; the auto preset, whose wrong-pair removal runs first, tolerates
   // none (configs/presets/refine/auto.yaml says why).
   bool inconsistent_pairs_test = true;
-  double inconsistent_pair_px = 4.0;            // pixels, per-pair median
+  double inconsistent_pair_px = 4.0;  // pixels, per-pair median
+  // The posterior test's threshold is max(inconsistent_pair_px, this x the median over the pairs of
+  // their measure); 0 = inconsistent_pair_px alone. (The wrong-pair removal keeps the absolute
+  // threshold: it separated castle-P19's wrong pairs at the basin solution.)
+  double inconsistent_pair_median_multiple = 0.0;
   double max_inconsistent_pair_fraction = 0.1;  // of the pairs with used matches, in [0, 1)
 
   // Staged room recipe (§4.3): pass 1 = poses-only GNC from the prior with a light orientation
@@ -169,7 +173,8 @@ struct RefineOptions {
   // exact and an 8° prior alike.
   int max_pair_removal_rounds = 0;
   // Basin-first finish anneal (issue 12, beyond the paper's fixed nominal scale): after the
-  // nominal-scale finish, one more pass (`finish_anneal`, λR = 0) continues the GNC schedule below
+  // nominal-scale finish, one more pass (`finish_anneal`; the finish's λR, held towards the
+  // finish's own rotations) continues the GNC schedule below
   // loss_scale_px2 with one stage at a = (k m)² px², where m is the basin solve's median
   // cross-projection residual (px) and k this multiple, at least 0.25 px² (keypoints are located
   // to about half a pixel); 0 (or a not below loss_scale_px2) = no such pass. At a = 100 px² a
@@ -257,6 +262,10 @@ struct RefineOptions {
     v("inconsistent_pair_px", inconsistent_pair_px,
       "A pair is inconsistent above this median positive-ray epipolar distance, pixels",
       Positive());
+    v("inconsistent_pair_median_multiple", inconsistent_pair_median_multiple,
+      "The test's pair threshold rises to this x the median pair's measure when that is higher; "
+      "0 = inconsistent_pair_px alone",
+      NonNegative());
     v("max_inconsistent_pair_fraction", max_inconsistent_pair_fraction,
       "Fraction of inconsistent pairs above which the test fires", NonNegative(), Below(1));
     v("staged", staged,
@@ -276,8 +285,8 @@ struct RefineOptions {
       "drops it",
       NonNegative());
     v("finish_noise_multiple", finish_noise_multiple,
-      "Basin-first: after the finish, a pass (λR 0) at arctan scale (this x the basin's median "
-      "residual)² px²; 0 = none",
+      "Basin-first: after the finish, a pass at arctan scale (this x the basin's median residual)² "
+      "px², rotations held at the finish's; 0 = none",
       NonNegative());
     v("max_pair_removal_rounds", max_pair_removal_rounds,
       "Basin-first: times the pairs the basin solve leaves above inconsistent_pair_px are removed "

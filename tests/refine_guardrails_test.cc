@@ -151,7 +151,7 @@ TEST(RefineGuardrailTest, InconsistentPairsFiresAboveTheFractionAndListsThePairs
   for (int p = 0; p < 10; ++p) pairs.push_back(MakePair(p, p + 1, 0.5 + 0.1 * p));
   pairs[3].median_px = 34.0;
   pairs[6].median_px = 4.0;  // at the threshold: consistent
-  InconsistentPairsVerdict verdict = CheckInconsistentPairs(pairs, 4.0, 0.1);
+  InconsistentPairsVerdict verdict = CheckInconsistentPairs(pairs, 4.0, 0.0, 0.1);
   EXPECT_TRUE(verdict.enabled);
   EXPECT_FALSE(verdict.fired);
   EXPECT_EQ(verdict.num_pairs, 10);
@@ -166,7 +166,7 @@ TEST(RefineGuardrailTest, InconsistentPairsFiresAboveTheFractionAndListsThePairs
   // A castle-P19-like third of the pairs wrong fires and lists them in input order.
   pairs[0].median_px = 120.0;
   pairs[8].median_px = 6.5;
-  verdict = CheckInconsistentPairs(pairs, 4.0, 0.1);
+  verdict = CheckInconsistentPairs(pairs, 4.0, 0.0, 0.1);
   EXPECT_TRUE(verdict.fired);
   EXPECT_EQ(verdict.num_inconsistent, 3);
   EXPECT_DOUBLE_EQ(verdict.fraction, 0.3);
@@ -177,10 +177,41 @@ TEST(RefineGuardrailTest, InconsistentPairsFiresAboveTheFractionAndListsThePairs
   EXPECT_EQ(verdict.pairs[2].num_matches, 50);
   EXPECT_LT(verdict.median_pair_px, 4.0);
 
-  const InconsistentPairsVerdict none = CheckInconsistentPairs({}, 4.0, 0.1);
+  const InconsistentPairsVerdict none = CheckInconsistentPairs({}, 4.0, 0.0, 0.1);
   EXPECT_TRUE(none.enabled);
   EXPECT_FALSE(none.fired);
   EXPECT_EQ(none.num_pairs, 0);
+}
+
+// A capture whose pairs all sit near a pixel (the Record3D desk subsample: median pair 0.98 px,
+// worst correct ones 4.1-4.5 px): with the median multiple the threshold rises to 8 x 1 px and
+// those pairs are consistent, while a wrong pair many times the median is still caught; an object
+// capture's median (0.3 px) leaves the absolute 4 px in force.
+TEST(GuardrailsTest, InconsistentPairThresholdRisesWithTheMedianPair) {
+  std::vector<PairResidual> pairs;
+  for (int p = 0; p < 20; ++p) pairs.push_back(MakePair(p, p + 1, 0.9 + 0.01 * p));
+  pairs[4].median_px = 4.5;
+  pairs[9].median_px = 4.1;
+  InconsistentPairsVerdict verdict = CheckInconsistentPairs(pairs, 4.0, 0.0, 0.0);
+  EXPECT_TRUE(verdict.fired) << "the absolute threshold alone flags them";
+  EXPECT_EQ(verdict.num_inconsistent, 2);
+  verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_FALSE(verdict.fired);
+  EXPECT_EQ(verdict.num_inconsistent, 0);
+  EXPECT_DOUBLE_EQ(verdict.median_multiple, 8.0);
+  EXPECT_NEAR(verdict.pair_threshold_px, 8.0 * verdict.median_pair_px, 1e-12);
+  EXPECT_GT(verdict.pair_threshold_px, 7.0);
+  pairs[12].median_px = 40.0;
+  verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_TRUE(verdict.fired);
+  ASSERT_EQ(verdict.pairs.size(), 1u);
+  EXPECT_EQ(verdict.pairs[0].image1, 12);
+
+  for (PairResidual& pair : pairs) pair.median_px = 0.3;
+  pairs[5].median_px = 4.7;  // fountain-P11 32° seed 2's worst pair beside a 0.23 px median
+  verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_DOUBLE_EQ(verdict.pair_threshold_px, 4.0);
+  EXPECT_TRUE(verdict.fired);
 }
 
 using PoseBlock = std::array<double, kPoseBlockSize>;
@@ -660,7 +691,8 @@ TEST(RefineGuardrailTest, InconsistentPairsIgnoresStuckRayTimes) {
     EXPECT_LT(pairs[p].median_px, 1.0) << "pair " << p;
   }
   const InconsistentPairsVerdict verdict = CheckInconsistentPairs(
-      pairs, options.inconsistent_pair_px, options.max_inconsistent_pair_fraction);
+      pairs, options.inconsistent_pair_px, options.inconsistent_pair_median_multiple,
+      options.max_inconsistent_pair_fraction);
   EXPECT_FALSE(verdict.fired);
   EXPECT_EQ(verdict.num_inconsistent, 0);
   EXPECT_DOUBLE_EQ(verdict.median_pair_px, summary.inconsistent_pairs.median_pair_px);

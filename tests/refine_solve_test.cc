@@ -431,6 +431,26 @@ TEST(RefineSolveTest, BasinFirstFinishAnnealDiscountsMatchesAFewPixelsOff) {
       Errors(nominal.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
   EXPECT_LT(error, 0.5 * error_without);
   EXPECT_LT(error, 0.05);
+  ASSERT_FALSE(summary.orientation_prior.kept);
+
+  // From the exact prior the probe keeps λR, and the anneal holds the rotations with it at the
+  // finish's solution, not at the prior's: the solution still moves away from the wrong matches.
+  scene.input.prior_world_from_cam = scene.ground_truth;
+  RefineOutput exact_nominal;
+  options.finish_noise_multiple = 0.0;
+  RefinePoses(scene.input, options, &exact_nominal);
+  options.finish_noise_multiple = 2.0;
+  RefineOutput exact;
+  const RefineSummary held = RefinePoses(scene.input, options, &exact);
+  ASSERT_TRUE(held.orientation_prior.kept);
+  ASSERT_EQ(held.passes.size(), 4u);
+  EXPECT_EQ(held.passes[3].name, "finish_anneal");
+  EXPECT_EQ(held.passes[3].orientation_weight, options.orientation_weight);
+  const double held_error =
+      Errors(exact.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
+  EXPECT_LT(held_error,
+            Errors(exact_nominal.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg);
+  EXPECT_LT(held_error, 0.05);
 }
 
 // From a prior 8° off, holding the rotations to it costs the matches: the probe's median residual
@@ -652,6 +672,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "guardrails.inconsistent_pairs.fraction",
       "guardrails.inconsistent_pairs.median_pair_px",
       "guardrails.inconsistent_pairs.pair_threshold_px",
+      "guardrails.inconsistent_pairs.median_multiple",
       "guardrails.inconsistent_pairs.fraction_threshold",
       "guardrails.inconsistent_pairs.pairs",
       "guardrails.inconsistent_pairs.pairs[].image1",
