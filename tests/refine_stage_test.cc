@@ -188,11 +188,15 @@ TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
     for (const auto& pass : summary["passes"]) passes.push_back(pass["name"]);
     if (from_bootstrap) {
       EXPECT_FALSE(probe["kept"]);
-      EXPECT_EQ(passes, std::vector<std::string>({"basin", "finish"}));
-      EXPECT_EQ(summary["passes"].back()["orientation_weight"], 0.0);
+      EXPECT_EQ(passes, std::vector<std::string>({"basin", "finish", "finish_anneal"}));
+      EXPECT_EQ(summary["passes"][1]["orientation_weight"], 0.0);
     } else {
-      EXPECT_EQ(passes, std::vector<std::string>({"basin", "orientation_probe", "finish"}));
+      EXPECT_EQ(passes, std::vector<std::string>(
+                            {"basin", "orientation_probe", "finish", "finish_anneal"}));
     }
+    // The anneal keeps the finish's λR (towards the finish's own rotations when it is kept).
+    EXPECT_EQ(summary["passes"].back()["orientation_weight"],
+              summary["passes"][passes.size() - 2]["orientation_weight"]);
     EXPECT_LT(ComputePoseErrors(refined, scene.ground_truth, PoseErrorOptions()).mean_rotation_deg,
               0.05);
   }
