@@ -433,24 +433,27 @@ TEST(RefineSolveTest, BasinFirstFinishAnnealDiscountsMatchesAFewPixelsOff) {
   EXPECT_LT(error, 0.05);
   ASSERT_FALSE(summary.orientation_prior.kept);
 
-  // From the exact prior the probe keeps λR, and the anneal holds the rotations with it at the
-  // finish's solution, not at the prior's: the solution still moves away from the wrong matches.
-  scene.input.prior_world_from_cam = scene.ground_truth;
-  RefineOutput exact_nominal;
+  // From a prior 1.5° off that the probe keeps (the matches barely object: the wrong quarter hides
+  // it), the anneal keeps λR but holds the rotations at the finish's solution. Held at the prior's
+  // instead, the shrinking scale weakens the matches and the prior pulls the rotations back
+  // (measured: 0.144° against 0.132° without the anneal); held at the finish's, 0.055°.
+  scene.input.prior_world_from_cam = PerturbedPrior(scene, 1.5, 1);
+  RefineOutput kept_nominal;
   options.finish_noise_multiple = 0.0;
-  RefinePoses(scene.input, options, &exact_nominal);
+  RefinePoses(scene.input, options, &kept_nominal);
   options.finish_noise_multiple = 2.0;
-  RefineOutput exact;
-  const RefineSummary held = RefinePoses(scene.input, options, &exact);
+  RefineOutput kept;
+  const RefineSummary held = RefinePoses(scene.input, options, &kept);
   ASSERT_TRUE(held.orientation_prior.kept);
   ASSERT_EQ(held.passes.size(), 4u);
   EXPECT_EQ(held.passes[3].name, "finish_anneal");
   EXPECT_EQ(held.passes[3].orientation_weight, options.orientation_weight);
   const double held_error =
-      Errors(exact.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
-  EXPECT_LT(held_error,
-            Errors(exact_nominal.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg);
-  EXPECT_LT(held_error, 0.05);
+      Errors(kept.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg;
+  EXPECT_LT(
+      held_error,
+      0.6 * Errors(kept_nominal.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg);
+  EXPECT_LT(held_error, 0.08);
 }
 
 // From a prior 8° off, holding the rotations to it costs the matches: the probe's median residual
