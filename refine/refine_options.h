@@ -174,10 +174,10 @@ struct RefineOptions {
   int max_pair_removal_rounds = 0;
   // Basin-first finish anneal (issue 12, beyond the paper's fixed nominal scale): after the
   // nominal-scale finish, one more pass (`finish_anneal`; the finish's λR, held towards the
-  // finish's own rotations) continues the GNC schedule below
-  // loss_scale_px2 with one stage at a = (k m)² px², where m is the basin solve's median
-  // cross-projection residual (px) and k this multiple, at least 0.25 px² (keypoints are located
-  // to about half a pixel); 0 (or a not below loss_scale_px2) = no such pass. At a = 100 px² a
+  // finish's own rotations) continues the GNC schedule below loss_scale_px2 with one stage at
+  // a = (k m)² px², where m is the basin solve's median cross-projection residual (px) and k this
+  // multiple, at least 0.25 px² (keypoints are located to about half a pixel); 0 (or a not below
+  // loss_scale_px2) = no such pass. At a = 100 px² a
   // wrong match 10-30 px off still pulls (weight 1/(1 + (r²/a)²) = 0.5-0.01); repeated structure
   // leaves such matches inside correct pairs (castle-P19), and a scale matched to the measured
   // noise discounts them while a capture with larger residuals keeps a wider scale.

@@ -402,7 +402,8 @@ TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
 
 // With a quarter of the matches on a copy 0.15 m away (9-23 px off), the nominal-scale finish
 // (a = 100 px²) is still pulled by them; the finish anneal (finish_noise_multiple) solves again at
-// (2 x the basin's median residual)² with λR = 0 and discounts them.
+// (2 x the basin's median residual)² and discounts them (λR = 0 here: the probe drops this 4°
+// prior, so the finish and the anneal run without it).
 TEST(RefineSolveTest, BasinFirstFinishAnnealDiscountsMatchesAFewPixelsOff) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
   // Repeated structure inside correct pairs (castle-P19): every fourth match on a copy 0.15 m off.
