@@ -74,6 +74,27 @@ PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
   return repaired;
 }
 
+PoseSet RepairIfCoarse(const PoseSet& prior, const PoseSet& bootstrap,
+                       double min_rotation_change_deg, bool bootstrap_positions_supported,
+                       PriorRepairSummary* summary) {
+  PriorRepairSummary s;
+  PoseSet repaired = RepairRotations(prior, bootstrap, &s);
+  const double change_deg = s.median_rotation_change_deg;
+  if (change_deg <= min_rotation_change_deg) {
+    repaired = prior;
+    s.mode = "none";
+    s.num_kept_prior += s.num_repaired;
+    s.num_repaired = 0;
+  } else if (bootstrap_positions_supported) {
+    repaired = ReplaceWithBootstrap(prior, bootstrap, &s);
+  }
+  // The rotation change is reported as measured against the prior before any repair.
+  s.median_rotation_change_deg = change_deg;
+  s.min_rotation_change_deg = min_rotation_change_deg;
+  if (summary) *summary = s;
+  return repaired;
+}
+
 PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
                              PriorRepairSummary* summary) {
   std::vector<Eigen::Vector3d> source, target;

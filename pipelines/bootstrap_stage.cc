@@ -120,6 +120,10 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     writer.WritePoseSet(context.OutputPoseSetName("bootstrap"), poses, PoseRole::kPrior,
                         MakeProvenance(*this));
     writer.WriteJson("bootstrap_pairs", PairsJson(images, result));
+    writer.WriteJson("bootstrap_support", {{"weak", result.support.weak},
+                                           {"fragile", result.fragility.fragile},
+                                           {"fragility_deg", result.fragility.mean_residual_deg},
+                                           {"graph_support", GraphSupportJson(result.support)}});
     int written_pairs = 0;
     if (options_.filter_matches) {
       std::set<std::pair<int, int>> wrong;

@@ -21,15 +21,26 @@ struct PriorOptions {
   // "perturb": ground truth perturbed with the options below; "capture": the poses the capture
   // app recorded, read with the dataset (pose set "capture"); "file": read `path` in `format`;
   // "ground_truth": the ground truth unchanged (a 0° control that skips the perturbation);
-  // "bootstrap": the pose set "bootstrap" of the bootstrap stage (prior-free, SPEC §4).
+  // "bootstrap": the pose set "bootstrap" of the bootstrap stage (prior-free, SPEC §4);
+  // "pose_set": the pose set `pose_set` of an earlier stage (e.g. "prior"), to be repaired.
   std::string source = "perturb";
   std::string format = "colmap";  // for source "file": one of kPoseFileFormats
   std::string path;               // for source "file"
+  std::string pose_set;           // for source "pose_set"
   PerturbationOptions perturbation;
   // Repair of the prior above with the bootstrap's poses (paper §4.8): "none"; "rotations"
   // (averaged rotations in the prior's frame, prior centres kept: recovers 32° priors);
-  // "replace" (bootstrap poses Sim(3)-fitted onto the prior centres: recovers 64° priors).
+  // "replace" (bootstrap poses Sim(3)-fitted onto the prior centres: recovers 64° priors);
+  // "auto" (RepairIfCoarse: a prior whose rotations are further than
+  // repair_min_rotation_change_deg from the averaged ones is replaced, or gets the averaged
+  // rotations when the graph does not support the bootstrap's positions; otherwise unchanged).
   std::string repair = "none";
+  // Above the width the basin solve recovers alone: the ladder of preset auto succeeds 12/12 at
+  // 16° and 8/12 at 32°; a median change of 13.5–16.9° at 16° and 27–34° at 32° (one level's
+  // perturbation about random axes). Repairing at 8–16° costs castle-P19 accuracy (its fragile
+  // graph's averaged rotations: 0.14–0.16° instead of 0.04–0.07°); at 32° replacement takes the
+  // ladder to 12/12 (2026-11-26, issue 12).
+  double repair_min_rotation_change_deg = 20.0;
   // Images without a prior pose, and prior poses without an image, are reported and left out
   // (warnings missing_prior, missing_frames); strict makes either an error.
   bool strict = false;
@@ -38,19 +49,28 @@ struct PriorOptions {
   void VisitFields(Visitor&& v) {
     v("source", source,
       "Prior: ground truth perturbed (below), the capture app's poses that came with the dataset, "
-      "a pose file, the ground truth, or the bootstrap's poses",
-      OneOf({"perturb", "capture", "file", "ground_truth", "bootstrap"}));
+      "a pose file, the ground truth, the bootstrap's poses, or an earlier stage's pose set",
+      OneOf({"perturb", "capture", "file", "ground_truth", "bootstrap", "pose_set"}));
     v("format", format, "Pose file format for source 'file'", OneOf(kPoseFileFormats));
     v("path", path, "Pose file or folder for source 'file'");
+    v("pose_set", pose_set,
+      "Pose set of an earlier stage for source 'pose_set' (e.g. prior, to repair it)");
     v("repair", repair,
-      "Repair the prior with the bootstrap: averaged rotations, or all poses (§4.8)",
-      OneOf({"none", "rotations", "replace"}));
+      "Repair the prior with the bootstrap: averaged rotations, all poses, or the rotations "
+      "when the prior's are far from them (§4.8)",
+      OneOf({"none", "rotations", "replace", "auto"}));
+    v("repair_min_rotation_change_deg", repair_min_rotation_change_deg,
+      "Repair 'auto' repairs when the prior's rotations are further than this from the averaged "
+      "ones (median over images), degrees",
+      Positive());
     v("strict", strict,
       "Refuse a prior that lacks some images or has poses of images not in the dataset");
     perturbation.VisitFields(v);  // flat keys: prior.level_deg, prior.seed, ...
   }
   void CheckRelations(const Requirement& require) const {
     require(source != "file" || !path.empty(), "prior.source is 'file' but prior.path is not set");
+    require(source != "pose_set" || !pose_set.empty(),
+            "prior.source is 'pose_set' but prior.pose_set is not set");
     require(source != "bootstrap" || repair == "none",
             "prior.repair '" + repair +
                 "' repairs a given prior with the bootstrap; with prior.source 'bootstrap' there "
@@ -62,6 +82,18 @@ struct PriorOptions {
 const char* kFormatsWithCapturePoses =
     "record3d, polycam, stray, scanner3d, nerfcapture, scannetpp_iphone, lamar, and "
     "mobilebrick with PoRF's cameras_arkit.npz";
+
+// Whether the bootstrap stage found its view graph unable to support its positions (its
+// `/json/bootstrap_support`, docs/hdf5_schema.md).
+bool BootstrapIsWeak(const StageContext& context) {
+  const Hdf5Reader reader(context.Require(PoseArtifact("bootstrap")));
+  if (!reader.HasJson("bootstrap_support")) {
+    throw InputError(
+        "prior.repair 'auto': the bootstrap's file has no /json/bootstrap_support (written by "
+        "raytime since 2026-11-26); run the bootstrap stage again");
+  }
+  return reader.ReadJson("bootstrap_support").at("weak").get<bool>();
+}
 
 class PriorStage : public StageWithOptions<PriorOptions> {
  public:
@@ -104,8 +136,8 @@ class PriorStage : public StageWithOptions<PriorOptions> {
 
   std::string type() const override { return "prior"; }
   std::string description() const override {
-    return "Make the pose prior: perturbed ground truth, the capture's poses, a pose file, or the "
-           "ground truth";
+    return "Make the pose prior: perturbed ground truth, the capture's poses, a pose file, the "
+           "ground truth or the bootstrap's poses; repair a coarse prior from the bootstrap";
   }
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
@@ -113,6 +145,7 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       inputs.push_back(PoseArtifact("ground_truth"));
     }
     if (options_.source == "capture") inputs.push_back(PoseArtifact("capture"));
+    if (options_.source == "pose_set") inputs.push_back(PoseArtifact(options_.pose_set));
     if (options_.source == "bootstrap" || options_.repair != "none") {
       inputs.push_back(PoseArtifact("bootstrap"));
     }
@@ -150,6 +183,9 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       }
       prior = Hdf5Reader(context.Require(PoseArtifact("capture"))).ReadPoseSet("capture");
       DropPosesWithoutImages(images, &prior, &warnings);
+    } else if (options_.source == "pose_set") {
+      prior = Hdf5Reader(context.Require(PoseArtifact(options_.pose_set)))
+                  .ReadPoseSet(options_.pose_set);
     } else if (options_.source == "bootstrap") {
       prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
     } else {
@@ -178,8 +214,14 @@ class PriorStage : public StageWithOptions<PriorOptions> {
           Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
       PriorRepairSummary repair;
       try {
-        prior = options_.repair == "rotations" ? RepairRotations(prior, bootstrap, &repair)
-                                               : ReplaceWithBootstrap(prior, bootstrap, &repair);
+        if (options_.repair == "rotations") {
+          prior = RepairRotations(prior, bootstrap, &repair);
+        } else if (options_.repair == "replace") {
+          prior = ReplaceWithBootstrap(prior, bootstrap, &repair);
+        } else {
+          prior = RepairIfCoarse(prior, bootstrap, options_.repair_min_rotation_change_deg,
+                                 !BootstrapIsWeak(context), &repair);
+        }
       } catch (const std::invalid_argument& e) {
         throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());
       }
@@ -188,16 +230,43 @@ class PriorStage : public StageWithOptions<PriorOptions> {
                            {"num_kept_prior", repair.num_kept_prior},
                            {"scale", repair.scale},
                            {"median_rotation_change_deg", repair.median_rotation_change_deg}};
-      spdlog::info(
-          fmt::format("prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
-                      "rotation change {:.2f}°",
-                      repair.mode, repair.num_repaired, repair.num_kept_prior,
-                      repair.median_rotation_change_deg));
+      if (options_.repair == "auto") {
+        summary["repair"]["requested"] = "auto";
+        summary["repair"]["min_rotation_change_deg"] = repair.min_rotation_change_deg;
+        const bool kept = repair.mode == "none";
+        const std::string action =
+            kept ? std::string("prior kept")
+            : repair.mode == "replace"
+                ? fmt::format("coarse: {} poses replaced by the bootstrap's, {} kept",
+                              repair.num_repaired, repair.num_kept_prior)
+                : fmt::format(
+                      "coarse: rotations of {} images repaired (the graph does not "
+                      "support the bootstrap's positions), {} kept",
+                      repair.num_repaired, repair.num_kept_prior);
+        spdlog::log(kept ? spdlog::level::info : spdlog::level::warn,
+                    fmt::format("prior: the prior's rotations are {:.2f}° (median) from the "
+                                "bootstrap's averaged ones, {} the threshold {}° -> {}",
+                                repair.median_rotation_change_deg, kept ? "within" : "beyond",
+                                repair.min_rotation_change_deg, action));
+      } else {
+        spdlog::info(
+            fmt::format("prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
+                        "rotation change {:.2f}°",
+                        repair.mode, repair.num_repaired, repair.num_kept_prior,
+                        repair.median_rotation_change_deg));
+      }
     }
     ReportImagesWithoutPose(images, prior, &warnings);
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(context.OutputPoseSetName("prior"), prior, PoseRole::kPrior,
                         MakeProvenance(*this));
+    // What the repair did, for the refine stage: rotations taken from the match graph must not be
+    // held by the orientation prior (they add nothing but their own errors).
+    if (summary.contains("repair")) {
+      nlohmann::json record = summary["repair"];
+      record["pose_set"] = context.OutputPoseSetName("prior");
+      writer.WriteJson(kPriorRepairJson, record);
+    }
     writer.Commit();
     summary["num_poses"] = prior.size();
     summary["warnings"] = WarningsToJson(warnings);

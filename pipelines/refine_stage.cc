@@ -121,12 +121,17 @@ std::vector<std::vector<int>> MatchedComponents(const ImageSet& images,
   return components;
 }
 
-// Whether a prior pose set was made from the match graph: the bootstrap's own poses, or a prior
-// stage that took them (`source: bootstrap`).
-bool FromBootstrap(const Provenance& provenance) {
+// Whether a prior pose set's rotations were made from the match graph: the bootstrap's own
+// poses, a prior stage that took them (`source: bootstrap`), or a prior whose repair replaced
+// them (kPriorRepairJson beside it says a mode other than "none").
+bool RotationsFromMatches(const Hdf5Reader& reader, const std::string& pose_set,
+                          const Provenance& provenance) {
   if (provenance.stage == "bootstrap") return true;
-  return provenance.stage == "prior" && provenance.options.is_object() &&
-         provenance.options.value("source", "") == "bootstrap";
+  if (provenance.stage != "prior" || !provenance.options.is_object()) return false;
+  if (provenance.options.value("source", "") == "bootstrap") return true;
+  if (!reader.HasJson(kPriorRepairJson)) return false;
+  const nlohmann::json repair = reader.ReadJson(kPriorRepairJson);
+  return repair.value("pose_set", "") == pose_set && repair.value("mode", "none") != "none";
 }
 
 // The refiner's input for one component: its images (in image-list order), their cameras (the
@@ -309,9 +314,10 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
         Hdf5Reader(context.Require("features")).ReadFeatures();
     const std::vector<PairMatches> matches = Hdf5Reader(context.Require("matches")).ReadMatches();
     Provenance prior_provenance;
-    const PoseSet prior = Hdf5Reader(context.Require(PoseArtifact(options_.prior)))
-                              .ReadPoseSet(options_.prior, nullptr, &prior_provenance);
-    const bool prior_from_bootstrap = FromBootstrap(prior_provenance);
+    const Hdf5Reader prior_reader(context.Require(PoseArtifact(options_.prior)));
+    const PoseSet prior = prior_reader.ReadPoseSet(options_.prior, nullptr, &prior_provenance);
+    const bool prior_from_bootstrap =
+        RotationsFromMatches(prior_reader, options_.prior, prior_provenance);
     if (features.size() != images.images.size()) {
       throw InputError(context.Require("features") + ": features for " +
                        std::to_string(features.size()) + " images, but the image list has " +

@@ -566,8 +566,8 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   if (probe.prior_from_matches) {
     spdlog::info(fmt::format(
         "refine: orientation prior (λR = {:g}) not used: the prior's rotations were estimated "
-        "from these matches (the bootstrap), so they add nothing but their own errors; the finish "
-        "runs with λR = 0",
+        "from these matches (the bootstrap or a repair from it), so they add nothing but their "
+        "own errors; the finish runs with λR = 0",
         probe.weight));
   } else if (options.orientation_weight > 0) {
     PassSettings probe_pass = basin;

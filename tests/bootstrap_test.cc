@@ -665,5 +665,61 @@ TEST(PriorRepair, RotationsOnlyAndFullReplacement) {
   EXPECT_GT(summary.scale, 0.0);
 }
 
+// repair: auto. A coarse prior (rotations 30° off each) is replaced when the graph supports the
+// bootstrap's positions and gets the averaged rotations alone when it does not; an accurate one
+// (1° off) is kept unchanged, whatever the graph.
+TEST(PriorRepair, AutoRepairsOnlyACoarsePrior) {
+  std::mt19937 rng(17);
+  const BootstrapScene scene = OrbitScene(8, 0, rng);
+  Sim3 gauge;
+  gauge.scale = 0.5;
+  gauge.rotation = Eigen::Quaterniond(ExpSO3(Eigen::Vector3d(1.0, 0.2, -0.5)));
+  std::normal_distribution<double> normal;
+  const auto rotation_by = [&](double angle_rad) {
+    return ExpSO3(DrawVector3([&] { return normal(rng); }).normalized() * angle_rad);
+  };
+  PoseSet bootstrap, coarse, accurate;
+  for (int i = 0; i < 8; ++i) {
+    const std::string name = std::to_string(i);
+    const Rigid3 pose(Eigen::Quaterniond(scene.rotations[i]), scene.centres[i]);
+    bootstrap.world_from_cam[name] = gauge.TransformPose(pose);
+    const Eigen::Vector3d centre = scene.centres[i] + 0.1 * Eigen::Vector3d::Random();
+    coarse.world_from_cam[name] =
+        Rigid3(Eigen::Quaterniond(rotation_by(0.52) * scene.rotations[i]), centre);
+    accurate.world_from_cam[name] =
+        Rigid3(Eigen::Quaterniond(rotation_by(0.0175) * scene.rotations[i]), centre);
+  }
+  PriorRepairSummary summary;
+  const PoseSet replaced = RepairIfCoarse(coarse, bootstrap, 20.0, true, &summary);
+  EXPECT_EQ(summary.mode, "replace");
+  EXPECT_EQ(summary.num_repaired, 8);
+  EXPECT_GT(summary.median_rotation_change_deg, 20.0);
+  EXPECT_EQ(summary.min_rotation_change_deg, 20.0);
+  const PoseSet expected_replaced = ReplaceWithBootstrap(coarse, bootstrap);
+  const PoseSet rotations = RepairIfCoarse(coarse, bootstrap, 20.0, false, &summary);
+  EXPECT_EQ(summary.mode, "rotations");
+  const PoseSet expected_rotations = RepairRotations(coarse, bootstrap);
+  for (int i = 0; i < 8; ++i) {
+    const std::string name = std::to_string(i);
+    EXPECT_TRUE(replaced.world_from_cam.at(name).translation.isApprox(
+        expected_replaced.world_from_cam.at(name).translation));
+    EXPECT_TRUE(rotations.world_from_cam.at(name).rotation.isApprox(
+        expected_rotations.world_from_cam.at(name).rotation));
+    EXPECT_EQ(rotations.world_from_cam.at(name).translation,
+              coarse.world_from_cam.at(name).translation);
+  }
+  for (const bool supported : {true, false}) {
+    const PoseSet kept = RepairIfCoarse(accurate, bootstrap, 20.0, supported, &summary);
+    EXPECT_EQ(summary.mode, "none");
+    EXPECT_EQ(summary.num_repaired, 0);
+    EXPECT_EQ(summary.num_kept_prior, 8);
+    EXPECT_LT(summary.median_rotation_change_deg, 2.0);
+    for (const auto& [name, pose] : accurate.world_from_cam) {
+      EXPECT_EQ(kept.world_from_cam.at(name).rotation.coeffs(), pose.rotation.coeffs());
+      EXPECT_EQ(kept.world_from_cam.at(name).translation, pose.translation);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace raytime

@@ -210,6 +210,43 @@ stages:
   EXPECT_NE(dup.output.find("prior@NAME"), std::string::npos) << dup.output;
 }
 
+// The auto recipe's repair (issue 12; paper §4.8 "Basin of convergence"): a 32° prior is beyond
+// the basin solve's width; the bootstrap says so (its rotations ~32° from the prior's) and the
+// prior stage replaces it; the refine stage then knows the rotations came from the matches.
+TEST_F(PipelineTest, CoarsePriorIsRepairedFromTheBootstrapAndRefined) {
+  const std::string pipeline = WriteFile("repair.yaml", R"(
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - features: {max_features: 8192, first_octave: -1}
+  - matches: {pairs: exhaustive, guided_matching: true}
+  - prior: {source: perturb, mode: iid, level_deg: 32, seed: 2, translation_per_deg: 0.0125}
+  - bootstrap: {positions: lud}
+  - prior@auto: {source: pose_set, pose_set: prior, repair: auto}
+  - refine: {preset: auto, prior: prior@auto}
+  - evaluate: {poses: [prior, prior@auto, refined], alignments: [sim3]}
+)");
+  const std::string run_dir = (workdir_ / "repair").string();
+  CommandResult result = RunRaytime("run " + pipeline + " --workdir " + run_dir);
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadJson(fs::path(run_dir) / "summary.json");
+  json repair;
+  for (const auto& stage : summary["stages"]) {
+    if (stage["id"] == "prior@auto") repair = stage["summary"]["repair"];
+  }
+  ASSERT_TRUE(repair.is_object()) << summary["stages"].dump();
+  EXPECT_EQ(repair["requested"], "auto");
+  EXPECT_EQ(repair["mode"], "replace");
+  EXPECT_EQ(repair["num_repaired"], 11);
+  EXPECT_GT(repair["median_rotation_change_deg"].get<double>(), 20.0);
+  const json& metrics = summary["metrics"];
+  EXPECT_GT(metrics["prior"]["sim3"]["mean_rotation_deg"].get<double>(), 20.0);
+  EXPECT_LT(metrics["prior@auto"]["sim3"]["mean_rotation_deg"].get<double>(), 1.0);
+  EXPECT_LT(metrics["refined"]["sim3"]["mean_rotation_deg"].get<double>(), 0.1);
+  EXPECT_NE(result.output.find("beyond the threshold 20°"), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("the bootstrap or a repair from it"), std::string::npos)
+      << result.output;
+}
+
 // A capture has no ground truth: `reference` scores pose sets against another estimate. Scored
 // against a 4° prior, the ground truth is 4° off (the angle between two rotations is symmetric).
 TEST_F(PipelineTest, EvaluateScoresAgainstAnotherPoseSet) {

@@ -133,11 +133,13 @@ SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
 nlohmann::json RunRefine(
     const SceneInputs& scene, const TempDir& dir, PoseSet* refined,
     const std::string& options = "{preset: plain, num_threads: 1, trust_region: false}",
-    const Provenance& prior_provenance = Provenance{"test", {}, "", ""}) {
+    const Provenance& prior_provenance = Provenance{"test", {}, "", ""},
+    const nlohmann::json& prior_repair = nullptr) {
   {
     Hdf5Writer writer(dir / "inputs.h5");
     writer.WriteImages(scene.images);
     writer.WritePoseSet("prior", scene.prior, PoseRole::kPrior, prior_provenance);
+    if (!prior_repair.is_null()) writer.WriteJson(kPriorRepairJson, prior_repair);
     writer.WriteFeatures(scene.features, Provenance{"test", {}, "", ""});
     writer.WriteMatches(scene.matches, Provenance{"test", {}, "", ""});
     writer.Commit();
@@ -169,19 +171,38 @@ const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::stri
   return nullptr;
 }
 
-// A prior the bootstrap made has rotations estimated from the same matches: preset auto finishes
-// without an orientation prior towards them and does not probe it; any other prior is probed.
+// A prior the bootstrap made, or one the prior stage's repair replaced from it, has rotations
+// estimated from the same matches: preset auto finishes without an orientation prior towards them
+// and does not probe it; any other prior (a repair that kept it included) is probed.
 TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
   std::vector<CameraIntrinsics> cameras;
   const SceneInputs scene = MakePerImageScene(&cameras);
   const std::string options = "{preset: auto, num_threads: 1}";
-  for (const bool from_bootstrap : {false, true}) {
+  struct Case {
+    Provenance provenance;
+    nlohmann::json repair;
+    bool from_bootstrap;
+  };
+  const nlohmann::json repaired_source = {{"source", "pose_set"}, {"repair", "auto"}};
+  const std::vector<Case> cases = {
+      {Provenance{"prior", {{"source", "capture"}}, "", ""}, nullptr, false},
+      {Provenance{"prior", {{"source", "bootstrap"}}, "", ""}, nullptr, true},
+      {Provenance{"prior", repaired_source, "", ""},
+       {{"mode", "replace"}, {"pose_set", "prior"}},
+       true},
+      {Provenance{"prior", repaired_source, "", ""},
+       {{"mode", "none"}, {"pose_set", "prior"}},
+       false},
+      // The repair record of another pose set says nothing about this one.
+      {Provenance{"prior", repaired_source, "", ""},
+       {{"mode", "rotations"}, {"pose_set", "prior@other"}},
+       false}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.provenance.options.dump() + " " + c.repair.dump());
+    const bool from_bootstrap = c.from_bootstrap;
     TempDir dir("refine_stage");
-    const Provenance provenance = from_bootstrap
-                                      ? Provenance{"prior", {{"source", "bootstrap"}}, "", ""}
-                                      : Provenance{"prior", {{"source", "capture"}}, "", ""};
     PoseSet refined;
-    const nlohmann::json summary = RunRefine(scene, dir, &refined, options, provenance);
+    const nlohmann::json summary = RunRefine(scene, dir, &refined, options, c.provenance, c.repair);
     const nlohmann::json& probe = summary["orientation_prior"];
     EXPECT_EQ(probe["prior_from_matches"], from_bootstrap) << probe;
     std::vector<std::string> passes;

@@ -301,7 +301,8 @@ void ProvenanceAttributes(ByteReader& in, hid_t loc) {
 
 const std::vector<std::string> kPoseSetNames = {"prior", "refined", "ground_truth", "refined@gnc"};
 const std::vector<std::string> kRoles = {"prior", "refined", "ground_truth", "other"};
-const std::vector<std::string> kJsonNames = {"refine_summary", "bootstrap_pairs"};
+const std::vector<std::string> kJsonNames = {"refine_summary", "bootstrap_pairs",
+                                             "bootstrap_support"};
 
 // Everything the harness created that the reader can be asked about by name.
 struct Built {
