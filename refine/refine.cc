@@ -619,7 +619,8 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   // on 4 of 24 ladder runs at 1-2°, one of them unflagged. With no prior at all, the long Record3D
   // desk sweep drifted 0.196° (median relative rotation) from the finish, unflagged: the mode of
   // docs/real_captures.md that made the probe keep λR there; held at the finish it moved 0.012°.
-  // The hold costs castle-P19 from an exact prior (0.122° against 0.039° without it). One stage,
+  // At the finish's full λR the hold costs castle-P19 from an exact prior (0.122° against 0.039°
+  // without it); RefineOptions::finish_anneal_hold_ratio weakens it (0.01 in auto). One stage,
   // straight to its scale: through the decade between, as GNC would, the same errors to 0.001° on
   // the four Strecha scenes at 0° and 8°, with 35 % more iterations.
   const double anneal_scale = FinishAnnealScale(options, probe.free_residual_median_px);
@@ -627,6 +628,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
     PassSettings anneal = finish;
     anneal.name = "finish_anneal";
     anneal.scales = {anneal_scale};
+    anneal.orientation_weight = finish.orientation_weight * options.finish_anneal_hold_ratio;
     // Only the rotations: the centres' terms and the gauge stay the prior's, as in every pass.
     std::vector<Rigid3> anchor = prior;
     for (size_t i = 0; i < anchor.size(); ++i) {

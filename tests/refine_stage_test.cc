@@ -215,9 +215,11 @@ TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
       EXPECT_EQ(passes, std::vector<std::string>(
                             {"basin", "orientation_probe", "finish", "finish_anneal"}));
     }
-    // The anneal keeps the finish's λR (towards the finish's own rotations when it is kept).
-    EXPECT_EQ(summary["passes"].back()["orientation_weight"],
-              summary["passes"][passes.size() - 2]["orientation_weight"]);
+    // The anneal holds the rotations at the finish's own with 0.01 x the finish's λR (auto's
+    // finish_anneal_hold_ratio): none after a λR = 0 finish.
+    EXPECT_DOUBLE_EQ(
+        summary["passes"].back()["orientation_weight"].get<double>(),
+        0.01 * summary["passes"][passes.size() - 2]["orientation_weight"].get<double>());
     EXPECT_LT(ComputePoseErrors(refined, scene.ground_truth, PoseErrorOptions()).mean_rotation_deg,
               0.05);
   }
