@@ -4,12 +4,15 @@
 // room capture);
 // every point a camera sees is one keypoint (0.5 px noise by default), and every pair of frames at
 // most --window apart is matched on the points both see, a --outliers fraction of each pair's
-// matches replaced by a random keypoint of the second frame. The prior is the ground truth
+// matches replaced by a random keypoint of the second frame. With --laps L > 1 the frames walk
+// the corridor L times (each lap on its own sway) and every pair of frames at most --window
+// positions apart is matched whatever their laps: revisits, the loop closures whose fill-in of the
+// reduced camera system a single pass does not have. The prior is the ground truth
 // perturbed by the ladder protocol (evaluate/perturbation.h: i.i.d., --level degrees per frame,
 // 1.25 % of the 4.5 m median depth per degree). Deterministic for a seed.
 //
-//   synthetic_capture --cameras N [--keypoints K] [--window W] [--noise PX] [--outliers F]
-//                     [--level DEG] [--seed S] --out DIR
+//   synthetic_capture --cameras N [--keypoints K] [--window W] [--laps L] [--noise PX]
+//                     [--outliers F] [--level DEG] [--seed S] --out DIR
 //
 // Writes DIR/dataset.h5 (images, cameras, ground_truth), DIR/features.h5 (keypoints, no
 // descriptors), DIR/matches.h5 (verified inlier matches) and DIR/prior.h5 (pose set "prior"), so
@@ -37,6 +40,7 @@ struct CaptureOptions {
   int cameras = 100;
   int keypoints = 1000;  // points each frame sees, about
   int window = 10;       // frames matched ahead of each frame
+  int laps = 1;          // passes along the corridor (revisits matched across passes)
   double noise_px = 0.5;
   double outliers = 0.05;
   double level_deg = 2.0;
@@ -61,6 +65,10 @@ int Main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--window", o.window, "Frames matched ahead of each frame")
       ->check(CLI::PositiveNumber);
+  app.add_option("--laps", o.laps,
+                 "Passes along the corridor; frames at most --window positions apart are matched "
+                 "across passes (loop closures)")
+      ->check(CLI::PositiveNumber);
   app.add_option("--noise", o.noise_px, "Keypoint noise, pixels (standard deviation)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--outliers", o.outliers, "Fraction of each pair's matches made wrong")
@@ -79,7 +87,9 @@ int Main(int argc, char** argv) {
   const double height = std::min(2.0 * kWallHalfHeight, kHeight / kFocal * kMedianDepth);
   const double density = o.keypoints / (footprint * height);  // points per m² of wall
   const double margin = footprint;
-  const double length = (o.cameras - 1) * spacing + 2 * margin;
+  const int per_lap = (o.cameras + o.laps - 1) / o.laps;  // frame positions along the corridor
+  const auto position = [&](int i) { return i % per_lap; };
+  const double length = (per_lap - 1) * spacing + 2 * margin;
   std::mt19937_64 rng(o.seed);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::normal_distribution<double> noise(0.0, o.noise_px);
@@ -110,9 +120,11 @@ int Main(int argc, char** argv) {
     images.images.push_back({name, kWidth, kHeight, 0});
     // A hand-held walk, not a rail: the centre sways ±10 cm in depth and height (collinear
     // centres would leave the roll about the corridor to the gauge and Sim(3) alignment undefined).
-    const Rigid3 pose(
-        Eigen::Quaterniond(world_from_cam_rotation),
-        Eigen::Vector3d(i * spacing, 0.1 * std::sin(0.13 * i), 0.1 * std::sin(0.07 * i)));
+    // Each lap sways on its own phase, so revisits see the wall from other centres.
+    const double phase = 1.7 * (i / per_lap);
+    const Rigid3 pose(Eigen::Quaterniond(world_from_cam_rotation),
+                      Eigen::Vector3d(position(i) * spacing, 0.1 * std::sin(0.13 * i + phase),
+                                      0.1 * std::sin(0.07 * i + phase)));
     ground_truth.world_from_cam[name] = pose;
     const Rigid3 cam_from_world = pose.Inverse();
     const double x_min = pose.translation.x() - footprint;
@@ -138,7 +150,8 @@ int Main(int argc, char** argv) {
   std::vector<PairMatches> pairs;
   long long num_matches = 0;
   for (int i = 0; i < o.cameras; ++i) {
-    for (int j = i + 1; j <= std::min(o.cameras - 1, i + o.window); ++j) {
+    for (int j = i + 1; j < o.cameras; ++j) {
+      if (std::abs(position(j) - position(i)) > o.window) continue;
       std::vector<std::pair<uint32_t, uint32_t>> matches;
       auto a = seen[i].begin();
       auto b = seen[j].begin();
@@ -182,10 +195,10 @@ int Main(int argc, char** argv) {
   std::filesystem::create_directories(o.out);
   Provenance provenance;
   provenance.stage = "synthetic_capture";
-  provenance.options = {{"cameras", o.cameras},   {"keypoints", o.keypoints},
-                        {"window", o.window},     {"noise_px", o.noise_px},
-                        {"outliers", o.outliers}, {"level_deg", o.level_deg},
-                        {"seed", o.seed}};
+  provenance.options = {{"cameras", o.cameras},     {"keypoints", o.keypoints},
+                        {"window", o.window},       {"laps", o.laps},
+                        {"noise_px", o.noise_px},   {"outliers", o.outliers},
+                        {"level_deg", o.level_deg}, {"seed", o.seed}};
   {
     Hdf5Writer writer(o.out + "/dataset.h5");
     writer.WriteImages(images);
