@@ -92,7 +92,13 @@ bool BootstrapIsWeak(const StageContext& context) {
         "prior.repair 'auto': the bootstrap's file has no /json/bootstrap_support (written by "
         "raytime since 2026-11-26); run the bootstrap stage again");
   }
-  return reader.ReadJson("bootstrap_support").at("weak").get<bool>();
+  const nlohmann::json support = reader.ReadJson("bootstrap_support");
+  if (!support.is_object() || !support.contains("weak") || !support["weak"].is_boolean()) {
+    throw InputError(reader.path() +
+                     ": /json/bootstrap_support has no boolean 'weak'; run the bootstrap stage "
+                     "again");
+  }
+  return support["weak"].get<bool>();
 }
 
 class PriorStage : public StageWithOptions<PriorOptions> {

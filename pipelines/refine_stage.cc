@@ -131,7 +131,13 @@ bool RotationsFromMatches(const Hdf5Reader& reader, const std::string& pose_set,
   if (provenance.options.value("source", "") == "bootstrap") return true;
   if (!reader.HasJson(kPriorRepairJson)) return false;
   const nlohmann::json repair = reader.ReadJson(kPriorRepairJson);
-  return repair.value("pose_set", "") == pose_set && repair.value("mode", "none") != "none";
+  if (!repair.is_object() || !repair.contains("pose_set") || !repair["pose_set"].is_string() ||
+      !repair.contains("mode") || !repair["mode"].is_string()) {
+    throw InputError(reader.path() + ": /json/" + kPriorRepairJson +
+                     " is not the prior stage's repair record (an object with the strings "
+                     "pose_set and mode); run the prior stage again");
+  }
+  return repair["pose_set"] == pose_set && repair["mode"] != "none";
 }
 
 // The refiner's input for one component: its images (in image-list order), their cameras (the

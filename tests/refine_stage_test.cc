@@ -223,6 +223,17 @@ TEST(RefineStageTest, AutoUsesNoOrientationPriorFromTheBootstrap) {
     EXPECT_LT(ComputePoseErrors(refined, scene.ground_truth, PoseErrorOptions()).mean_rotation_deg,
               0.05);
   }
+  // A damaged repair record is an input error naming the file, not a guess either way.
+  TempDir dir("refine_stage");
+  PoseSet refined;
+  try {
+    RunRefine(scene, dir, &refined, options, Provenance{"prior", repaired_source, "", ""},
+              nlohmann::json::array({"replace"}));
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("inputs.h5: /json/prior_repair"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST(RefineStageTest, UnmatchedCameraIsReportedAndNotExported) {
