@@ -85,8 +85,7 @@ const char* kFormatsWithCapturePoses =
 
 // Whether the bootstrap stage found its view graph unable to support its positions (its
 // `/json/bootstrap_support`, docs/hdf5_schema.md).
-bool BootstrapIsWeak(const StageContext& context) {
-  const Hdf5Reader reader(context.Require(PoseArtifact("bootstrap")));
+bool BootstrapIsWeak(const Hdf5Reader& reader) {
   if (!reader.HasJson("bootstrap_support")) {
     throw InputError(
         "prior.repair 'auto': the bootstrap's file has no /json/bootstrap_support (written by "
@@ -216,8 +215,8 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       }
     }
     if (options_.repair != "none") {
-      const PoseSet bootstrap =
-          Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
+      const Hdf5Reader bootstrap_reader(context.Require(PoseArtifact("bootstrap")));
+      const PoseSet bootstrap = bootstrap_reader.ReadPoseSet("bootstrap");
       PriorRepairSummary repair;
       try {
         if (options_.repair == "rotations") {
@@ -226,7 +225,7 @@ class PriorStage : public StageWithOptions<PriorOptions> {
           prior = ReplaceWithBootstrap(prior, bootstrap, &repair);
         } else {
           prior = RepairIfCoarse(prior, bootstrap, options_.repair_min_rotation_change_deg,
-                                 !BootstrapIsWeak(context), &repair);
+                                 !BootstrapIsWeak(bootstrap_reader), &repair);
         }
       } catch (const std::invalid_argument& e) {
         throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());

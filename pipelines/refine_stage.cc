@@ -322,7 +322,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     Provenance prior_provenance;
     const Hdf5Reader prior_reader(context.Require(PoseArtifact(options_.prior)));
     const PoseSet prior = prior_reader.ReadPoseSet(options_.prior, nullptr, &prior_provenance);
-    const bool prior_from_bootstrap =
+    const bool prior_rotations_from_matches =
         RotationsFromMatches(prior_reader, options_.prior, prior_provenance);
     if (features.size() != images.images.size()) {
       throw InputError(context.Require("features") + ": features for " +
@@ -386,7 +386,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     for (size_t c = 0; c < num_solved; ++c) {
       std::vector<std::string> names;
       RefineInput input = ComponentInput(images, features, matches, prior, components[c], &names);
-      input.prior_rotations_from_matches = prior_from_bootstrap;
+      input.prior_rotations_from_matches = prior_rotations_from_matches;
       RefineOutput output;
       const RefineSummary summary = RefinePoses(input, options_.refine, &output);
       for (size_t k = 0; k < names.size(); ++k) {
