@@ -23,10 +23,14 @@
 namespace raytime {
 namespace {
 
-Eigen::Matrix3d RandomRotation(std::mt19937& rng, double max_angle_rad) {
+Eigen::Vector3d RandomAxis(std::mt19937& rng) {
   std::normal_distribution<double> normal;
+  return DrawVector3([&] { return normal(rng); }).normalized();
+}
+
+Eigen::Matrix3d RandomRotation(std::mt19937& rng, double max_angle_rad) {
+  const Eigen::Vector3d axis = RandomAxis(rng);
   std::uniform_real_distribution<double> uniform(0.0, max_angle_rad);
-  const Eigen::Vector3d axis = DrawVector3([&] { return normal(rng); }).normalized();
   return ExpSO3(axis * uniform(rng));
 }
 
@@ -674,10 +678,7 @@ TEST(PriorRepair, AutoRepairsOnlyACoarsePrior) {
   Sim3 gauge;
   gauge.scale = 0.5;
   gauge.rotation = Eigen::Quaterniond(ExpSO3(Eigen::Vector3d(1.0, 0.2, -0.5)));
-  std::normal_distribution<double> normal;
-  const auto rotation_by = [&](double angle_rad) {
-    return ExpSO3(DrawVector3([&] { return normal(rng); }).normalized() * angle_rad);
-  };
+  const auto rotation_by = [&](double angle_rad) { return ExpSO3(RandomAxis(rng) * angle_rad); };
   PoseSet bootstrap, coarse, accurate;
   for (int i = 0; i < 8; ++i) {
     const std::string name = std::to_string(i);

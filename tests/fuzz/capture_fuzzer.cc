@@ -49,7 +49,7 @@ namespace {
 
 namespace fs = std::filesystem;
 // The dataset.format of the input being run (set by FuzzCapture; the fuzzers are single-threaded).
-const char* kFormat = "";
+const char* current_format = "";
 constexpr size_t kMaxFiles = 64;
 constexpr size_t kMaxPathBytes = 200;
 
@@ -59,11 +59,11 @@ bool Verbose() {
 }
 
 void Report(const char* step, const char* what) {
-  if (Verbose()) std::fprintf(stderr, "  %s %s: %s\n", kFormat, step, what);
+  if (Verbose()) std::fprintf(stderr, "  %s %s: %s\n", current_format, step, what);
 }
 
 [[noreturn]] void NotFinite(const std::string& what) {
-  std::fprintf(stderr, "%s reader returned a value that is not finite: %s\n", kFormat,
+  std::fprintf(stderr, "%s reader returned a value that is not finite: %s\n", current_format,
                what.c_str());
   std::abort();
 }
@@ -164,16 +164,16 @@ void AttachDecodedFrames(std::string_view description, raytime::Dataset* dataset
 
 int raytime::fuzz::FuzzCapture(const char* format, const uint8_t* data, size_t size) {
   using namespace raytime;
-  kFormat = format;
+  current_format = format;
   fuzz::ClearScratch();
   const std::string root = fuzz::ScratchPath("capture");
   std::filesystem::create_directory(root);
   const std::string_view video =
       WriteTree(std::string_view(reinterpret_cast<const char*>(data), size), root);
-  const bool stray = std::string_view(kFormat) == "stray";
+  const bool stray = std::string_view(current_format) == "stray";
   bool poses_read = false;
   try {
-    const PoseSet poses = ReadPoseFile(kFormat, root);
+    const PoseSet poses = ReadPoseFile(current_format, root);
     poses_read = true;
     RequireFinite(poses, "pose file");
     Report("pose file", (std::to_string(poses.size()) + " poses").c_str());
@@ -185,7 +185,7 @@ int raytime::fuzz::FuzzCapture(const char* format, const uint8_t* data, size_t s
   if (!poses_read && !stray) return 0;
   try {
     DatasetOptions options;
-    options.format = kFormat;
+    options.format = current_format;
     options.root = root;
     Dataset dataset = LoadDataset(options);
     if (dataset.video) AttachDecodedFrames(video, &dataset);
