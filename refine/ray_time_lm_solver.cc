@@ -44,6 +44,15 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
 
 double Clamp(double value) { return std::min(std::max(value, kMinLmDiagonal), kMaxLmDiagonal); }
 
+// block += s·a·bᵀ, 6x6 row-major.
+inline void AddScaledOuter(double* __restrict block, const double* __restrict a,
+                           const double* __restrict b, double s) {
+  for (int i = 0; i < 6; ++i) {
+    const double ai = s * a[i];
+    for (int j = 0; j < 6; ++j) block[6 * i + j] += ai * b[j];
+  }
+}
+
 // Ceres' ArctanLoss(a) scaled by w: ρ(s) and ρ'(s).
 struct ArctanLoss {
   double scale;
@@ -110,24 +119,56 @@ class ReducedCameraSystem {
     for (const RayTimeLmResidual& r : problem.residuals) ++residual_begin_[r.ray_time + 1];
     for (int t = 0; t < num_ray_times; ++t) residual_begin_[t + 1] += residual_begin_[t];
 
-    // Coupled pairs (c < d): every two variable images of one ray time's residuals.
-    std::vector<std::pair<int, int>> pairs;
-    std::vector<int> cameras;
+    // Each ray time's variable images, ascending: the images its elimination couples.
+    group_begin_.assign(num_ray_times + 1, 0);
     for (int t = 0; t < num_ray_times; ++t) {
-      GroupCameras(problem, t, &cameras);
-      for (size_t i = 0; i < cameras.size(); ++i) {
-        for (size_t j = i + 1; j < cameras.size(); ++j) {
-          pairs.emplace_back(std::min(cameras[i], cameras[j]), std::max(cameras[i], cameras[j]));
+      const size_t begin = group_cameras_.size();
+      for (int k = residual_begin_[t]; k < residual_begin_[t + 1]; ++k) {
+        for (const int image :
+             {problem.residuals[k].source_image, problem.residuals[k].target_image}) {
+          const int c = variable_[image];
+          if (c >= 0 && std::find(group_cameras_.begin() + begin, group_cameras_.end(), c) ==
+                            group_cameras_.end()) {
+            group_cameras_.push_back(c);
+          }
         }
       }
+      std::sort(group_cameras_.begin() + begin, group_cameras_.end());
+      group_begin_[t + 1] = static_cast<int>(group_cameras_.size());
     }
-    std::sort(pairs.begin(), pairs.end());
-    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+
+    // Coupled pairs (c < d): every two images of one group. Collected per image from the groups
+    // that hold it, deduplicated by a stamp per image: a list of every group's pairs holds
+    // Σ k(k-1)/2 entries, which long tracks make huge (a 500-frame corridor walked four times,
+    // tracks of ~59 frames: 850M pairs, 6.8 GB and a minute of sorting; docs/scaling.md).
+    std::vector<int> image_group_begin(num_variables_ + 1, 0);
+    for (const int c : group_cameras_) ++image_group_begin[c + 1];
+    for (int c = 0; c < num_variables_; ++c) image_group_begin[c + 1] += image_group_begin[c];
+    std::vector<int> image_groups(group_cameras_.size());
+    std::vector<int> next(image_group_begin.begin(), image_group_begin.end() - 1);
+    for (int t = 0; t < num_ray_times; ++t) {
+      for (int g = group_begin_[t]; g < group_begin_[t + 1]; ++g) {
+        image_groups[next[group_cameras_[g]]++] = t;
+      }
+    }
+    std::vector<int> stamp(num_variables_, -1);
     neighbour_begin_.assign(num_variables_ + 1, 0);
-    for (const auto& [c, d] : pairs) ++neighbour_begin_[c + 1];
-    for (int c = 0; c < num_variables_; ++c) neighbour_begin_[c + 1] += neighbour_begin_[c];
-    neighbours_.reserve(pairs.size());
-    for (const auto& pair : pairs) neighbours_.push_back(pair.second);
+    for (int c = 0; c < num_variables_; ++c) {
+      const size_t row = neighbours_.size();
+      for (int n = image_group_begin[c]; n < image_group_begin[c + 1]; ++n) {
+        const int t = image_groups[n];
+        for (int g = group_begin_[t]; g < group_begin_[t + 1]; ++g) {
+          const int d = group_cameras_[g];
+          if (d > c && stamp[d] != c) {
+            stamp[d] = c;
+            neighbours_.push_back(d);
+          }
+        }
+      }
+      std::sort(neighbours_.begin() + row, neighbours_.end());
+      neighbour_begin_[c + 1] = static_cast<int>(neighbours_.size());
+    }
+    neighbours_.shrink_to_fit();
 
     // Chunks of ray times of about equal residual counts.
     const size_t num_residuals = problem.residuals.size();
@@ -150,20 +191,17 @@ class ReducedCameraSystem {
   int chunk_begin(int chunk) const { return chunk_begin_[chunk]; }
   int chunk_end(int chunk) const { return chunk_begin_[chunk + 1]; }
 
-  // The variable images a ray time's residuals reach, in first-seen order.
-  void GroupCameras(const RayTimeLmProblem& problem, int ray_time,
-                    std::vector<int>* cameras) const {
-    cameras->clear();
-    for (int k = residual_begin_[ray_time]; k < residual_begin_[ray_time + 1]; ++k) {
-      for (const int image :
-           {problem.residuals[k].source_image, problem.residuals[k].target_image}) {
-        const int c = variable_[image];
-        if (c >= 0 && std::find(cameras->begin(), cameras->end(), c) == cameras->end()) {
-          cameras->push_back(c);
-        }
-      }
-    }
+  // The variable images a ray time's residuals reach, ascending.
+  const int* group_begin(int ray_time) const {
+    return group_cameras_.data() + group_begin_[ray_time];
   }
+  const int* group_end(int ray_time) const {
+    return group_cameras_.data() + group_begin_[ray_time + 1];
+  }
+  // The first of c's couplings with images after it (blocks num_variables + n for the n from
+  // here on, ascending in the other image): a walk along it finds the blocks of a group's pairs.
+  int first_neighbour(int c) const { return neighbour_begin_[c]; }
+  int neighbour(int n) const { return neighbours_[n]; }
 
   // Block index of the coupling of variables c and d: c for c == d, else the pair's.
   int Block(int c, int d) const {
@@ -197,12 +235,8 @@ class ReducedCameraSystem {
 
   // Adds s·a·bᵀ (rows: c's parameters, columns: d's) to the coupling of c and d.
   void AddOuter(Partial* partial, int c, int d, const double* a, const double* b, double s) const {
-    double* block = partial->blocks[Block(c, d)].data();
     if (c > d) std::swap(a, b);
-    for (int i = 0; i < 6; ++i) {
-      const double ai = s * a[i];
-      for (int j = 0; j < 6; ++j) block[6 * i + j] += ai * b[j];
-    }
+    AddScaledOuter(partial->blocks[Block(c, d)].data(), a, b, s);
   }
 
   // Adds w·Jaᵀ·Jb for 2x6 row-major Ja (c's) and Jb (d's) to the coupling of c and d (both
@@ -247,6 +281,8 @@ class ReducedCameraSystem {
   int num_variables_ = 0;
   std::vector<int> variable_;
   std::vector<int> residual_begin_;
+  std::vector<int> group_begin_;
+  std::vector<int> group_cameras_;
   std::vector<int> neighbour_begin_;
   std::vector<int> neighbours_;
   std::vector<int> chunk_begin_;
@@ -429,12 +465,12 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
   ForEachChunk(num_threads_, [&](int chunk) {
     ReducedCameraSystem::Partial& partial = partials[chunk];
     partial.Reset(system_.num_blocks(), num_variables);
-    std::vector<int> cameras;
     std::vector<Row6> coupling;  // per camera of the group: H_ct
     LinearizedResidual lin;
     for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
-      system_.GroupCameras(problem_, t, &cameras);
-      coupling.assign(cameras.size(), Row6{});
+      const int* group = system_.group_begin(t);
+      const int group_size = static_cast<int>(system_.group_end(t) - group);
+      coupling.assign(group_size, Row6{});
       double h_tt = 0.0;
       double g_t = 0.0;
       for (int k = system_.residual_begin(t); k < system_.residual_end(t); ++k) {
@@ -450,7 +486,7 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
         for (int s = 0; s < 2; ++s) {
           if (c[s] < 0) continue;
           const double* j = jacobian[s];
-          const auto slot = std::find(cameras.begin(), cameras.end(), c[s]) - cameras.begin();
+          const auto slot = std::lower_bound(group, group + group_size, c[s]) - group;
           double* h_ct = coupling[slot].data();
           double* gradient = partial.gradient[c[s]].data();
           double* diagonal = partial.diagonal[c[s]].data();
@@ -470,14 +506,22 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
       const double projected = std::max(t_value - g_t, kRayTimeLowerBound);
       partial.gradient_max_norm =
           std::max(partial.gradient_max_norm, std::abs(t_value - projected));
-      // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g).
+      // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g). The
+      // group is ascending, so the blocks of (group[i], group[j > i]) come in one walk along
+      // group[i]'s couplings: k²/2 pairs per ray time are the solve's bulk with long tracks, and
+      // a search per pair was a fifth of it.
       const double damped = h_tt + Clamp(h_tt) / radius;
-      for (size_t i = 0; i < cameras.size(); ++i) {
-        double* elimination = partial.elimination[cameras[i]].data();
+      const double scale = -1.0 / damped;
+      for (int i = 0; i < group_size; ++i) {
+        const int ci = group[i];
+        double* elimination = partial.elimination[ci].data();
         for (int a = 0; a < 6; ++a) elimination[a] += coupling[i][a] * (g_t / damped);
-        for (size_t j = i; j < cameras.size(); ++j) {
-          system_.AddOuter(&partial, cameras[i], cameras[j], coupling[i].data(), coupling[j].data(),
-                           -1.0 / damped);
+        AddScaledOuter(partial.blocks[ci].data(), coupling[i].data(), coupling[i].data(), scale);
+        int n = system_.first_neighbour(ci);
+        for (int j = i + 1; j < group_size; ++j) {
+          while (system_.neighbour(n) < group[j]) ++n;
+          AddScaledOuter(partial.blocks[num_variables + n].data(), coupling[i].data(),
+                         coupling[j].data(), scale);
         }
       }
     }
