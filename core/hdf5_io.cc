@@ -139,19 +139,16 @@ Id CreateGroup(const Context& c, hid_t loc, const std::string& name) {
 }
 
 std::vector<std::string> ChildNames(const Context& c, hid_t group) {
-  H5G_info_t info;
-  c.Check(H5Gget_info(group, &info), "group " + ObjectName(group));
+  // One pass over the links: a lookup by index walks the group's index from its start each time,
+  // which made listing a 100,000-pair matches file take hours (quadratic in the links).
   std::vector<std::string> names;
-  for (hsize_t i = 0; i < info.nlinks; ++i) {
-    const ssize_t n = c.Check(
-        H5Lget_name_by_idx(group, ".", H5_INDEX_NAME, H5_ITER_INC, i, nullptr, 0, H5P_DEFAULT),
-        "link names of " + ObjectName(group));
-    std::string name(static_cast<size_t>(n) + 1, '\0');
-    H5Lget_name_by_idx(group, ".", H5_INDEX_NAME, H5_ITER_INC, i, name.data(), name.size(),
-                       H5P_DEFAULT);
-    name.resize(static_cast<size_t>(n));
-    names.push_back(std::move(name));
-  }
+  const auto collect = [](hid_t, const char* name, const H5L_info_t*, void* data) -> herr_t {
+    static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+    return 0;
+  };
+  hsize_t position = 0;
+  c.Check(H5Literate(group, H5_INDEX_NAME, H5_ITER_INC, &position, collect, &names),
+          "link names of " + ObjectName(group));
   return names;
 }
 
