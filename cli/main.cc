@@ -83,6 +83,12 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
       errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m, success_deg,
       errors.success ? "yes" : "no", errors.num_relative_pairs, errors.mean_relative_rotation_deg,
       errors.median_relative_rotation_deg);
+  if (errors.alignment != "none") {
+    std::printf(
+        "the alignment's own rotation, RMS from the centres left after it: %.5f deg (rotation "
+        "errors that differ by less are not told apart)\n",
+        errors.alignment_rotation_sigma_deg);
+  }
   for (const auto& name : errors.only_in_estimate) {
     std::printf("not scored: %s has no ground truth\n", name.c_str());
   }

@@ -31,6 +31,8 @@ json SweepPoseErrors::ToJson() const {
           {"median_centre_m", Number(e.median_centre_m)},
           {"mean_centre_relative", Number(e.mean_centre_relative)},
           {"median_centre_relative", Number(e.median_centre_relative)},
+          {"mean_relative_rotation_deg", Number(e.mean_relative_rotation_deg)},
+          {"alignment_rotation_sigma_deg", Number(e.alignment_rotation_sigma_deg)},
           {"success", e.success}};
 }
 
@@ -43,6 +45,8 @@ SweepPoseErrors SweepPoseErrors::FromJson(const json& object) {
   e.median_centre_m = NumberOr(object, "median_centre_m");
   e.mean_centre_relative = NumberOr(object, "mean_centre_relative");
   e.median_centre_relative = NumberOr(object, "median_centre_relative");
+  e.mean_relative_rotation_deg = NumberOr(object, "mean_relative_rotation_deg");
+  e.alignment_rotation_sigma_deg = NumberOr(object, "alignment_rotation_sigma_deg");
   e.success = object.value("success", false);
   return e;
 }
@@ -193,6 +197,10 @@ std::vector<std::pair<std::string, std::string>> SweepRow::Columns() const {
       columns.emplace_back(prefix + "median_centre_m", NumberText(e.median_centre_m));
       columns.emplace_back(prefix + "mean_centre_relative", NumberText(e.mean_centre_relative));
       columns.emplace_back(prefix + "median_centre_relative", NumberText(e.median_centre_relative));
+      columns.emplace_back(prefix + "mean_relative_rotation_deg",
+                           NumberText(e.mean_relative_rotation_deg));
+      columns.emplace_back(prefix + "alignment_rotation_sigma_deg",
+                           NumberText(e.alignment_rotation_sigma_deg));
       columns.emplace_back(prefix + "success", e.success ? "true" : "false");
     }
   }

@@ -24,6 +24,8 @@ struct SweepPoseErrors {
   double median_centre_m = kNone;
   double mean_centre_relative = kNone;
   double median_centre_relative = kNone;
+  double mean_relative_rotation_deg = kNone;    // alignment-free (PoseErrorSummary)
+  double alignment_rotation_sigma_deg = kNone;  // the fit's own rotation, RMS (PoseErrorSummary)
   bool success = false;
 
   nlohmann::json ToJson() const;

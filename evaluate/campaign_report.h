@@ -52,6 +52,11 @@ struct AlignedCellStats {
   // Mean centre error over the scene scale (PoseErrorSummary::mean_centre_relative), median over
   // the runs that report one.
   double median_centre_relative = kNoValue;
+  // Alignment-free: each run's mean relative rotation error (PoseErrorSummary), median over runs.
+  double median_relative_rotation_deg = kNoValue;
+  // The alignment's own rotation, RMS (PoseErrorSummary::alignment_rotation_sigma_deg), median
+  // over runs: Sim(3) rotation errors closer than this are not told apart by the fit.
+  double median_alignment_rotation_sigma_deg = kNoValue;
   // Runs where the baseline arm was scored too, and those where this arm's mean rotation error is
   // at most half the baseline's (SPEC §6); both 0 for the baseline itself.
   int halving_runs = 0;

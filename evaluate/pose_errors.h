@@ -56,6 +56,14 @@ struct PoseErrorSummary {
   int num_relative_pairs = 0;
   double mean_relative_rotation_deg = 0.0;
   double median_relative_rotation_deg = 0.0;
+  // How far the fitted alignment's own rotation is determined (sim3, se3; 0 for none): the RMS
+  // angle by which the centre fit turns the frame when the centres carry errors as large as
+  // those left after it (AlignmentRotationSigma). Every aligned frame's rotation error carries
+  // that turn, so Sim(3) rotation errors that differ by less than this are not told apart by the
+  // fit: the Strecha scenes' cameras lie in a plane within centimetres, and at 0° the turn makes
+  // most of their Sim(3) error (refine/README.md). Null (JSON) when the ground-truth centres are
+  // collinear (no rotation about their line is fitted).
+  double alignment_rotation_sigma_deg = 0.0;
   bool success = false;
   Sim3 gt_from_estimate;  // the fitted alignment (identity for "none")
   std::vector<FrameError> frames;
@@ -70,14 +78,23 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PoseErrorSummary, alignment, num_frames, mean
                                    median_rotation_deg, mean_centre_m, median_centre_m,
                                    scene_scale_m, mean_centre_relative, median_centre_relative,
                                    num_relative_pairs, mean_relative_rotation_deg,
-                                   median_relative_rotation_deg, success, frames, only_in_estimate,
-                                   only_in_ground_truth)
+                                   median_relative_rotation_deg, alignment_rotation_sigma_deg,
+                                   success, frames, only_in_estimate, only_in_ground_truth)
 
 // Frame pairs scored by the relative rotation error at most (memory and time stay bounded on
 // captures of thousands of frames).
 inline constexpr size_t kMaxRelativePairs = 4'000'000;
 
 AlignmentKind AlignmentKindFromName(const std::string& name);  // throws InputError
+
+// The RMS rotation (radians) of a centre alignment's error when each aligned centre is off by
+// independent isotropic noise: a small turn θ of the fit moves centre i by θ x (g_i - ḡ), so the
+// least-squares θ has covariance σ² M⁻¹ with M = Σ (|d_i|² I - d_i d_iᵀ), d_i = g_i - ḡ (the
+// target centres' inertia tensor), and the RMS angle is σ sqrt(trace M⁻¹). σ² per axis is
+// estimated from the residuals left after the fit, Σ r_i² / (3n - fitted_parameters). Infinity
+// when M is singular (collinear or coincident centres) and residuals are left; 0 when none are.
+double AlignmentRotationSigma(const std::vector<Eigen::Vector3d>& target_centres,
+                              const std::vector<double>& residual_norms, int fitted_parameters);
 
 // Joins by image name; needs at least 3 common frames for sim3/se3 (InputError otherwise).
 PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& ground_truth,

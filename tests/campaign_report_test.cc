@@ -85,6 +85,9 @@ SweepRow Row(const std::string& scene, const std::string& level, const std::stri
     sim3.success = errors.sim3_deg < 1.0;
     // Only scene A has a scene scale (2 m): the relative error is absent elsewhere (NaN).
     if (scene == "A") sim3.mean_centre_relative = 0.01 * errors.sim3_deg / 2.0;
+    sim3.mean_relative_rotation_deg = 0.5 * errors.sim3_deg;
+    // Only scene B reports the alignment's own rotation (NaN in A: rows of older runs).
+    if (scene == "B") sim3.alignment_rotation_sigma_deg = 0.1 * errors.sim3_deg;
     SweepPoseErrors& none = row.errors[arm]["none"];
     none.mean_rotation_deg = errors.none_deg;
     none.mean_centre_m = 0.02 * errors.none_deg;
@@ -155,6 +158,9 @@ TEST(CampaignReportTest, CountsAndMediansPerCell) {
   EXPECT_DOUBLE_EQ(gnc->sim3.median_centre_m, 0.004);
   // Relative centre error only where a scene scale is known (scene A): median of 0.001, 0.0125.
   EXPECT_DOUBLE_EQ(gnc->sim3.median_centre_relative, 0.5 * (0.001 + 0.0125));
+  // Relative rotations from all three runs (0.1, 1.25, 0.2); the fit's own rotation from B only.
+  EXPECT_DOUBLE_EQ(gnc->sim3.median_relative_rotation_deg, 0.2);
+  EXPECT_DOUBLE_EQ(gnc->sim3.median_alignment_rotation_sigma_deg, 0.1 * 0.4);
   // Halving under Sim(3): 0.2 <= 1.95 and 0.4 <= 1.75, not 2.5 <= 2.05; absolute: all three.
   EXPECT_EQ(gnc->sim3.halving_runs, 3);
   EXPECT_EQ(gnc->sim3.halves_baseline, 2);
@@ -231,6 +237,11 @@ TEST(CampaignReportTest, FailedRunsAreCountedAndListed) {
       << markdown;
   EXPECT_NE(markdown.find(", – | 2/3, 0.40°, 20.0 s |"), std::string::npos) << markdown;
   EXPECT_NE(markdown.find("### B"), std::string::npos);
+  EXPECT_NE(markdown.find("## Accuracy beside the Sim(3) fit's resolution"), std::string::npos);
+  EXPECT_NE(markdown.find("| refined@gnc | 0.235° ± 0.024 / rel. 0.117° | 0.400° ± 0.040 / rel. "
+                          "0.200° |"),
+            std::string::npos)
+      << markdown;
   EXPECT_NE(markdown.find("| refined@gnc | 0/4 (abs. 0/4) | 2/3 (abs. 3/3) |"), std::string::npos)
       << markdown;
 
