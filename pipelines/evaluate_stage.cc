@@ -70,11 +70,15 @@ class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
         error_options.success_rotation_deg = options_.success_rotation_deg;
         const PoseErrorSummary errors = ComputePoseErrors(estimate, reference, error_options);
         spdlog::info(
-            fmt::format("evaluate: {}{} ({}): rotation mean {:.4f}° median {:.4f}°, centre mean "
+            fmt::format("evaluate: {}{} ({}): rotation mean {:.4f}°{} median {:.4f}°, centre mean "
                         "{:.4f} m median {:.4f} m, relative rotation median {:.4f}°{}",
                         name, against_truth ? "" : " vs " + options_.reference, alignment,
-                        errors.mean_rotation_deg, errors.median_rotation_deg, errors.mean_centre_m,
-                        errors.median_centre_m, errors.median_relative_rotation_deg,
+                        errors.mean_rotation_deg,
+                        alignment == "none" ? std::string()
+                                            : fmt::format(" (fit's own rotation ±{:.4f}°)",
+                                                          errors.alignment_rotation_sigma_deg),
+                        errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m,
+                        errors.median_relative_rotation_deg,
                         errors.only_in_estimate.empty() && errors.only_in_ground_truth.empty()
                             ? ""
                             : " (some names did not join: see summary)"));
