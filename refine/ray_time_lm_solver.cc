@@ -810,6 +810,19 @@ void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
   }
 }
 
+void PosePriorJacobian(const Rigid3& world_from_cam, const Rigid3& prior_world_from_cam,
+                       double rotation_scale, double centre_scale,
+                       Eigen::Matrix<double, 6, 1>* residual,
+                       Eigen::Matrix<double, 6, 6>* jacobian) {
+  const PriorLinearization p =
+      LinearizePrior(world_from_cam, prior_world_from_cam, rotation_scale, centre_scale);
+  residual->head<3>() = p.centre_residual;
+  residual->tail<3>() = p.rotation_residual;
+  jacobian->setZero();
+  jacobian->block<3, 3>(0, 3) = p.centre_scale * Eigen::Matrix3d::Identity();
+  jacobian->block<3, 3>(3, 0) = p.rotation_jacobian;
+}
+
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
                                                const RayTimeLmSettings& settings) {
   Solver solver(problem, settings.num_threads);

@@ -78,6 +78,15 @@ void CrossProjectionJacobian(const Eigen::Matrix3d& source_rotation,
                              Eigen::Vector2d* ray_time_jacobian,
                              Eigen::Matrix<double, 2, 6>* target_jacobian);
 
+// The pose prior of one image (refine/pose_prior_cost.h) and its Jacobian in the local parameters
+// (φ, δO) of the pose, R ← Exp(φ)·R and O ← O + δO: residual rows in PosePriorCost's order
+// (centre_scale·(O - O_prior), rotation_scale·Log(R_priorᵀ R)). Plain arguments so it tests
+// against numeric differentiation and against the Ceres functor.
+void PosePriorJacobian(const Rigid3& world_from_cam, const Rigid3& prior_world_from_cam,
+                       double rotation_scale, double centre_scale,
+                       Eigen::Matrix<double, 6, 1>* residual,
+                       Eigen::Matrix<double, 6, 6>* jacobian);
+
 // Solves every stage of the schedule in place; stops after a stage that fails (the reduced system
 // could not be factorized at any damping). Logs one line per stage and progress on long stages.
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <random>
 
+#include "refine/pose_prior_cost.h"
 #include "refine/refine.h"
 #include "tests/random_draws.h"
 #include "tests/refine_synthetic.h"
@@ -83,6 +84,63 @@ TEST(RayTimeLmSolverTest, JacobiansMatchNumericDifferentiation) {
       const Eigen::Vector2d numeric = (res.At(plus) - res.At(minus)) / (2 * h);
       EXPECT_LT((numeric - analytic.col(k)).norm(), 1e-5 * (1.0 + numeric.norm()))
           << "trial " << trial << ", parameter " << k;
+    }
+  }
+}
+
+// The pose prior's linearization, from the exact prior (θ = 0) to nearly half a turn, with the
+// pose's quaternion in either sign: its residual is the Ceres functor's (PosePriorCost) and its
+// Jacobian equals central differences in (φ, δO).
+TEST(RayTimeLmSolverTest, PosePriorJacobianMatchesTheCeresTermAndNumericDifferentiation) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto draw = [&] { return u(rng); };
+  const double position_weight = 0.7;
+  const double orientation_weight = 1e3 / 11.0;
+  const double centre_scale = std::sqrt(2.0 * position_weight);
+  const double rotation_scale = std::sqrt(2.0 * orientation_weight);
+  for (const double angle : {0.0, 1e-7, 1e-3, 0.3, 1.5, 3.0}) {
+    for (const double sign : {1.0, -1.0}) {
+      const Rigid3 prior(Eigen::Quaterniond(ExpRotation(DrawVector3(draw))),
+                         3.0 * DrawVector3(draw));
+      const Eigen::Vector3d axis = DrawVector3(draw).normalized();
+      Eigen::Quaterniond rotation =
+          Eigen::Quaterniond(prior.rotation.toRotationMatrix() * ExpRotation(angle * axis));
+      rotation.coeffs() *= sign;
+      const Rigid3 pose(rotation, prior.translation + 0.2 * DrawVector3(draw));
+
+      Eigen::Matrix<double, 6, 1> residual;
+      Eigen::Matrix<double, 6, 6> jacobian;
+      PosePriorJacobian(pose, prior, rotation_scale, centre_scale, &residual, &jacobian);
+      EXPECT_NEAR(residual.tail<3>().norm(), rotation_scale * angle, 1e-9 * rotation_scale);
+
+      double block[kPoseBlockSize];
+      for (int k = 0; k < 4; ++k) block[k] = pose.rotation.coeffs()[k];
+      for (int k = 0; k < 3; ++k) block[kPoseCentreOffset + k] = pose.translation[k];
+      double ceres_residual[6];
+      ASSERT_TRUE(PosePriorCost(prior, position_weight, orientation_weight)(block, ceres_residual));
+      for (int k = 0; k < 6; ++k) {
+        EXPECT_NEAR(residual(k), ceres_residual[k], 1e-9) << "angle " << angle << ", row " << k;
+      }
+
+      const auto at = [&](const Eigen::Matrix<double, 6, 1>& x) {
+        const Rigid3 moved(
+            Eigen::Quaterniond(ExpRotation(x.head<3>()) * pose.rotation.toRotationMatrix()),
+            pose.translation + x.tail<3>());
+        Eigen::Matrix<double, 6, 1> r;
+        Eigen::Matrix<double, 6, 6> unused;
+        PosePriorJacobian(moved, prior, rotation_scale, centre_scale, &r, &unused);
+        return r;
+      };
+      for (int k = 0; k < 6; ++k) {
+        const double h = 1e-6;
+        Eigen::Matrix<double, 6, 1> plus = Eigen::Matrix<double, 6, 1>::Zero(), minus = plus;
+        plus(k) = h;
+        minus(k) = -h;
+        const Eigen::Matrix<double, 6, 1> numeric = (at(plus) - at(minus)) / (2 * h);
+        EXPECT_LT((numeric - jacobian.col(k)).norm(), 1e-6 * (1.0 + numeric.norm()))
+            << "angle " << angle << ", sign " << sign << ", parameter " << k;
+      }
     }
   }
 }
