@@ -37,10 +37,16 @@ struct ExportStageOptions {
   // protocol initializes every source from the same random points, §4.5); else a pose set name.
   std::string points_from = "auto";
   TrainerExportOptions trainer;
+  // A refined set's images most of whose pairs its solve left unexplained (the inconsistent-pairs
+  // guardrail names them): a trainer given a frame the solve did not place learns a wrong view.
+  bool leave_out_unexplained_images = true;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("poses", poses, "Pose sets to write (e.g. refined)", NonEmpty());
+    v("leave_out_unexplained_images", leave_out_unexplained_images,
+      "Leave out of a refined set's export the images most of whose pairs the solve left "
+      "unexplained (inconsistent_pairs names them: their poses are likely wrong)");
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
@@ -68,33 +74,58 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
 }
 
 // The poses of set `name` that may be exported under its name. A refined set leaves out the
-// images a guardrail returned unrefined: users train on these files, and a prior pose under the
-// name "refined" is a quiet wrong answer. Each left-out image is named in a warning; a set with
-// nothing left is an error, so the run fails instead of writing an empty model.
-PoseSet ExportablePoses(const StageContext& context, const std::string& name, Warnings* warnings) {
+// images a guardrail returned unrefined (users train on these files, and a prior pose under the
+// name "refined" is a quiet wrong answer) and, when asked, those most of whose pairs its solve
+// left unexplained. Each left-out image is named in a warning; a set with nothing left is an
+// error, so the run fails instead of writing an empty model.
+// Erases the images listed in `reader`'s JSON document `key` from `poses`; the erased names.
+std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, PoseSet* poses) {
+  std::vector<std::string> erased;
+  if (!reader.HasJson(key)) return erased;
+  for (const auto& entry : reader.ReadJson(key)) {
+    const std::string image = entry.get<std::string>();
+    if (poses->world_from_cam.erase(image)) erased.push_back(image);
+  }
+  return erased;
+}
+
+PoseSet ExportablePoses(const StageContext& context, const std::string& name,
+                        bool leave_out_unexplained, Warnings* warnings) {
   const Hdf5Reader reader(context.Require(PoseArtifact(name)));
   PoseRole role = PoseRole::kPrior;
   PoseSet poses = reader.ReadPoseSet(name, &role);
-  if (role != PoseRole::kRefined || !reader.HasJson(kUnrefinedImagesJson)) return poses;
-  std::vector<std::string> left_out;
-  for (const auto& entry : reader.ReadJson(kUnrefinedImagesJson)) {
-    const std::string image = entry.get<std::string>();
-    if (poses.world_from_cam.erase(image)) left_out.push_back(image);
-  }
-  if (left_out.empty()) return poses;
+  if (role != PoseRole::kRefined) return poses;
+  const std::vector<std::string> unrefined = EraseListed(reader, kUnrefinedImagesJson, &poses);
+  const std::vector<std::string> unexplained =
+      leave_out_unexplained ? EraseListed(reader, kUnexplainedImagesJson, &poses)
+                            : std::vector<std::string>();
+  if (unrefined.empty() && unexplained.empty()) return poses;
   if (poses.world_from_cam.empty()) {
     throw InputError("export: no pose of '" + name +
-                     "' was refined (a guardrail returned the prior for every image; see the "
-                     "refine stage's warnings); nothing exported. Export the pose set 'prior' "
-                     "explicitly if that is what you want to train on");
+                     "' is left to export (a guardrail returned the prior, or found most pairs "
+                     "unexplained, for every image; see the refine stage's warnings). Export the "
+                     "pose set 'prior' explicitly if that is what you want to train on");
   }
-  warnings->push_back({"unrefined_not_exported",
-                       std::to_string(left_out.size()) + " image(s) of '" + name +
-                           "' kept the prior's pose (guardrail) and are left out of its export",
-                       left_out,
-                       {},
-                       {{"pose_set", name}}});
-  spdlog::warn(fmt::format("export: {}", warnings->back().message));
+  if (!unrefined.empty()) {
+    warnings->push_back({"unrefined_not_exported",
+                         std::to_string(unrefined.size()) + " image(s) of '" + name +
+                             "' kept the prior's pose (guardrail) and are left out of its export",
+                         unrefined,
+                         {},
+                         {{"pose_set", name}}});
+    spdlog::warn(fmt::format("export: {}", warnings->back().message));
+  }
+  if (!unexplained.empty()) {
+    warnings->push_back(
+        {"unexplained_not_exported",
+         std::to_string(unexplained.size()) + " image(s) of '" + name +
+             "' leave most of their pairs unexplained (inconsistent_pairs: their poses are likely "
+             "wrong) and are left out of its export (leave_out_unexplained_images)",
+         unexplained,
+         {},
+         {{"pose_set", name}}});
+    spdlog::warn(fmt::format("export: {}", warnings->back().message));
+  }
   return poses;
 }
 
@@ -131,7 +162,8 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     Warnings warnings;
     std::map<std::string, PoseSet> exportable;
     for (const auto& name : options_.poses) {
-      const PoseSet poses = ExportablePoses(context, name, &warnings);
+      const PoseSet poses =
+          ExportablePoses(context, name, options_.leave_out_unexplained_images, &warnings);
       exportable[name] = poses;
       for (const auto& format : options_.formats) {
         if (format == "3dgs") continue;  // all pose sets at once, below

@@ -267,6 +267,23 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
     for (const PairResidual& pair : pairs.pairs) {
       warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
     }
+    // Most of these images' pairs are unexplained: a frame the solve did not place, whose pose a
+    // trainer should not be given as refined.
+    for (const int image : pairs.images_mostly_inconsistent) {
+      warning.images.push_back(names.at(image));
+    }
+    if (!warning.images.empty()) {
+      constexpr size_t kNamed = 5;
+      std::string named;
+      for (size_t i = 0; i < std::min(kNamed, warning.images.size()); ++i) {
+        named += (i == 0 ? "" : ", ") + warning.images[i];
+      }
+      if (warning.images.size() > kNamed) {
+        named += " and " + std::to_string(warning.images.size() - kNamed) + " more";
+      }
+      warning.message +=
+          "; most pairs of " + named + " are among them: the pose(s) are likely wrong";
+    }
     warnings->push_back(warning);
   }
   const PairRemovalSummary& removal = summary.pair_removal;
@@ -380,6 +397,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // Images whose "refined" pose is the prior's (a guardrail returned it): the export leaves
     // them out of a refined model rather than hand them to a trainer as refined.
     std::vector<std::string> unrefined;
+    // Images most of whose pairs a solve that was returned left unexplained: likely wrong poses,
+    // which the export leaves out too (leave_out_unexplained_images).
+    std::vector<std::string> unexplained;
     std::vector<CameraIntrinsics> cameras = images.cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
@@ -411,6 +431,11 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       if (summary.returned_prior) {
         unrefined.insert(unrefined.end(), names.begin(), names.end());
       } else {
+        if (summary.inconsistent_pairs.fired) {
+          for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
+            unexplained.push_back(names.at(image));
+          }
+        }
         AppendRayTimes(input, output.solved_observations, names, &rays);
       }
       if (c == 0) {
@@ -450,6 +475,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     result["warnings"] = WarningsToJson(warnings);
     writer.WriteJson("refine_summary", result);
     writer.WriteJson(kUnrefinedImagesJson, unrefined);
+    writer.WriteJson(kUnexplainedImagesJson, unexplained);
     writer.Commit();
     return result;
   }

@@ -25,6 +25,10 @@ inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" +
 // JSON document beside a refined pose set: the names whose pose a guardrail returned unrefined
 // (the prior's). Written by refine, read by export ("never a silent wrong result").
 inline constexpr const char* kUnrefinedImagesJson = "unrefined_images";
+// JSON document beside a refined pose set: the names most of whose pairs the solve left
+// unexplained when the inconsistent-pairs guardrail fired (their poses are likely wrong). Written
+// by refine, read by export.
+inline constexpr const char* kUnexplainedImagesJson = "unexplained_images";
 // JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";

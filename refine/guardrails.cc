@@ -1,6 +1,7 @@
 #include "refine/guardrails.h"
 
 #include <algorithm>
+#include <map>
 #include <stdexcept>
 
 #include "core/statistics.h"
@@ -71,6 +72,19 @@ InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>&
     if (pair.median_px > verdict.pair_threshold_px) verdict.pairs.push_back(pair);
   }
   verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
+  std::map<int, std::pair<int, int>> pairs_of_image;  // image -> (pairs, inconsistent pairs)
+  for (const PairResidual& pair : pairs) {
+    const bool inconsistent = pair.median_px > verdict.pair_threshold_px;
+    for (const int image : {pair.image1, pair.image2}) {
+      ++pairs_of_image[image].first;
+      if (inconsistent) ++pairs_of_image[image].second;
+    }
+  }
+  for (const auto& [image, counts] : pairs_of_image) {
+    if (counts.second >= kMinInconsistentPairsOfAnImage && 2 * counts.second > counts.first) {
+      verdict.images_mostly_inconsistent.push_back(image);
+    }
+  }
   verdict.fraction = static_cast<double>(verdict.num_inconsistent) / verdict.num_pairs;
   verdict.fired = verdict.fraction > max_fraction;
   return verdict;

@@ -25,6 +25,10 @@ TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
 WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
                           double expected, double factor);
 
+// Fewest inconsistent pairs that name their shared image (InconsistentPairsVerdict::
+// images_mostly_inconsistent): two wrong pairs of one image are what repeated structure leaves.
+inline constexpr int kMinInconsistentPairsOfAnImage = 3;
+
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): a pair whose
 // median positive-ray epipolar distance at the solve (PairResidualMedians, pair_consistency.h)
 // exceeds max(`pair_threshold_px`, `median_multiple` x the median over the pairs of that measure)
@@ -36,7 +40,8 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
 // wherever its ray times ended, while the matches of a wrong pair (repeated structure matched to
 // the wrong copy) agree with another relative pose and stay off by the difference between the
 // two. A handful of such pairs is the front end's usual residue; many of them pull the
-// solution off (castle-P19). Quiet on no pairs.
+// solution off (castle-P19). Quiet on no pairs. Also names the images most of whose pairs are
+// inconsistent.
 InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>& pairs,
                                                 double pair_threshold_px, double median_multiple,
                                                 double max_fraction);

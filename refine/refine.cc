@@ -831,10 +831,17 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                             pairs.pairs[p].image2, pairs.pairs[p].median_px);
     }
     if (pairs.pairs.size() > kLogged) listed += ", ...";
+    std::string images;
+    for (const int image : pairs.images_mostly_inconsistent) {
+      images += (images.empty() ? "" : ", ") + std::to_string(image);
+    }
     spdlog::warn(fmt::format(
         "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
-        "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}",
-        pairs.num_inconsistent, pairs.num_pairs, listed));
+        "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}{}",
+        pairs.num_inconsistent, pairs.num_pairs, listed,
+        images.empty() ? std::string()
+                       : "; most pairs of image(s) " + images +
+                             " are among them: their poses are likely wrong"));
   }
   return summary;
 }

@@ -199,10 +199,16 @@ struct InconsistentPairsVerdict {
   double median_multiple = 0.0;
   double fraction_threshold = 0.0;  // max_inconsistent_pair_fraction
   std::vector<PairResidual> pairs;  // the inconsistent pairs, in input order
+  // Images in at least kMinInconsistentPairsOfAnImage (guardrails.h) inconsistent pairs that are
+  // more than half of their pairs, ascending: a wrong pair involves two images, so when most of one
+  // image's pairs are unexplained, its pose (a frame the solve did not place) is the likelier
+  // culprit.
+  std::vector<int> images_mostly_inconsistent;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num_pairs,
                                    num_inconsistent, fraction, median_pair_px, pair_threshold_px,
-                                   median_multiple, fraction_threshold, pairs)
+                                   median_multiple, fraction_threshold, pairs,
+                                   images_mostly_inconsistent)
 
 // The basin-first solve's orientation-prior probe (RefineOptions::basin_first): whether the
 // matches agree with the prior's rotations, and so whether the finish keeps λR.

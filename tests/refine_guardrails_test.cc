@@ -183,6 +183,48 @@ TEST(RefineGuardrailTest, InconsistentPairsFiresAboveTheFractionAndListsThePairs
   EXPECT_EQ(none.num_pairs, 0);
 }
 
+// A frame the solve did not place leaves most of its own pairs unexplained (the Record3D desk's
+// every 3rd frame, prior-free: 9 inconsistent pairs, all of one image): the verdict names it; wrong
+// pairs scattered over images, two wrong pairs of one image, or half of an image's pairs do not.
+TEST(GuardrailsTest, InconsistentPairsNameTheImageMostOfWhosePairsAreUnexplained) {
+  std::vector<PairResidual> pairs;
+  // Images 0..11, each paired with the next three (in a ring): six pairs per image.
+  for (int i = 0; i < 12; ++i) {
+    for (int k = 1; k <= 3; ++k) pairs.push_back(MakePair(i, (i + k) % 12, 0.5));
+  }
+  const auto set = [&](int a, int b, double px) {
+    for (PairResidual& pair : pairs) {
+      if ((pair.image1 == a && pair.image2 == b) || (pair.image1 == b && pair.image2 == a)) {
+        pair.median_px = px;
+      }
+    }
+  };
+  // Image 5: four of its six pairs off by ~100 px.
+  set(5, 2, 90.0);
+  set(5, 3, 110.0);
+  set(5, 6, 95.0);
+  set(5, 8, 120.0);
+  // Image 9: two wrong pairs; images 0/1 and 10/11: scattered ones.
+  set(9, 10, 30.0);
+  set(9, 11, 25.0);
+  set(0, 1, 40.0);
+  InconsistentPairsVerdict verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_EQ(verdict.num_inconsistent, 7);
+  EXPECT_EQ(verdict.images_mostly_inconsistent, std::vector<int>{5});
+
+  // Image 5 with exactly half of its pairs off is not named; a third wrong pair of image 9 that is
+  // half of its pairs neither.
+  set(5, 8, 0.5);
+  set(9, 6, 50.0);
+  verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_TRUE(verdict.images_mostly_inconsistent.empty());
+  // A fourth makes image 9's pairs mostly unexplained.
+  set(9, 7, 60.0);
+  verdict = CheckInconsistentPairs(pairs, 4.0, 8.0, 0.0);
+  EXPECT_EQ(verdict.images_mostly_inconsistent, std::vector<int>{9});
+  EXPECT_EQ(nlohmann::json(verdict)["images_mostly_inconsistent"], nlohmann::json::array({9}));
+}
+
 // A capture whose pairs all sit near a pixel (the Record3D desk subsample: median pair 0.98 px,
 // worst correct ones 4.1-4.5 px): with the median multiple the threshold rises to 8 x 1 px and
 // those pairs are consistent, while a wrong pair many times the median is still caught; an object

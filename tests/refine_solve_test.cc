@@ -694,6 +694,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "guardrails.inconsistent_pairs.pairs[].image2",
       "guardrails.inconsistent_pairs.pairs[].median_px",
       "guardrails.inconsistent_pairs.pairs[].num_matches",
+      "guardrails.inconsistent_pairs.images_mostly_inconsistent",
   };
   EXPECT_EQ(keys, expected);
   // Values come from the fields of the same name.

@@ -303,10 +303,11 @@ double MeanRotationErrorDeg(const PoseSet& estimate, const PoseSet& truth) {
 
 // Runs the export stage on the refine stage's output (its /images when it wrote one): a COLMAP
 // text model in dir/refined/ and dir/refined_transforms.json.
-nlohmann::json RunExport(const TempDir& dir) {
+nlohmann::json RunExport(
+    const TempDir& dir,
+    const std::string& options = "{poses: [refined], formats: [colmap_text, transforms_json]}") {
   std::unique_ptr<Stage> stage = CreateStage("export");
-  stage->Configure(YAML::Load("{poses: [refined], formats: [colmap_text, transforms_json]}"),
-                   "test");
+  stage->Configure(YAML::Load(options), "test");
   StageContext context;
   context.stage_id = "export";
   context.workdir = dir.path().string();
@@ -437,6 +438,40 @@ TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   }
 }
 
+// One frame whose keypoints are mirrored (no pose explains its matches: a frame the solve cannot
+// place): the inconsistent-pairs warning names it, and the export leaves it out of the refined
+// model unless asked to keep it.
+TEST(RefineStageTest, AnImageMostOfWhosePairsAreUnexplainedIsNamedAndLeftOutOfTheExport) {
+  TempDir dir("refine_stage");
+  std::vector<CameraIntrinsics> cameras;
+  SceneInputs scene = MakePerImageScene(&cameras);
+  auto& keypoints = scene.features[2].keypoints;
+  keypoints.col(0).array() = static_cast<float>(cameras[2].width) - keypoints.col(0).array();
+  PoseSet refined;
+  const nlohmann::json summary = RunRefine(scene, dir, &refined);
+  const nlohmann::json* pairs = FindWarning(summary, "inconsistent_pairs");
+  ASSERT_NE(pairs, nullptr) << summary["warnings"].dump();
+  EXPECT_EQ((*pairs)["images"], nlohmann::json::array({"0002.jpg"}));
+  EXPECT_NE((*pairs)["message"].get<std::string>().find("0002.jpg"), std::string::npos);
+  EXPECT_EQ(summary["guardrails"]["inconsistent_pairs"]["images_mostly_inconsistent"],
+            nlohmann::json::array({2}));
+
+  const nlohmann::json exported = RunExport(dir);
+  const nlohmann::json* left_out = FindWarning(exported, "unexplained_not_exported");
+  ASSERT_NE(left_out, nullptr) << exported.dump();
+  EXPECT_EQ((*left_out)["images"], nlohmann::json::array({"0002.jpg"}));
+  EXPECT_EQ(FindWarning(exported, "unrefined_not_exported"), nullptr);
+  ColmapModel model = ReadColmapModelText(dir / "refined");
+  ASSERT_EQ(model.images.size(), 5u);
+  for (const auto& [id, image] : model.images) EXPECT_NE(image.name, "0002.jpg");
+  EXPECT_EQ(ReadJsonFile(dir / "refined_transforms.json")["frames"].size(), 5u);
+
+  const nlohmann::json kept = RunExport(
+      dir, "{poses: [refined], formats: [colmap_text], leave_out_unexplained_images: false}");
+  EXPECT_EQ(FindWarning(kept, "unexplained_not_exported"), nullptr);
+  EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
+}
+
 // Format 3dgs of the same run, with the prior beside the refined set: the five images a guardrail
 // left unrefined are in no 3dgs export (the refined set lacks them, not_in_every_pose_set), so both
 // folders hold the same three images and split, and the points come from the refined solve's ray
@@ -492,7 +527,7 @@ TEST(RefineStageTest, ExportOfARefinedSetWithNothingRefinedFails) {
     RunExport(dir);
     FAIL() << "expected an InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' was refined"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' is left to export"), std::string::npos)
         << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "refined"));
