@@ -73,11 +73,6 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
   return poses + "_tum.txt";
 }
 
-// The poses of set `name` that may be exported under its name. A refined set leaves out the
-// images a guardrail returned unrefined (users train on these files, and a prior pose under the
-// name "refined" is a quiet wrong answer) and, when asked, those most of whose pairs its solve
-// left unexplained. Each left-out image is named in a warning; a set with nothing left is an
-// error, so the run fails instead of writing an empty model.
 // Erases the images listed in `reader`'s JSON document `key` from `poses`; the erased names.
 std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, PoseSet* poses) {
   std::vector<std::string> erased;
@@ -89,6 +84,11 @@ std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, 
   return erased;
 }
 
+// The poses of set `name` that may be exported under its name. A refined set leaves out the
+// images a guardrail returned unrefined (users train on these files, and a prior pose under the
+// name "refined" is a quiet wrong answer) and, when asked, those most of whose pairs its solve
+// left unexplained. Each left-out image is named in a warning; a set with nothing left is an
+// error, so the run fails instead of writing an empty model.
 PoseSet ExportablePoses(const StageContext& context, const std::string& name,
                         bool leave_out_unexplained, Warnings* warnings) {
   const Hdf5Reader reader(context.Require(PoseArtifact(name)));
@@ -106,26 +106,23 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
                      "unexplained, for every image; see the refine stage's warnings). Export the "
                      "pose set 'prior' explicitly if that is what you want to train on");
   }
-  if (!unrefined.empty()) {
-    warnings->push_back({"unrefined_not_exported",
-                         std::to_string(unrefined.size()) + " image(s) of '" + name +
-                             "' kept the prior's pose (guardrail) and are left out of its export",
-                         unrefined,
+  // `option`: the export option that chose to leave them out, if one did.
+  const auto warn = [&](const char* code, const std::vector<std::string>& left_out,
+                        const std::string& why, const std::string& option) {
+    if (left_out.empty()) return;
+    warnings->push_back({code,
+                         std::to_string(left_out.size()) + " image(s) of '" + name + "' " + why +
+                             " and are left out of its export" +
+                             (option.empty() ? "" : " (" + option + ")"),
+                         left_out,
                          {},
                          {{"pose_set", name}}});
     spdlog::warn(fmt::format("export: {}", warnings->back().message));
-  }
-  if (!unexplained.empty()) {
-    warnings->push_back(
-        {"unexplained_not_exported",
-         std::to_string(unexplained.size()) + " image(s) of '" + name +
-             "' leave most of their pairs unexplained (inconsistent_pairs: their poses are likely "
-             "wrong) and are left out of its export (leave_out_unexplained_images)",
-         unexplained,
-         {},
-         {{"pose_set", name}}});
-    spdlog::warn(fmt::format("export: {}", warnings->back().message));
-  }
+  };
+  warn("unrefined_not_exported", unrefined, "kept the prior's pose (guardrail)", "");
+  warn("unexplained_not_exported", unexplained,
+       "leave most of their pairs unexplained (inconsistent_pairs: their poses are likely wrong)",
+       "leave_out_unexplained_images");
   return poses;
 }
 

@@ -68,18 +68,16 @@ InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>&
   for (const PairResidual& pair : pairs) medians.push_back(pair.median_px);
   verdict.median_pair_px = UpperMedian(medians, 0.0);
   verdict.pair_threshold_px = std::max(pair_threshold_px, median_multiple * verdict.median_pair_px);
-  for (const PairResidual& pair : pairs) {
-    if (pair.median_px > verdict.pair_threshold_px) verdict.pairs.push_back(pair);
-  }
-  verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
   std::map<int, std::pair<int, int>> pairs_of_image;  // image -> (pairs, inconsistent pairs)
   for (const PairResidual& pair : pairs) {
     const bool inconsistent = pair.median_px > verdict.pair_threshold_px;
+    if (inconsistent) verdict.pairs.push_back(pair);
     for (const int image : {pair.image1, pair.image2}) {
       ++pairs_of_image[image].first;
       if (inconsistent) ++pairs_of_image[image].second;
     }
   }
+  verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
   for (const auto& [image, counts] : pairs_of_image) {
     if (counts.second >= kMinInconsistentPairsOfAnImage && 2 * counts.second > counts.first) {
       verdict.images_mostly_inconsistent.push_back(image);

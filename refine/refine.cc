@@ -812,14 +812,10 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                                       removal.kept.size())));
   }
   if (!removal.doubtful_images.empty()) {
-    std::string listed;
-    for (const int image : removal.doubtful_images) {
-      listed += (listed.empty() ? "" : ", ") + std::to_string(image);
-    }
     spdlog::warn(fmt::format(
         "refine: guardrail fired (doubtful_images): after removing inconsistent pairs, the poses "
         "of images {} rest on one pair that nothing else checks",
-        listed));
+        fmt::join(removal.doubtful_images, ", ")));
   }
   spdlog::info(fmt::format("refine: decision: {}", summary.decision));
   if (pairs.fired) {
@@ -831,17 +827,15 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                             pairs.pairs[p].image2, pairs.pairs[p].median_px);
     }
     if (pairs.pairs.size() > kLogged) listed += ", ...";
-    std::string images;
-    for (const int image : pairs.images_mostly_inconsistent) {
-      images += (images.empty() ? "" : ", ") + std::to_string(image);
-    }
     spdlog::warn(fmt::format(
         "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
         "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}{}",
         pairs.num_inconsistent, pairs.num_pairs, listed,
-        images.empty() ? std::string()
-                       : "; most pairs of image(s) " + images +
-                             " are among them: their poses are likely wrong"));
+        pairs.images_mostly_inconsistent.empty()
+            ? std::string()
+            : fmt::format(
+                  "; most pairs of image(s) {} are among them: their poses are likely wrong",
+                  fmt::join(pairs.images_mostly_inconsistent, ", "))));
   }
   return summary;
 }
