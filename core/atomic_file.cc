@@ -1,11 +1,13 @@
 #include "core/atomic_file.h"
 
 #include <signal.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -149,11 +151,35 @@ void WriteDirectoryAtomically(const std::string& path,
 
 void WriteTextFileAtomically(const std::string& path, const std::string& contents) {
   WriteAtomically(path, [&](const std::string& tmp) {
+    errno = 0;
     std::ofstream out(tmp, std::ios::binary);
     out << contents;
     out.close();
-    if (!out) throw std::runtime_error("cannot write " + tmp);
+    if (!out) {
+      const int error = errno;
+      throw std::runtime_error("cannot write " + path + WriteFailureReason(path, error));
+    }
   });
+}
+
+std::string WriteFailureReason(const std::string& path, int error) {
+  // Below this much free space a failed write is taken for a full disk whatever errno says
+  // (HDF5 and iostreams do not always leave it set).
+  constexpr unsigned long long kNearlyFullBytes = 1 << 20;
+  fs::path dir = fs::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  struct statvfs stats;
+  const bool known = ::statvfs(dir.c_str(), &stats) == 0;
+  const unsigned long long free_bytes =
+      known ? static_cast<unsigned long long>(stats.f_bavail) * stats.f_frsize : 0;
+  if (error == ENOSPC || error == EDQUOT || (known && free_bytes < kNearlyFullBytes)) {
+    return ": no space left on device (" + std::to_string(free_bytes) + " bytes free in " +
+           dir.string() + "); free some space and run again";
+  }
+  // Only the errors of a write itself: errno may be left over from an unrelated call.
+  if (error == EFBIG || error == EIO || error == EROFS)
+    return std::string(": ") + std::strerror(error);
+  return "";
 }
 
 bool PathExists(const std::string& path) {

@@ -19,6 +19,11 @@ void WriteDirectoryAtomically(const std::string& path,
 
 void WriteTextFileAtomically(const std::string& path, const std::string& contents);
 
+// Why writing `path` failed, for the end of an error message: ": no space left on device (N bytes
+// free in DIR)" when its file system is full, else the system's reason for `error` (an errno value
+// read right after the failure) when it is a write's own (EFBIG, EIO, EROFS), "" otherwise.
+std::string WriteFailureReason(const std::string& path, int error);
+
 // Whole file as a string; throws InputError naming the path when it cannot be read.
 std::string ReadTextFile(const std::string& path);
 

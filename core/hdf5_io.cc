@@ -1,5 +1,6 @@
 #include "core/hdf5_io.h"
 
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -7,12 +8,22 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime::hdf5 {
 namespace {
+
+// HDF5's atexit cleanup closes the files still open. One whose last flush failed (a full disk) is
+// left half-closed by H5Fclose, and that cleanup then crashed the process after the error had
+// been reported (exit 139, issue 30). Every raytime file is closed by its owner (Id), so the
+// cleanup has nothing to do; the library is told not to register it, before its first use.
+const bool kNoAtexitCleanup = [] {
+  H5dont_atexit();
+  return true;
+}();
 
 // Treat a filesystem that refuses locks (NFS, read-only mounts) as unlocked rather than failing
 // to open; raytime files are never modified in place, so locking protects nothing here.
@@ -75,7 +86,9 @@ Id OpenAttribute(const Context& c, hid_t loc, const std::string& name, const std
 
 void Context::Fail(const std::string& message) const {
   if (reading) ThrowInput(path, 0, message);
-  throw std::runtime_error(path + ": " + message);
+  // errno of the failed write() below HDF5, read before anything else can change it.
+  const int error = errno;
+  throw std::runtime_error(path + ": " + message + WriteFailureReason(path, error));
 }
 
 Id OpenFile(const Context& c) {
