@@ -2,7 +2,9 @@
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 
 namespace raytime {
@@ -32,6 +34,26 @@ Eigen::Matrix3d Orthonormalize(const Eigen::Matrix3d& m) {
   Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
   d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
   return svd.matrixU() * d * svd.matrixV().transpose();
+}
+
+std::string RotationMatrixProblem(const Eigen::Matrix3d& m) {
+  if (!m.allFinite()) return "the rotation matrix has a value that is not finite";
+  const double determinant = m.determinant();
+  const double off = (m.transpose() * m - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (off <= kRotationMatrixTolerance && determinant > 0) return "";
+  char buffer[200];
+  if (!(determinant > 0)) {
+    std::snprintf(buffer, sizeof(buffer),
+                  "the rotation matrix has determinant %.3g, not +1 (a reflection or a singular "
+                  "matrix, not a rotation)",
+                  determinant);
+  } else {
+    std::snprintf(buffer, sizeof(buffer),
+                  "the rotation matrix is not orthonormal: |RᵀR - I| reaches %.3g (tolerance %g; "
+                  "a scaled or sheared matrix, not a rotation)",
+                  off, kRotationMatrixTolerance);
+  }
+  return buffer;
 }
 
 Eigen::Matrix3d ExpSO3(const Eigen::Vector3d& omega) {
@@ -115,6 +137,41 @@ Sim3 FitAlignment(const std::vector<Eigen::Vector3d>& source,
   sim.rotation = Eigen::Quaterniond(Orthonormalize(sr / sim.scale));
   sim.translation = t.topRightCorner<3, 1>();
   return sim;
+}
+
+const std::vector<std::string>& PoseConventionNames() {
+  static const std::vector<std::string> names = {"native", "inverted", "flipped_axes",
+                                                 "inverted_flipped_axes"};
+  return names;
+}
+
+std::string PoseConventionName(PoseConvention convention) {
+  return PoseConventionNames().at(static_cast<size_t>(convention));
+}
+
+PoseConvention ParsePoseConvention(const std::string& name) {
+  const auto& names = PoseConventionNames();
+  const auto it = std::find(names.begin(), names.end(), name);
+  if (it == names.end()) throw std::invalid_argument("unknown pose convention '" + name + "'");
+  return static_cast<PoseConvention>(it - names.begin());
+}
+
+Rigid3 ApplyPoseConvention(const Rigid3& world_from_cam, PoseConvention convention) {
+  // F = diag(1, -1, -1) is a 180° turn about the camera's x axis: quaternion (0, 1, 0, 0).
+  const Eigen::Quaterniond flip(0, 1, 0, 0);
+  switch (convention) {
+    case PoseConvention::kNative:
+      return world_from_cam;
+    case PoseConvention::kInverted:
+      return world_from_cam.Inverse();
+    case PoseConvention::kFlippedAxes:
+      return Rigid3(world_from_cam.rotation * flip, world_from_cam.translation);
+    case PoseConvention::kInvertedFlippedAxes: {
+      const Rigid3 inverse = world_from_cam.Inverse();
+      return Rigid3(inverse.rotation * flip, inverse.translation);
+    }
+  }
+  throw std::logic_error("ApplyPoseConvention: unknown convention");
 }
 
 double DegreesFromRadians(double radians) { return radians * 180.0 / M_PI; }

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <string>
 #include <vector>
 
 namespace raytime {
@@ -50,6 +51,15 @@ struct Sim3 {
 // unprojected matrix alone reads as ~0.03° of error (SPEC §2).
 Eigen::Matrix3d Orthonormalize(const Eigen::Matrix3d& m);
 
+// How far a rotation matrix read from a file may be from SO(3): the largest entry of |MᵀM − I|.
+// Files with 6 decimals are off by ~1e-6 there and float32 by ~1e-7; at 1e-3 the nearest rotation
+// is ambiguous by at most ~0.06°, where a sheared or scaled matrix (one that Orthonormalize would
+// quietly turn into a rotation several degrees off) is off by 1e-2 and more.
+constexpr double kRotationMatrixTolerance = 1e-3;
+// "" when `m` is a rotation within kRotationMatrixTolerance; otherwise what is wrong with it (not
+// finite, a reflection, or how far it is from orthonormal), for a reader's error message.
+std::string RotationMatrixProblem(const Eigen::Matrix3d& m);
+
 // SO(3) exponential of a rotation vector (axis * angle, radians) and its logarithm (shorter arc).
 Eigen::Matrix3d ExpSO3(const Eigen::Vector3d& omega);
 Eigen::Vector3d LogSO3(const Eigen::Matrix3d& rotation);
@@ -68,6 +78,21 @@ enum class AlignmentKind { kSim3, kSE3, kNone };
 // throws std::invalid_argument otherwise.
 Sim3 FitAlignment(const std::vector<Eigen::Vector3d>& source,
                   const std::vector<Eigen::Vector3d>& target, AlignmentKind kind);
+
+// A repair of poses read in the wrong convention, the field's most common mistake (issue 30),
+// applied to each pose X = world_from_cam as a reader returned it: kInverted gives X⁻¹
+// (camera-to-world given where world-to-camera was expected, or the reverse), kFlippedAxes X·F with
+// F = diag(1, -1, -1) (OpenGL camera axes where OpenCV's were expected, or the reverse),
+// kInvertedFlippedAxes X⁻¹·F (both). Up to a change of world frame, which no relative pose sees,
+// these four cover the mistakes: a file holding T⁻¹·F is repaired by kInverted (F·T), one holding
+// (T·F)⁻¹ by kInvertedFlippedAxes.
+enum class PoseConvention { kNative, kInverted, kFlippedAxes, kInvertedFlippedAxes };
+// "native", "inverted", "flipped_axes", "inverted_flipped_axes", in enum order.
+const std::vector<std::string>& PoseConventionNames();
+std::string PoseConventionName(PoseConvention convention);
+// Throws std::invalid_argument for a name not in PoseConventionNames().
+PoseConvention ParsePoseConvention(const std::string& name);
+Rigid3 ApplyPoseConvention(const Rigid3& world_from_cam, PoseConvention convention);
 
 double DegreesFromRadians(double radians);
 double RadiansFromDegrees(double degrees);

@@ -199,7 +199,12 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
       ThrowInput(path, 0,
                  "image is " + std::to_string(gray.cols) + "x" + std::to_string(gray.rows) +
                      " but the image list (and its intrinsics) says " + std::to_string(info.width) +
-                     "x" + std::to_string(info.height));
+                     "x" + std::to_string(info.height) +
+                     (gray.cols == info.height && gray.rows == info.width
+                          ? " (width and height swapped: the decoder turned it by 90° as its EXIF "
+                            "orientation tag says; save the image without the tag, or give "
+                            "intrinsics for the image as decoded)"
+                          : ""));
     }
     (*features)[i] = ExtractSift(gray, options);
     if (EffectiveFirstOctave(gray.cols, gray.rows, options) < 0) ++upsampled;

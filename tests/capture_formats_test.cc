@@ -159,6 +159,18 @@ TEST(CaptureFormats, Scanner3dFixtureReadsBackAndCountsPosesWithoutImages) {
   EXPECT_EQ(dataset.num_poses_without_image, 20);
   // As a pose file every pose is read, also those without an image (31 = 11 + 20).
   EXPECT_EQ(ReadPoseFile("scanner3d", dir.path().string()).size(), 31u);
+  EXPECT_TRUE(dataset.warnings.empty());
+
+  // A photo whose frame file is missing was left out without a word (issue 30: 23 of 24 images).
+  fs::remove(dir / (fixtures::Scanner3dName(4).substr(0, 11) + ".json"));
+  const Dataset fewer = Load("scanner3d", dir.path().string());
+  EXPECT_EQ(fewer.images.images.size(), 10u);
+  ASSERT_EQ(fewer.warnings.size(), 1u);
+  EXPECT_EQ(fewer.warnings[0].code, "images_without_frame");
+  EXPECT_EQ(fewer.warnings[0].images, std::vector<std::string>{fixtures::Scanner3dName(4)});
+  EXPECT_NE(fewer.warnings[0].message.find("1 image(s) in " + dir.path().string()),
+            std::string::npos)
+      << fewer.warnings[0].message;
 }
 
 TEST(CaptureFormats, NerfCaptureFixtureReadsBack) {
@@ -345,7 +357,7 @@ TEST(CaptureFormatsBadInput, Scanner3dMalformedFrame) {
   std::ofstream(frame) << "{\"cameraPoseARFrame\": [2, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, "
                           "1], \"intrinsics\": [1, 0, 0, 0, 1, 0, 0, 0, 1], \"time\": 0}";
   ExpectInputError([&] { Load("scanner3d", dir.path().string()); },
-                   {frame, "column 0 has length 2"});
+                   {frame, "not orthonormal: |RᵀR - I| reaches 3"});
 }
 
 TEST(CaptureFormatsBadInput, PolycamCameraWithoutTransformRow) {

@@ -20,6 +20,7 @@
 #include "core/formats/nerfstudio.h"
 #include "core/formats/strecha.h"
 #include "core/formats/tum.h"
+#include "core/geometry.h"
 #include "core/warnings.h"
 #include "tests/random_draws.h"
 #include "tests/temp_dir.h"
@@ -377,6 +378,62 @@ TEST(FormatsBadInput, StrechaWrongNumberCount) {
   EXPECT_NE(message.find(tmp / "0000.jpg.camera"), std::string::npos) << message;
   EXPECT_NE(message.find("found 20 numbers"), std::string::npos) << message;
   EXPECT_NE(message.find("expected 26"), std::string::npos) << message;
+}
+
+// A sheared R was orthonormalized into a ground truth 8.5° off (issue 30, item 4): every reader
+// of a rotation matrix refuses one that is not a rotation within kRotationMatrixTolerance.
+TEST(FormatsBadInput, StrechaShearedRotationIsRefused) {
+  TempDir tmp("formats");
+  const std::string real =
+      ReadTextFile(SharedData("strecha/fountain-P11/gt_dense_cameras/0000.jpg.camera"));
+  // Line 5 is R's first row; 0.450927 -> 0.600927 shears R (|RᵀR - I| ~ 0.14).
+  std::string sheared = real;
+  const size_t at = sheared.find("0.450927000");
+  ASSERT_NE(at, std::string::npos);
+  sheared.replace(at, 11, "0.600927000");
+  WriteFile(tmp / "0000.jpg.camera", sheared);
+  const std::string message = InputErrorOf([&] { ReadStrechaCamera(tmp / "0000.jpg.camera"); });
+  EXPECT_NE(message.find(tmp / "0000.jpg.camera:5:"), std::string::npos) << message;
+  EXPECT_NE(message.find("not orthonormal"), std::string::npos) << message;
+  // A reflection (one row negated) is named as such.
+  std::string reflected = real;
+  reflected.replace(reflected.find("0.450927000 -0.094564200 -0.887537000"), 37,
+                    "-0.450927000 0.094564200 0.887537000");
+  WriteFile(tmp / "0001.jpg.camera", reflected);
+  const std::string reflection = InputErrorOf([&] { ReadStrechaCamera(tmp / "0001.jpg.camera"); });
+  EXPECT_NE(reflection.find("determinant -1"), std::string::npos) << reflection;
+  // The real file, 9 decimals, is within the tolerance.
+  WriteFile(tmp / "0002.jpg.camera", real);
+  EXPECT_NO_THROW(ReadStrechaCamera(tmp / "0002.jpg.camera"));
+}
+
+TEST(FormatsBadInput, TransformsJsonShearedRotationIsRefused) {
+  TempDir tmp("formats");
+  const std::string path = tmp / "transforms.json";
+  // Unit columns, not orthogonal: a column-length check alone lets this through.
+  WriteFile(path, R"({"fl_x": 500, "fl_y": 500, "cx": 320, "cy": 240, "w": 640, "h": 480,
+    "frames": [
+      {"file_path": "./images/a.jpg", "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},
+      {"file_path": "./images/b.jpg", "transform_matrix": [[1,0.6,0,0],[0,0.8,0,0],[0,0,1,0],[0,0,0,1]]}]})");
+  const std::string message = InputErrorOf([&] { ReadTransformsJson(path, nullptr, nullptr); });
+  EXPECT_NE(message.find(path), std::string::npos) << message;
+  EXPECT_NE(message.find("frame 1 (./images/b.jpg)"), std::string::npos) << message;
+  EXPECT_NE(message.find("not orthonormal: |RᵀR - I| reaches 0.6"), std::string::npos) << message;
+}
+
+TEST(FormatsRotationMatrix, ToleranceSeparatesRoundingFromShear) {
+  const Eigen::Matrix3d r = ExpSO3(Eigen::Vector3d(0.3, -1.2, 0.7));
+  EXPECT_EQ(RotationMatrixProblem(r), "");
+  // 6 decimals, as files carry them.
+  const Eigen::Matrix3d rounded = (r * 1e6).array().round() / 1e6;
+  EXPECT_EQ(RotationMatrixProblem(rounded), "");
+  Eigen::Matrix3d shear = Eigen::Matrix3d::Identity();
+  shear(0, 1) = 2e-3;
+  EXPECT_NE(RotationMatrixProblem(r * shear).find("not orthonormal"), std::string::npos);
+  EXPECT_NE(RotationMatrixProblem(-r).find("determinant -1"), std::string::npos);
+  Eigen::Matrix3d nan = r;
+  nan(1, 1) = std::nan("");
+  EXPECT_NE(RotationMatrixProblem(nan).find("not finite"), std::string::npos);
 }
 
 TEST(FormatsBadInput, StrechaSceneMissingImage) {

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -84,6 +85,7 @@ ImageSize ReadJpegSize(const std::string& path, std::ifstream& in) {
                      static_cast<int>(ReadUnsigned(segment, 1, 2, true))};
       if (size.width <= 0 || size.height <= 0) break;
       if (orientation >= 5) std::swap(size.width, size.height);  // transposed by the decoder
+      size.exif_orientation = orientation;
       return size;
     }
   }
@@ -185,17 +187,8 @@ Rigid3 PoseFromCameraToWorld(const Eigen::Matrix3d& world_from_cam, const Eigen:
   if (!world_from_cam.allFinite() || !centre.allFinite()) {
     ThrowInput(path, 0, prefix + "pose has a value that is not finite");
   }
-  if (!(world_from_cam.determinant() > 0)) {
-    ThrowInput(path, 0, prefix + "camera-to-world rotation has a non-positive determinant");
-  }
-  for (int c = 0; c < 3; ++c) {
-    const double norm = world_from_cam.col(c).norm();
-    if (std::abs(norm - 1.0) > 0.01) {
-      ThrowInput(path, 0,
-                 prefix + "camera-to-world rotation column " + std::to_string(c) + " has length " +
-                     Short(norm) + ", not 1 (a scaled or sheared matrix)");
-    }
-  }
+  const std::string problem = RotationMatrixProblem(world_from_cam);
+  if (!problem.empty()) ThrowInput(path, 0, prefix + "camera-to-world pose: " + problem);
   return Rigid3(Eigen::Quaterniond(Orthonormalize(world_from_cam)), centre);
 }
 
@@ -226,6 +219,17 @@ ImageSize ReadImageSize(const std::string& path) {
   ThrowInput(path, 0, "not a JPEG or PNG image (cannot read its size from the header)");
 }
 
+std::string ExifOrientationNote(const ImageSize& size) {
+  if (size.exif_orientation == 1) return "";
+  return " (its EXIF orientation tag is " + std::to_string(size.exif_orientation) +
+         (size.exif_orientation >= 5
+              ? ": decoders turn it by 90°, so it reads as " + std::to_string(size.width) + "x" +
+                    std::to_string(size.height)
+              : ": decoders flip or turn it by 180°") +
+         "; the intrinsics must describe the image as decoded, or the image be saved without the "
+         "tag)";
+}
+
 Eigen::Matrix3d ScaleK(const Eigen::Matrix3d& K, int width, int height, int new_width,
                        int new_height) {
   const double sx = double(new_width) / width, sy = double(new_height) / height;
@@ -236,6 +240,45 @@ Eigen::Matrix3d ScaleK(const Eigen::Matrix3d& K, int width, int height, int new_
   scaled(0, 2) = (K(0, 2) + 0.5) * sx - 0.5;
   scaled(1, 2) = (K(1, 2) + 0.5) * sy - 0.5;
   return scaled;
+}
+
+// Images in the recording's image folder that no frame of its files names have no pose and no
+// intrinsics, so they cannot take part; a user who sees 23 of 24 images refined must be told why
+// (a photo whose metadata file is missing). Only where the frames themselves lie in that folder
+// (names without a folder part): elsewhere the folder may hold other things.
+void WarnOfImagesWithoutFrame(const CaptureRecording& recording, Warnings* warnings) {
+  std::set<std::string> named;
+  for (const CaptureFrame& frame : recording.frames) {
+    if (frame.name.find('/') != std::string::npos) return;
+    named.insert(frame.name);
+  }
+  // Images the reader already reported (frames left out of a timestamp join, say).
+  for (const Warning& warning : *warnings) {
+    named.insert(warning.images.begin(), warning.images.end());
+  }
+  std::error_code error;
+  std::vector<std::string> unnamed;
+  for (const auto& entry : fs::directory_iterator(recording.image_root, error)) {
+    std::string extension = entry.path().extension().string();
+    std::transform(extension.begin(), extension.end(), extension.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    const std::string name = entry.path().filename().string();
+    if (entry.is_regular_file(error) &&
+        (extension == ".jpg" || extension == ".jpeg" || extension == ".png") &&
+        !named.count(name)) {
+      unnamed.push_back(name);
+    }
+  }
+  if (unnamed.empty()) return;
+  std::sort(unnamed.begin(), unnamed.end());
+  warnings->push_back({"images_without_frame",
+                       std::to_string(unnamed.size()) + " image(s) in " + recording.image_root +
+                           " have no frame in the " + recording.format +
+                           " files (no pose, no intrinsics) and are left out: " + unnamed.front() +
+                           (unnamed.size() > 1 ? ", ..." : ""),
+                       unnamed,
+                       {},
+                       {{"folder", recording.image_root}}});
 }
 
 Dataset DatasetFromRecording(CaptureRecording recording) {
@@ -262,7 +305,8 @@ Dataset DatasetFromRecording(CaptureRecording recording) {
                    "intrinsics are for " + std::to_string(frame.width) + "x" +
                        std::to_string(frame.height) + " pixels but " + image_path + " is " +
                        std::to_string(size.width) + "x" + std::to_string(size.height) +
-                       ": another aspect ratio (rotated or cropped), not a rescaled image");
+                       ": another aspect ratio (rotated or cropped), not a rescaled image" +
+                       ExifOrientationNote(size));
       }
       K = ScaleK(K, frame.width, frame.height, size.width, size.height);
       rescaled.images.push_back(frame.name);
@@ -278,7 +322,8 @@ Dataset DatasetFromRecording(CaptureRecording recording) {
                  "principal point (" + Short(camera.cx()) + ", " + Short(camera.cy()) +
                      ") lies outside the " + std::to_string(size.width) + "x" +
                      std::to_string(size.height) + " image " + image_path +
-                     ": the intrinsics do not belong to this image (rotated? transposed K?)");
+                     ": the intrinsics do not belong to this image (rotated? transposed K?)" +
+                     ExifOrientationNote(size));
     }
     // Frames with exactly the same intrinsics share a camera (nearly equal ones are merged, with a
     // warning, by LoadDataset).
@@ -291,6 +336,7 @@ Dataset DatasetFromRecording(CaptureRecording recording) {
     if (frame.ground_truth) ground_truth.world_from_cam[frame.name] = *frame.ground_truth;
     if (frame.time_s) dataset.timestamps[frame.name] = *frame.time_s;
   }
+  WarnOfImagesWithoutFrame(recording, &dataset.warnings);
   if (dataset.images.images.empty()) {
     ThrowInput(recording.image_root, 0,
                "no images: none of the " + std::to_string(recording.frames.size()) + " " +

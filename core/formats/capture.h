@@ -68,9 +68,9 @@ int PixelSize(double value, const std::string& path, int line, const std::string
 std::vector<double> ReadNumbersFile(const std::string& path);
 
 // The pose of a camera-to-world rotation in ARKit camera axes and a camera centre, in raytime's
-// convention. The rotation is orthonormalized (files hold floats); a matrix that is far from a
-// rotation (determinant <= 0, or columns off unit length by more than 1 %) is an InputError
-// naming `path` and `where`.
+// convention. The rotation is orthonormalized (files hold floats); a matrix that is not a rotation
+// within kRotationMatrixTolerance (RotationMatrixProblem) is an InputError naming `path` and
+// `where`.
 Rigid3 PoseFromArkitCameraToWorld(const Eigen::Matrix3d& world_from_arkit_cam,
                                   const Eigen::Vector3d& centre, const std::string& path,
                                   const std::string& where);
@@ -84,7 +84,11 @@ Rigid3 PoseFromCameraToWorld(const Eigen::Matrix3d& world_from_cam, const Eigen:
 struct ImageSize {
   int width = 0;
   int height = 0;
+  int exif_orientation = 1;  // a JPEG's EXIF orientation tag, 1 (as stored) when absent
 };
+// " (its EXIF orientation is N: ...)" for an image a decoder turns, "" otherwise: what a message
+// about a size or principal point that does not fit should say.
+std::string ExifOrientationNote(const ImageSize& size);
 ImageSize ReadImageSize(const std::string& path);
 
 // `K` (at width x height) for an image of new_width x new_height of the same view: focal lengths

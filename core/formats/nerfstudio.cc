@@ -132,9 +132,8 @@ Rigid3 ReadWorldFromCam(const FrameContext& frame) {
     frame.Fail("transform_matrix last row must be 0 0 0 1");
   }
   const Eigen::Matrix3d world_from_gl = m.topLeftCorner<3, 3>();
-  if (!(world_from_gl.determinant() > 0)) {
-    frame.Fail("transform_matrix rotation has a non-positive determinant");
-  }
+  const std::string problem = RotationMatrixProblem(world_from_gl);
+  if (!problem.empty()) frame.Fail("transform_matrix: " + problem);
   return Rigid3(Eigen::Quaterniond(Orthonormalize(world_from_gl) * kFlipYZ),
                 m.topRightCorner<3, 1>());
 }

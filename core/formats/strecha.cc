@@ -23,6 +23,7 @@ StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
   const std::string contents = ReadTextFile(path);
   const auto lines = text::SplitLines(contents);
   std::vector<double> v;
+  std::vector<int> line_of;  // line of each number, for messages
   for (size_t k = 0; k < lines.size(); ++k) {
     for (const std::string_view token : text::SplitWhitespace(lines[k])) {
       double value;
@@ -31,6 +32,7 @@ StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
                    "'" + std::string(token) + "' is not a finite number");
       }
       v.push_back(value);
+      line_of.push_back(static_cast<int>(k + 1));
     }
   }
   if (v.size() != kNumbersPerCamera) {
@@ -48,9 +50,9 @@ StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
   }
   const Eigen::Matrix3d world_from_cam_rotation =
       Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(&v[12]);
-  if (!(world_from_cam_rotation.determinant() > 0)) {
-    ThrowInput(path, 0, "R has a non-positive determinant, not a rotation");
-  }
+  // Orthonormalize would quietly turn a sheared R into a ground truth degrees off.
+  const std::string problem = RotationMatrixProblem(world_from_cam_rotation);
+  if (!problem.empty()) ThrowInput(path, line_of[12], "R (numbers 13-21): " + problem);
   StrechaCamera camera;
   // NAME.camera belongs to image NAME.
   camera.intrinsics =
