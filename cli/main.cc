@@ -209,7 +209,8 @@ int Main(int argc, char** argv) {
                                      "Run a YAML pipeline (resumes: unchanged stages are "
                                      "skipped)");
   run->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
-  run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
+  CLI::Option* workdir_option =
+      run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
   run->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
   run->add_flag("--force", force, "Rerun every stage even when unchanged");
   RunOptions run_options;
@@ -304,7 +305,11 @@ int Main(int argc, char** argv) {
   resize->add_option("--out", resize_output, "Output scene folder")->required();
   resize->add_option("--width", resize_options.width, "Output width, pixels")
       ->capture_default_str();
-  resize->add_option("--jpeg-quality", resize_options.jpeg_quality)->capture_default_str();
+  resize
+      ->add_option("--jpeg-quality", resize_options.jpeg_quality,
+                   "JPEG quality of the written images, 0-100 (OpenCV's IMWRITE_JPEG_QUALITY)")
+      ->check(CLI::Range(0, 100))
+      ->capture_default_str();
 
   CLI11_PARSE(app, argc, argv);
   // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
@@ -313,6 +318,12 @@ int Main(int argc, char** argv) {
   if (quiet) spdlog::set_level(spdlog::level::warn);
 
   if (run->parsed()) {
+    // An empty --workdir (an unset shell variable, say) would quietly write into the pipeline's.
+    if (workdir_option->count() > 0 && workdir.empty()) {
+      throw InputError(
+          "raytime run: --workdir is empty; give a directory, or leave the option "
+          "out to use the pipeline's 'workdir'");
+    }
     PipelineSpec spec = LoadPipeline(pipeline_path);
     for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
     run_options.workdir = workdir;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numeric>
 #include <sstream>
 
@@ -48,6 +49,44 @@ std::string UnknownKeyMessage(const std::string& what, const std::string& key,
 int YamlLine(const YAML::Node& node) {
   const YAML::Mark mark = node.Mark();
   return mark.line >= 0 ? mark.line + 1 : 0;
+}
+
+namespace {
+
+void CheckNoRepeatedKeys(const YAML::Node& node, const std::string& path) {
+  if (node.IsSequence()) {
+    for (const auto& child : node) CheckNoRepeatedKeys(child, path);
+    return;
+  }
+  if (!node.IsMap()) return;
+  std::map<std::string, int> first_line;
+  for (const auto& entry : node) {
+    if (entry.first.IsScalar()) {
+      const auto [it, added] = first_line.emplace(entry.first.Scalar(), YamlLine(entry.first));
+      if (!added) {
+        ThrowInput(path, YamlLine(entry.first),
+                   "key '" + entry.first.Scalar() +
+                       "' appears twice in one mapping (first at line " +
+                       std::to_string(it->second) + "); give it once");
+      }
+    }
+    CheckNoRepeatedKeys(entry.second, path);
+  }
+}
+
+}  // namespace
+
+YAML::Node LoadYamlFile(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    ThrowInput(path, 0, "cannot read the file");
+  } catch (const YAML::ParserException& e) {
+    ThrowInput(path, e.mark.line + 1, "YAML syntax error: " + e.msg);
+  }
+  CheckNoRepeatedKeys(root, path);
+  return root;
 }
 
 void RequireUtf8(const std::string& text, const std::string& path, int line,

@@ -49,6 +49,11 @@ std::string UnknownKeyMessage(const std::string& what, const std::string& key,
 // 1-based line of a YAML node, 0 when the node has no mark.
 int YamlLine(const YAML::Node& node);
 
+// YAML::LoadFile of a file whose mappings must not repeat a key: yaml-cpp keeps both and a lookup
+// finds the first, so a repeated key would be silently ignored. InputError naming the file and
+// line (a syntax error, or the second occurrence of a key with the first one's line).
+YAML::Node LoadYamlFile(const std::string& path);
+
 // InputError at `path`:`line` unless `text` is UTF-8: options, names and paths from YAML end up
 // in JSON (provenance, content hashes, summary.json), which holds nothing else. The message
 // names the offending byte without repeating it.
@@ -109,10 +114,19 @@ template <typename T>
 struct IsVector<std::vector<T>> : std::true_type {};
 
 // Converts one YAML node into a field, with a located error on a type mismatch. Booleans also
-// accept 1 and 0, as command lines write them.
+// accept 1 and 0, as command lines write them. A text option given no value (`key:`, `~`, `--set
+// stage.key=`) is the empty text, which the options' rules then refuse where it must not be: as
+// yaml-cpp reads it, it was the text "null" (a prior.path "null", found only after hours of
+// matching).
 template <typename T>
 void ReadYamlField(const YAML::Node& node, T& field, const std::string& path,
                    const std::string& key) {
+  if constexpr (std::is_same_v<T, std::string>) {
+    if (node.IsNull()) {
+      field.clear();
+      return;
+    }
+  }
   try {
     if constexpr (std::is_same_v<T, bool>) {
       if (node.IsScalar() && (node.Scalar() == "1" || node.Scalar() == "0")) {
@@ -233,6 +247,23 @@ struct DocCollector {
   }
 };
 
+// Checks the rules of the fields `map` gives (relations are left for ValidateOptions, once every
+// value is in place); the first broken one is an InputError at `path` and the value's line.
+struct GivenFieldValidator {
+  const YAML::Node& map;
+  const std::string& path;
+  const std::string& what;
+  template <typename T, typename... Rules>
+  void operator()(const char* key, T& field, const char* description, const Rules&... rules) {
+    if (!map[key]) return;
+    const OptionRule* broken = BrokenRule(field, {&rules...});
+    if (broken != nullptr) {
+      ThrowInput(path, YamlLine(map[key]),
+                 what + ": " + RuleFailure(key, description, *broken, nlohmann::json(field)));
+    }
+  }
+};
+
 template <typename Options, typename = void>
 struct HasRelations : std::false_type {};
 template <typename Options>
@@ -277,6 +308,17 @@ void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
   }
   options_detail::YamlReader reader{map, path};
   options.VisitFields(reader);
+}
+
+// Checks the rules of the fields `map` sets in `options` (after ApplyYaml of the same map): a
+// value out of range is blamed on where it was given (a --set, a sweep value, a YAML line) as
+// soon as it arrives, before anything runs.
+template <typename Options>
+void ValidateGivenFields(const YAML::Node& map, Options& options, const std::string& path,
+                         const std::string& what) {
+  if (!map || !map.IsMap()) return;
+  options_detail::GivenFieldValidator validator{map, path, what};
+  options.VisitFields(validator);
 }
 
 // Checks every field's rules and the struct's relations; one InputError listing every problem,

@@ -1,5 +1,6 @@
 #include "pipelines/pipeline_spec.h"
 
+#include <cctype>
 #include <filesystem>
 
 #include "core/error.h"
@@ -106,10 +107,21 @@ void SetStageOption(PipelineSpec* spec, const std::string& dotted_key, const YAM
   YAML::Node single(YAML::NodeType::Map);
   single[key] = YAML::Clone(value);
   try {
-    CreateStage(stage->type)->CheckKeysAndTypes(single, source + " " + dotted_key);
+    CreateStage(stage->type)->CheckOverride(single, source + " " + dotted_key);
   } catch (const InputError& e) {
-    // Unknown keys name the stage id ("refine@gnc"), not only its type.
-    throw InputError(source + " " + dotted_key + ": " + e.what());
+    // Unknown keys name the stage id ("refine@gnc"), not only its type. The override's own
+    // location ("--set prior.seed:1: ", its line in the one-line value) is said once, without the
+    // line.
+    const std::string where = source + " " + dotted_key;
+    std::string message = e.what();
+    if (message.rfind(where + ":", 0) == 0) {
+      size_t end = where.size() + 1;
+      while (end < message.size() && std::isdigit(static_cast<unsigned char>(message[end]))) ++end;
+      if (end < message.size() && message[end] == ':') ++end;
+      while (end < message.size() && message[end] == ' ') ++end;
+      message = message.substr(end);
+    }
+    throw InputError(where + ": " + message);
   }
   stage->options = YAML::Clone(stage->options);
   if (!stage->options.IsMap()) stage->options = YAML::Node(YAML::NodeType::Map);
@@ -118,12 +130,7 @@ void SetStageOption(PipelineSpec* spec, const std::string& dotted_key, const YAM
 
 PipelineSpec LoadPipeline(const std::string& path) {
   if (!fs::exists(path)) ThrowInput(path, 0, "pipeline file not found");
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::ParserException& e) {
-    ThrowInput(path, e.mark.line + 1, "YAML syntax error: " + e.msg);
-  }
+  const YAML::Node root = LoadYamlFile(path);
   if (!root.IsMap()) ThrowInput(path, 0, "a pipeline file must be a YAML mapping");
   for (const auto& entry : root) {
     const std::string key = ScalarText(entry.first, path, "a top-level key");

@@ -11,7 +11,7 @@ const std::string& StageContext::Require(const std::string& artifact) const {
   if (it == artifacts.end()) {
     std::string have;
     for (const auto& [name, file] : artifacts) have += (have.empty() ? "" : ", ") + name;
-    throw InputError(
+    throw MissingArtifactError(
         "this stage needs '" + artifact +
         "', which no earlier stage produced (available: " + (have.empty() ? "none" : have) + ")");
   }

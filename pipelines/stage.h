@@ -46,10 +46,17 @@ struct StageContext {
   // splat stage's finished trainings).
   bool force = false;
 
-  // File holding `artifact`; InputError naming the artifact and the stage that should make it.
+  // File holding `artifact`; MissingArtifactError naming the artifact and those there are.
   const std::string& Require(const std::string& artifact) const;
   // "refined" for stage "refine", "refined@gnc" for stage "refine@gnc".
   std::string OutputPoseSetName(const std::string& base) const;
+};
+
+// A stage needs an artifact no earlier stage wrote: the pipeline needs fixing, so the run stops
+// even where the stage's own failures would not stop it (Stage::FailureStopsRun).
+class MissingArtifactError : public InputError {
+ public:
+  using InputError::InputError;
 };
 
 // The type of a stage id: "refine@gnc" -> "refine".
@@ -66,9 +73,13 @@ class Stage {
   // the keys given in `options` (explicit keys always win), then validates them all at once.
   // InputError naming `path` on an unknown key, a wrong type or an invalid value.
   virtual void Configure(const YAML::Node& options, const std::string& path) = 0;
-  // Checks the keys and value types of `options` without validating values: overrides are
-  // checked as they are given, and validated once all of them are in place.
+  // Checks the keys and value types of `options` without validating values: a pipeline file's
+  // values may still be overridden, and are validated once all overrides are in place.
   virtual void CheckKeysAndTypes(const YAML::Node& options, const std::string& path) = 0;
+  // The same, and each given value's own rules (a range, a list of names): for an override (a
+  // --set, a sweep value), which nothing replaces, so that a bad one is blamed on itself at once.
+  // Relations between options are still validated once all of them are in place.
+  virtual void CheckOverride(const YAML::Node& options, const std::string& path) = 0;
   virtual nlohmann::json OptionsJson() = 0;
   // Every option's key, default, description and rules, in declaration order.
   virtual std::vector<OptionDoc> OptionDocs() = 0;
@@ -91,6 +102,10 @@ class Stage {
   // Whether sweep runs may share this stage's result through the cache, which holds only its HDF5
   // file: not when it writes files besides it.
   virtual bool Cacheable() const { return ExtraOutputs().empty(); }
+  // Whether the run stops when this stage fails. A measurement (evaluate) does not: its failure
+  // is a stage_failed warning and the stages after it (the export of the user's poses) go on.
+  // An input that no earlier stage wrote (MissingArtifactError) stops the run whatever this says.
+  virtual bool FailureStopsRun() const { return true; }
 
   // Runs the stage and returns its summary (timings, counts, metrics, guardrail verdicts, and
   // "warnings": an array of core/warnings.h objects the pipeline collects into summary.json).
@@ -114,6 +129,11 @@ class StageWithOptions : public Stage {
   void CheckKeysAndTypes(const YAML::Node& node, const std::string& path) override {
     Options probe;
     ApplyYaml(node, probe, path, What());
+  }
+  void CheckOverride(const YAML::Node& node, const std::string& path) override {
+    Options probe;
+    ApplyYaml(node, probe, path, What());
+    ValidateGivenFields(node, probe, path, What());
   }
   nlohmann::json OptionsJson() override { return OptionsToJson(options_); }
   std::vector<OptionDoc> OptionDocs() override {

@@ -63,13 +63,20 @@ TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
             std::string::npos);
   EXPECT_NE(ErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=[1, 2]"); }).find("a number"),
             std::string::npos);
-  // A value of the right type but outside its rule waits for validation, then names the rule,
-  // the value and what the option means.
-  ApplyOverride(&spec, "prior.level_deg=-3");
-  const std::string message = ErrorOf([&] { ValidatePipeline(spec); });
+  // A value of the right type but outside its own rule is refused as it arrives, blamed on the
+  // override (not on the pipeline's line), naming the rule, the value and what the option means.
+  const std::string message = ErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=-3"); });
+  EXPECT_EQ(message.rfind("--set prior.level_deg: ", 0), 0u) << message;
   EXPECT_NE(message.find("option 'level_deg' must be non-negative, got -3.0"), std::string::npos)
       << message;
   EXPECT_NE(message.find("degrees"), std::string::npos) << message;
+  EXPECT_EQ(message.find(spec.path), std::string::npos) << message;
+  // Relations wait until every override is in place: prior.path may come after prior.source.
+  ApplyOverride(&spec, "prior.source=file");
+  EXPECT_NE(ErrorOf([&] { ValidatePipeline(spec); }).find("prior.path is not set"),
+            std::string::npos);
+  ApplyOverride(&spec, "prior.path=poses");
+  EXPECT_NO_THROW(ValidatePipeline(spec));
 }
 
 TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
