@@ -9,6 +9,7 @@
 
 #include "bootstrap/prior_repair.h"
 #include "core/formats/dataset.h"
+#include "core/geometry.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "evaluate/perturbation.h"
@@ -27,6 +28,9 @@ struct PriorOptions {
   std::string format = "colmap";  // for source "file": one of kPoseFileFormats
   std::string path;               // for source "file"
   std::string pose_set;           // for source "pose_set"
+  // A repair of poses given in another convention (core/geometry.h PoseConvention), applied to
+  // each pose as read: the refine stage's convention check names the value that fits the matches.
+  std::string convention = "native";
   PerturbationOptions perturbation;
   // Repair of the prior above with the bootstrap's poses (paper §4.8): "none"; "rotations"
   // (averaged rotations in the prior's frame, prior centres kept: recovers 32° priors);
@@ -55,6 +59,11 @@ struct PriorOptions {
     v("path", path, "Pose file or folder for source 'file'");
     v("pose_set", pose_set,
       "Pose set of an earlier stage for source 'pose_set' (e.g. prior, to repair it)");
+    v("convention", convention,
+      "Pose convention of the source's poses: native (the format's own), or applied to each pose "
+      "as read: inverted (camera-to-world <-> world-to-camera), flipped_axes (OpenGL <-> OpenCV "
+      "camera axes), inverted_flipped_axes (both)",
+      OneOf(PoseConventionNames()));
     v("repair", repair,
       "Repair the prior with the bootstrap: averaged rotations, all poses, or the rotations "
       "when the prior's are far from them (§4.8)",
@@ -71,6 +80,10 @@ struct PriorOptions {
     require(source != "file" || !path.empty(), "prior.source is 'file' but prior.path is not set");
     require(source != "pose_set" || !pose_set.empty(),
             "prior.source is 'pose_set' but prior.pose_set is not set");
+    require(source != "bootstrap" || convention == "native",
+            "prior.convention '" + convention +
+                "' repairs poses read in another convention; the bootstrap's poses are raytime's "
+                "own (prior.source 'bootstrap')");
     require(source != "bootstrap" || repair == "none",
             "prior.repair '" + repair +
                 "' repairs a given prior with the bootstrap; with prior.source 'bootstrap' there "
@@ -139,6 +152,13 @@ class PriorStage : public StageWithOptions<PriorOptions> {
     warnings->push_back({"missing_prior", message, join.only_right, {}, {}});
   }
 
+  // `poses` read in options_.convention.
+  PoseSet WithConvention(PoseSet poses) const {
+    const PoseConvention convention = ParsePoseConvention(options_.convention);
+    for (auto& [name, pose] : poses.world_from_cam) pose = ApplyPoseConvention(pose, convention);
+    return poses;
+  }
+
   std::string type() const override { return "prior"; }
   std::string description() const override {
     return "Make the pose prior: perturbed ground truth, the capture's poses, a pose file, the "
@@ -200,8 +220,8 @@ class PriorStage : public StageWithOptions<PriorOptions> {
                          "(the capture app's poses, formats " +
                          kFormatsWithCapturePoses + ") or file");
       }
-      const PoseSet ground_truth =
-          Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth");
+      const PoseSet ground_truth = WithConvention(
+          Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth"));
       if (options_.source == "ground_truth") {
         prior = ground_truth;
       } else {
@@ -213,6 +233,14 @@ class PriorStage : public StageWithOptions<PriorOptions> {
                                  options_.perturbation.mode, options_.perturbation.level_deg,
                                  perturbation.translation_m, options_.perturbation.seed));
       }
+    }
+    if (options_.source == "file" || options_.source == "capture" ||
+        options_.source == "pose_set") {
+      prior = WithConvention(prior);
+    }
+    if (options_.convention != "native") {
+      summary["convention"] = options_.convention;
+      spdlog::info(fmt::format("prior: poses read with convention {}", options_.convention));
     }
     if (options_.repair != "none") {
       const Hdf5Reader bootstrap_reader(context.Require(PoseArtifact("bootstrap")));

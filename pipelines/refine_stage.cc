@@ -17,12 +17,14 @@
 #include <map>
 #include <set>
 
+#include "core/camera.h"
 #include "core/error.h"
 #include "core/graph.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "pipelines/stages.h"
 #include "refine/camera_blocks.h"
+#include "refine/prior_convention.h"
 #include "refine/refine.h"
 
 namespace fs = std::filesystem;
@@ -36,6 +38,9 @@ struct RefineStageOptions {
   // Pose set the solve starts from, e.g. "prior@bootstrap" for a stage prior@bootstrap, so arms
   // seeded differently can share one run.
   std::string prior = "prior";
+  // Refuse a prior that the matches' own relative poses say is in another convention (inverted,
+  // OpenGL camera axes): refined as given it becomes a wrong answer that looks converged.
+  bool check_prior_convention = true;
   RefineOptions refine;
 
   template <class Visitor>
@@ -44,6 +49,9 @@ struct RefineStageOptions {
       "Named preset (configs/presets/refine/NAME.yaml) applied before the explicit keys",
       NonEmpty());
     v("prior", prior, "Pose set the solve starts from (e.g. prior, prior@bootstrap)", NonEmpty());
+    v("check_prior_convention", check_prior_convention,
+      "Refuse a prior that another pose convention (inverted, flipped camera axes) explains far "
+      "better than as given, judged by the verified pairs' own relative poses");
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
   void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
@@ -232,6 +240,50 @@ void AppendRayTimes(const RefineInput& input, const SolvedObservations& solved,
   }
 }
 
+// The verified pairs' relative poses from their essential matrices (pairs of images that both have
+// a prior pose), for the convention check; at most kParallaxSamples inliers per pair measure its
+// parallax.
+std::vector<MeasuredRelativePose> MeasuredRelativePoses(const ImageSet& images,
+                                                        const std::vector<ImageFeatures>& features,
+                                                        const std::vector<PairMatches>& matches,
+                                                        const PoseSet& prior) {
+  constexpr Eigen::Index kParallaxSamples = 200;
+  const auto unit_ray = [&](int image, uint32_t keypoint) {
+    const double* k = images.cameras.at(images.images.at(image).camera_index).params.data();
+    const double observed[2] = {features.at(image).keypoints(keypoint, 0),
+                                features.at(image).keypoints(keypoint, 1)};
+    double pixel[2], ray[3];
+    UndistortPixel(k, observed, pixel);
+    PixelToUnitRay(k, pixel, ray);
+    return Eigen::Vector3d(ray[0], ray[1], ray[2]);
+  };
+  std::vector<MeasuredRelativePose> out;
+  for (const PairMatches& pair : matches) {
+    const auto& inliers = pair.geometry.inlier_matches;
+    if (pair.geometry.config != TwoViewConfig::kCalibrated || inliers.rows() == 0 ||
+        !prior.Has(images.images.at(pair.image1).name) ||
+        !prior.Has(images.images.at(pair.image2).name)) {
+      continue;
+    }
+    MeasuredRelativePose measured;
+    measured.image1 = pair.image1;
+    measured.image2 = pair.image2;
+    measured.cam2_from_cam1_rotation = pair.geometry.cam2_from_cam1.RotationMatrix();
+    measured.cam2_from_cam1_direction = pair.geometry.cam2_from_cam1.translation.normalized();
+    const Eigen::Index step = std::max<Eigen::Index>(1, inliers.rows() / kParallaxSamples);
+    const Eigen::Index samples = (inliers.rows() + step - 1) / step;
+    Eigen::Matrix<double, Eigen::Dynamic, 3> rays1(samples, 3), rays2(samples, 3);
+    for (Eigen::Index s = 0; s < samples; ++s) {
+      rays1.row(s) = unit_ray(pair.image1, inliers(s * step, 0)).transpose();
+      rays2.row(s) = unit_ray(pair.image2, inliers(s * step, 1)).transpose();
+    }
+    measured.median_parallax_deg =
+        MedianParallaxDeg(measured.cam2_from_cam1_rotation, rays1, rays2);
+    out.push_back(measured);
+  }
+  return out;
+}
+
 // A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
 // written (the campaign reports score them), but never as if the solve had succeeded quietly.
 void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
@@ -314,12 +366,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       ReadYamlField(node["preset"], options_.preset, path, "preset");
     }
     const fs::path preset_path = PresetPath(options_.preset);
-    YAML::Node preset;
-    try {
-      preset = YAML::LoadFile(preset_path.string());
-    } catch (const YAML::Exception& e) {
-      ThrowInput(preset_path.string(), e.mark.line + 1, e.msg);
-    }
+    const YAML::Node preset = LoadYamlFile(preset_path.string());
     ApplyYaml(preset, options_.refine, preset_path.string(),
               "refine preset '" + options_.preset + "'");
   }
@@ -345,6 +392,32 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       throw InputError(context.Require("features") + ": features for " +
                        std::to_string(features.size()) + " images, but the image list has " +
                        std::to_string(images.images.size()));
+    }
+    // A prior in another convention is refused before any solve (issue 30); a prior made from
+    // the match graph (the bootstrap's) cannot be in one.
+    PriorConventionVerdict convention;
+    if (options_.check_prior_convention && !prior_rotations_from_matches) {
+      std::vector<Rigid3> world_from_cam(images.images.size());
+      for (size_t i = 0; i < images.images.size(); ++i) {
+        const auto pose = prior.world_from_cam.find(images.images[i].name);
+        if (pose != prior.world_from_cam.end()) world_from_cam[i] = pose->second;
+      }
+      convention = CheckPriorConvention(world_from_cam,
+                                        MeasuredRelativePoses(images, features, matches, prior));
+      if (convention.checked) {
+        const ConventionScore& native = convention.scores.front();
+        spdlog::info(fmt::format(
+            "refine: the prior as given is {:.2f}° (rotation) / {:.2f}° (baseline direction) "
+            "from the matches' relative poses (median over {} pairs, {} with parallax)",
+            native.median_rotation_error_deg, native.median_direction_error_deg,
+            convention.num_pairs, convention.num_pairs_with_parallax));
+      }
+      if (convention.refused) {
+        throw InputError("refine: pose set '" + options_.prior + "' of " +
+                         context.Require(PoseArtifact(options_.prior)) + ": " +
+                         DescribeConventionRefusal(convention, "prior.convention") +
+                         " (or refine.check_prior_convention=false to refine it as given)");
+      }
     }
 
     // The images with a prior pose take part; the others are reported and left out.
@@ -462,6 +535,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WritePoseSet(pose_set, refined, PoseRole::kRefined, MakeProvenance(*this));
     writer.WriteRayTimes(pose_set, rays);
     result["preset"] = options_.preset;
+    result["prior_convention"] = convention;
     result["pose_set"] = pose_set;
     result["num_refined"] = refined.size();
     result["num_images_without_prior"] = without_prior.size();
