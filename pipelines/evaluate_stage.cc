@@ -37,6 +37,9 @@ struct EvaluateStageOptions {
 class EvaluateStage : public StageWithOptions<EvaluateStageOptions> {
  public:
   std::string type() const override { return "evaluate"; }
+  // Scores are for people measuring; a scene they cannot be computed for (two images: no Sim(3))
+  // must not keep the refined poses from being exported.
+  bool FailureStopsRun() const override { return false; }
   std::string description() const override {
     return "Score pose sets against the ground truth or a reference pose set (Sim(3), SE(3), "
            "absolute frame)";

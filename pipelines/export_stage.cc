@@ -73,6 +73,20 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
   return poses + "_tum.txt";
 }
 
+// The file_path prefix of a transforms.json written to `path`: trainers resolve file_path from the
+// file's own folder, so the dataset's image folder is given relative to it (absolute when the two
+// share no root). Paths relative to the working directory are made absolute first, as every
+// stage reads them.
+std::string ImagePrefixFor(const std::string& path, const std::string& image_root) {
+  const fs::path root = fs::absolute(image_root).lexically_normal();
+  const fs::path folder = fs::absolute(path).parent_path().lexically_normal();
+  fs::path relative = root.lexically_relative(folder);
+  if (relative.empty()) relative = root;
+  std::string prefix = relative.generic_string();
+  if (prefix == ".") return "";
+  return prefix.back() == '/' ? prefix : prefix + "/";
+}
+
 // Erases the images listed in `reader`'s JSON document `key` from `poses`; the erased names.
 std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, PoseSet* poses) {
   std::vector<std::string> erased;
@@ -170,7 +184,21 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
         } else if (format == "colmap_binary") {
           WriteColmapModelBinary(ToColmapModel(images, poses), path);
         } else if (format == "transforms_json") {
-          WriteTransformsJson(path, images, poses);
+          std::string prefix = "images/";
+          if (images.image_root.empty()) {
+            warnings.push_back(
+                {"image_folder_unknown",
+                 "the dataset's image folder is unknown (no image_root in " +
+                     context.Require(kArtifactImages) + "): " + path +
+                     " names its images images/NAME, which a trainer resolves beside the file",
+                 {},
+                 {},
+                 {{"file", path}}});
+            spdlog::warn(fmt::format("export: {}", warnings.back().message));
+          } else {
+            prefix = ImagePrefixFor(path, images.image_root);
+          }
+          WriteTransformsJson(path, images, poses, prefix);
         } else {
           WriteTumTrajectory(path, poses);
         }

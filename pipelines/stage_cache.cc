@@ -5,6 +5,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <filesystem>
@@ -17,6 +18,7 @@
 #include "core/interrupt.h"
 #include "core/timing.h"
 #include "core/version.h"
+#include "core/warnings.h"
 #include "pipelines/content_hash.h"
 #include "pipelines/stage.h"
 
@@ -149,6 +151,56 @@ void CollectStage(const std::string& id, const json& stage_summary, json* summar
   }
 }
 
+// Whether a stage entry of summary.json says the stage's result is this run's.
+bool Completed(const json& entry) {
+  const std::string status = entry.value("status", "");
+  return status == "ran" || status == "skipped" || status == "cached";
+}
+
+// Files and folders that stages which did not complete in this run had written in an earlier one
+// (an export's refined/ and refined_transforms.json): moved to WORKDIR/stale/ when the run fails
+// or is interrupted, so that a failed run never leaves poses of other inputs or options under the
+// names users train from. Returns the paths moved, relative to the work directory.
+std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::string& workdir,
+                                          const json& stages) {
+  std::vector<std::string> moved;
+  for (const PipelineStageSpec& stage_spec : spec.stages) {
+    const bool done = std::any_of(stages.begin(), stages.end(), [&](const json& entry) {
+      return entry.value("id", "") == stage_spec.id && Completed(entry);
+    });
+    if (done) continue;
+    std::vector<std::string> outputs;
+    try {
+      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
+      stage->Configure(stage_spec.options, spec.path);
+      outputs = stage->ExtraOutputs();
+    } catch (const std::exception&) {
+      continue;  // a stage that does not configure wrote nothing under this configuration
+    }
+    for (const std::string& output : outputs) {
+      const fs::path from = fs::path(workdir) / output;
+      std::error_code error;
+      if (!fs::exists(fs::symlink_status(from, error))) continue;
+      const fs::path to = fs::path(workdir) / "stale" / output;
+      fs::remove_all(to, error);
+      fs::create_directories(to.parent_path(), error);
+      fs::rename(from, to, error);
+      if (error) {
+        spdlog::error(
+            fmt::format("cannot move the earlier run's {} aside ({}): it is not this "
+                        "run's result",
+                        from.string(), error.message()));
+        continue;
+      }
+      moved.push_back(output);
+      spdlog::warn(fmt::format(
+          "moved {} to {}: an earlier run wrote it, and this run did not reach its stage {}",
+          from.string(), to.string(), stage_spec.id));
+    }
+  }
+  return moved;
+}
+
 }  // namespace
 
 void LogWarnings(const std::string& stage_id, const json& stage_summary) {
@@ -188,6 +240,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   };
   const InterruptAction on_interrupt([&](int signal) {
     run.Update([&](json& summary) {
+      summary["stale_outputs_moved"] = MoveStaleOutputs(spec, workdir, summary["stages"]);
       finish(summary, "interrupted");
       summary["signal"] = signal;
       summary["error"] =
@@ -238,6 +291,15 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           spdlog::info(fmt::format("{}: the previous result is incomplete, running again", tag));
           unchanged = false;
         }
+        // A file damaged since it was written (same size, other bytes) is not reused.
+        if (unchanged && record.contains("output_hash") &&
+            record["output_hash"] != HashFileContents(context.output_path)) {
+          spdlog::warn(fmt::format(
+              "{}: {} is not the file this stage wrote (its content checksum differs: damaged or "
+              "changed since), running the stage again",
+              tag, context.output_path));
+          unchanged = false;
+        }
       }
       std::vector<std::string> produced;
       if (unchanged) {
@@ -265,9 +327,23 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
         std::unique_ptr<CacheLock> lock;
         const fs::path cached = fs::path(options.cache_dir) / key;
         if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
+        json cached_record;
         if (cacheable && !options.force && fs::exists(cached / "record.json")) {
+          cached_record =
+              json::parse(ReadTextFile((cached / "record.json").string()), nullptr, false);
+          if (cached_record.is_discarded() || !cached_record.contains("output_hash") ||
+              !fs::exists(cached / "output.h5") ||
+              cached_record["output_hash"] != HashFileContents((cached / "output.h5").string())) {
+            spdlog::warn(fmt::format(
+                "{}: the cached result in {} is damaged (no record or checksum, or the content "
+                "differs), computing it again",
+                tag, cached.string()));
+            cached_record = json();
+          }
+        }
+        if (!cached_record.is_null()) {
           spdlog::info(fmt::format("{}: computed by another run, taken from the cache", tag));
-          record = json::parse(ReadTextFile((cached / "record.json").string()));
+          record = cached_record;
           LinkOrCopy(cached / "output.h5", context.output_path);
           entry["status"] = "cached";
           entry["seconds"] = 0.0;
@@ -276,13 +352,39 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           // 3. Run it.
           spdlog::info(fmt::format("{}: {}", tag, stage->description()));
           const auto start = std::chrono::steady_clock::now();
-          const json stage_summary = stage->Run(context);
+          json stage_summary;
+          try {
+            stage_summary = stage->Run(context);
+          } catch (const MissingArtifactError&) {
+            throw;  // the pipeline needs fixing, whatever stage this is
+          } catch (const std::exception& e) {
+            if (stage->FailureStopsRun() || Interrupting()) throw;
+            // A measurement that could not be made (a Sim(3) of two cameras): said in the summary
+            // and the log, the run goes on, and the stage runs again next time (no record).
+            const std::string message = fmt::format(
+                "{} failed: {}; the stages after it went on (stage type {} does not "
+                "stop the run)",
+                stage_spec.id, e.what(), stage_spec.type);
+            spdlog::error(fmt::format("{}: {}", tag, message));
+            entry["status"] = "failed";
+            entry["error"] = e.what();
+            entry["seconds"] = SecondsSince(start);
+            run.Update([&](json& summary) {
+              summary["stages"].push_back(entry);
+              json warning =
+                  Warning{"stage_failed", message, {}, {}, {{"error", e.what()}}}.ToJson();
+              warning["stage"] = stage_spec.id;
+              summary["warnings"].push_back(warning);
+            });
+            continue;
+          }
           const double seconds = SecondsSince(start);
           spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
           record = {{"key", key},
                     {"summary", stage_summary},
                     {"seconds", seconds},
-                    {"finished_utc", UtcNow()}};
+                    {"finished_utc", UtcNow()},
+                    {"output_hash", HashFileContents(context.output_path)}};
           entry["status"] = "ran";
           entry["seconds"] = seconds;
           if (cacheable) {
@@ -311,10 +413,17 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
       });
     }
   } catch (const std::exception& e) {
-    run.Update([&](json& summary) {
-      finish(summary, "failed");
-      summary["error"] = e.what();
-    });
+    try {
+      run.Update([&](json& summary) {
+        summary["stale_outputs_moved"] = MoveStaleOutputs(spec, workdir, summary["stages"]);
+        finish(summary, "failed");
+        summary["error"] = e.what();
+      });
+    } catch (const std::exception& summary_error) {
+      // A full disk fails this write too: the stage's error is the one to report.
+      spdlog::error(
+          fmt::format("cannot record the failure in summary.json: {}", summary_error.what()));
+    }
     throw;
   }
   run.Update([&](json& summary) {
