@@ -40,6 +40,9 @@ struct ExportStageOptions {
   // A refined set's images most of whose pairs its solve left unexplained (the inconsistent-pairs
   // guardrail names them): a trainer given a frame the solve did not place learns a wrong view.
   bool leave_out_unexplained_images = true;
+  // A refined set's frames that moved far more than the others and fit their matches worse
+  // (frame_doubts: wrong intrinsics, say): their poses are likely wrong.
+  bool leave_out_doubted_images = true;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
@@ -47,6 +50,9 @@ struct ExportStageOptions {
     v("leave_out_unexplained_images", leave_out_unexplained_images,
       "Leave out of a refined set's export the images most of whose pairs the solve left "
       "unexplained (inconsistent_pairs names them: their poses are likely wrong)");
+    v("leave_out_doubted_images", leave_out_doubted_images,
+      "Leave out of a refined set's export the frames that moved far more than the others and "
+      "fit their matches worse (frame_doubts names them: wrong intrinsics, say)");
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
@@ -104,7 +110,7 @@ std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, 
 // left unexplained. Each left-out image is named in a warning; a set with nothing left is an
 // error, so the run fails instead of writing an empty model.
 PoseSet ExportablePoses(const StageContext& context, const std::string& name,
-                        bool leave_out_unexplained, Warnings* warnings) {
+                        bool leave_out_unexplained, bool leave_out_doubted, Warnings* warnings) {
   const Hdf5Reader reader(context.Require(PoseArtifact(name)));
   PoseRole role = PoseRole::kPrior;
   PoseSet poses = reader.ReadPoseSet(name, &role);
@@ -113,12 +119,16 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   const std::vector<std::string> unexplained =
       leave_out_unexplained ? EraseListed(reader, kUnexplainedImagesJson, &poses)
                             : std::vector<std::string>();
-  if (unrefined.empty() && unexplained.empty()) return poses;
+  const std::vector<std::string> doubted = leave_out_doubted
+                                               ? EraseListed(reader, kDoubtedImagesJson, &poses)
+                                               : std::vector<std::string>();
+  if (unrefined.empty() && unexplained.empty() && doubted.empty()) return poses;
   if (poses.world_from_cam.empty()) {
     throw InputError("export: no pose of '" + name +
-                     "' is left to export (a guardrail returned the prior, or found most pairs "
-                     "unexplained, for every image; see the refine stage's warnings). Export the "
-                     "pose set 'prior' explicitly if that is what you want to train on");
+                     "' is left to export (a guardrail returned the prior, found most pairs "
+                     "unexplained or doubted the frame, for every image; see the refine stage's "
+                     "warnings). Export the pose set 'prior' explicitly if that is what you want "
+                     "to train on");
   }
   // `option`: the export option that chose to leave them out, if one did.
   const auto warn = [&](const char* code, const std::vector<std::string>& left_out,
@@ -131,12 +141,15 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
                          left_out,
                          {},
                          {{"pose_set", name}}});
-    spdlog::warn(fmt::format("export: {}", warnings->back().message));
   };
   warn("unrefined_not_exported", unrefined, "kept the prior's pose (guardrail)", "");
   warn("unexplained_not_exported", unexplained,
        "leave most of their pairs unexplained (inconsistent_pairs: their poses are likely wrong)",
        "leave_out_unexplained_images");
+  warn("doubted_not_exported", doubted,
+       "moved far more than the others and fit their matches worse (frame_doubts: their poses "
+       "are likely wrong)",
+       "leave_out_doubted_images");
   return poses;
 }
 
@@ -173,8 +186,8 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     Warnings warnings;
     std::map<std::string, PoseSet> exportable;
     for (const auto& name : options_.poses) {
-      const PoseSet poses =
-          ExportablePoses(context, name, options_.leave_out_unexplained_images, &warnings);
+      const PoseSet poses = ExportablePoses(context, name, options_.leave_out_unexplained_images,
+                                            options_.leave_out_doubted_images, &warnings);
       exportable[name] = poses;
       for (const auto& format : options_.formats) {
         if (format == "3dgs") continue;  // all pose sets at once, below

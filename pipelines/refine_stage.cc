@@ -9,6 +9,7 @@
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
 // in the environment, else the source tree's configs/presets); a key given explicitly in the
 // pipeline, in --set or on the command line always overrides the preset's, whatever its value.
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -24,6 +25,7 @@
 #include "core/warnings.h"
 #include "pipelines/stages.h"
 #include "refine/camera_blocks.h"
+#include "refine/frame_doubt.h"
 #include "refine/prior_convention.h"
 #include "refine/refine.h"
 
@@ -41,6 +43,10 @@ struct RefineStageOptions {
   // Refuse a prior that the matches' own relative poses say is in another convention (inverted,
   // OpenGL camera axes): refined as given it becomes a wrong answer that looks converged.
   bool check_prior_convention = true;
+  // Name, and keep out of the refined export, a frame whose correction stands out and whose
+  // matches fit worse than the others' (refine/frame_doubt.h: wrong intrinsics, say).
+  bool check_frame_doubts = true;
+  FrameDoubtOptions frame_doubt;
   RefineOptions refine;
 
   template <class Visitor>
@@ -52,7 +58,12 @@ struct RefineStageOptions {
     v("check_prior_convention", check_prior_convention,
       "Refuse a prior that another pose convention (inverted, flipped camera axes) explains far "
       "better than as given, judged by the verified pairs' own relative poses");
-    refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
+    v("check_frame_doubts", check_frame_doubts,
+      "Name, and leave out of the refined export, frames that moved far more than the others and "
+      "fit their matches worse (wrong intrinsics, a frame the solve could not place); not for a "
+      "prior made from the match graph");
+    frame_doubt.VisitFields(v);  // flat keys: refine.frame_doubt_residual_ratio, ...
+    refine.VisitFields(v);       // flat keys: refine.max_matches_per_pair, ...
   }
   void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
@@ -284,6 +295,49 @@ std::vector<MeasuredRelativePose> MeasuredRelativePoses(const ImageSet& images,
   return out;
 }
 
+// The frames of one returned solve that refine/frame_doubt.h doubts, as image names.
+FrameDoubtVerdict FrameDoubtsOf(const RefineInput& input, const RefineOutput& output,
+                                const FrameDoubtOptions& options) {
+  const SolvedObservations& solved = output.solved_observations;
+  const Eigen::Index n = solved.observations.rows();
+  Eigen::VectorXi image(n);
+  Eigen::Matrix<double, Eigen::Dynamic, 2> pixel(n, 2);
+  for (Eigen::Index o = 0; o < n; ++o) {
+    image(o) = solved.observations(o, 0);
+    pixel.row(o) = input.keypoints[image(o)].row(solved.observations(o, 1));
+  }
+  std::vector<CameraIntrinsics> intrinsics;
+  for (size_t i = 0; i < input.prior_world_from_cam.size(); ++i) {
+    intrinsics.push_back(output.cameras.at(input.camera_index[i]));
+  }
+  return CheckFrameDoubts(input.prior_world_from_cam, output.world_from_cam, intrinsics, image,
+                          pixel, solved.ray_times, solved.matches, options);
+}
+
+// The frame_doubts warning: the doubted frames by name, with the numbers that doubted them.
+void AddFrameDoubtWarning(const FrameDoubtVerdict& verdict, const std::vector<std::string>& names,
+                          Warnings* warnings) {
+  if (verdict.images.empty()) return;
+  Warning warning{"frame_doubts", "", {}, {}, nlohmann::json::object()};
+  double worst_change = 0.0, worst_ratio = 0.0;
+  for (const int image : verdict.images) {
+    warning.images.push_back(names.at(image));
+    warning.details["centre_change"][names.at(image)] = verdict.centre_change[image];
+    warning.details["residual_ratio"][names.at(image)] = verdict.residual_ratio[image];
+    worst_change = std::max(worst_change, verdict.centre_change[image]);
+    worst_ratio = std::max(worst_ratio, verdict.residual_ratio[image]);
+  }
+  warning.details["median_centre_change"] = verdict.median_centre_change;
+  warning.details["centre_change_threshold"] = verdict.centre_change_threshold;
+  warning.message = fmt::format(
+      "{} frame(s) moved far more than the others (up to {:.3g} against a median {:.3g}, length "
+      "units of the prior) and fit their matches worse (up to {:.2f}x the median pair's "
+      "residual): wrong intrinsics, or a frame the solve could not place: {}",
+      verdict.images.size(), worst_change, verdict.median_centre_change, worst_ratio,
+      fmt::format("{}", fmt::join(warning.images, ", ")));
+  warnings->push_back(warning);
+}
+
 // A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
 // written (the campaign reports score them), but never as if the solve had succeeded quietly.
 void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
@@ -336,6 +390,23 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
       warning.message +=
           "; most pairs of " + named + " are among them: the pose(s) are likely wrong";
     }
+    warnings->push_back(warning);
+  }
+  // Frames all (or most, three and more) of whose pairs are unexplained, where too few pairs are
+  // for the test above to fire: named and left out all the same.
+  if (!pairs.fired && !pairs.images_mostly_inconsistent.empty()) {
+    Warning warning{
+        "unexplained_images", "", {}, {}, {{"pair_threshold_px", pairs.pair_threshold_px}}};
+    for (const int image : pairs.images_mostly_inconsistent) {
+      warning.images.push_back(names.at(image));
+    }
+    for (const PairResidual& pair : pairs.pairs) {
+      warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
+    }
+    warning.message = fmt::format(
+        "the solution leaves all or most pairs of {} frame(s) unexplained (above {:.3g} px): "
+        "their poses are likely wrong: {}",
+        warning.images.size(), pairs.pair_threshold_px, fmt::join(warning.images, ", "));
     warnings->push_back(warning);
   }
   const PairRemovalSummary& removal = summary.pair_removal;
@@ -473,6 +544,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // Images most of whose pairs a solve that was returned left unexplained: likely wrong poses,
     // which the export leaves out too (leave_out_unexplained_images).
     std::vector<std::string> unexplained;
+    // Frames that moved far more than the others and fit worse (FrameDoubtsOf), left out too.
+    std::vector<std::string> doubted;
+    FrameDoubtVerdict frame_doubts;  // of the largest component
     std::vector<CameraIntrinsics> cameras = images.cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
@@ -480,6 +554,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       std::vector<std::string> names;
       RefineInput input = ComponentInput(images, features, matches, prior, components[c], &names);
       input.prior_rotations_from_matches = prior_rotations_from_matches;
+      input.names = names;
       RefineOutput output;
       const RefineSummary summary = RefinePoses(input, options_.refine, &output);
       for (size_t k = 0; k < names.size(); ++k) {
@@ -504,10 +579,17 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       if (summary.returned_prior) {
         unrefined.insert(unrefined.end(), names.begin(), names.end());
       } else {
-        if (summary.inconsistent_pairs.fired) {
-          for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
-            unexplained.push_back(names.at(image));
-          }
+        for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
+          unexplained.push_back(names.at(image));
+        }
+        // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
+        // independent measurement to stand out from: its own errors (a translation-averaging
+        // drift at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
+        if (options_.check_frame_doubts && !prior_rotations_from_matches) {
+          const FrameDoubtVerdict verdict = FrameDoubtsOf(input, output, options_.frame_doubt);
+          AddFrameDoubtWarning(verdict, names, &warnings);
+          for (const int image : verdict.images) doubted.push_back(names.at(image));
+          if (c == 0) frame_doubts = verdict;
         }
         AppendRayTimes(input, output.solved_observations, names, &rays);
       }
@@ -536,6 +618,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteRayTimes(pose_set, rays);
     result["preset"] = options_.preset;
     result["prior_convention"] = convention;
+    if (options_.check_frame_doubts) result["frame_doubts"] = frame_doubts;
     result["pose_set"] = pose_set;
     result["num_refined"] = refined.size();
     result["num_images_without_prior"] = without_prior.size();
@@ -550,6 +633,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteJson("refine_summary", result);
     writer.WriteJson(kUnrefinedImagesJson, unrefined);
     writer.WriteJson(kUnexplainedImagesJson, unexplained);
+    writer.WriteJson(kDoubtedImagesJson, doubted);
     writer.Commit();
     return result;
   }

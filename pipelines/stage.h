@@ -29,6 +29,10 @@ inline constexpr const char* kUnrefinedImagesJson = "unrefined_images";
 // unexplained when the inconsistent-pairs guardrail fired (their poses are likely wrong). Written
 // by refine, read by export.
 inline constexpr const char* kUnexplainedImagesJson = "unexplained_images";
+// JSON document beside a refined pose set: the names of frames that moved far more than the others
+// and fit their matches worse (refine/frame_doubt.h: wrong intrinsics, a frame the solve could
+// not place). Written by refine, read by export.
+inline constexpr const char* kDoubtedImagesJson = "doubted_images";
 // JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";

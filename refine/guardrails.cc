@@ -79,7 +79,11 @@ InconsistentPairsVerdict CheckInconsistentPairs(const std::vector<PairResidual>&
   }
   verdict.num_inconsistent = static_cast<int>(verdict.pairs.size());
   for (const auto& [image, counts] : pairs_of_image) {
-    if (counts.second >= kMinInconsistentPairsOfAnImage && 2 * counts.second > counts.first) {
+    // Most of three or more, or every one of its pairs (a frame with one or two pairs, both
+    // unexplained, is a frame the solve did not place).
+    const bool all = counts.second > 0 && counts.second == counts.first;
+    if (all ||
+        (counts.second >= kMinInconsistentPairsOfAnImage && 2 * counts.second > counts.first)) {
       verdict.images_mostly_inconsistent.push_back(image);
     }
   }

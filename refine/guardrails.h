@@ -25,8 +25,9 @@ TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
 WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
                           double expected, double factor);
 
-// Fewest inconsistent pairs that name their shared image (InconsistentPairsVerdict::
-// images_mostly_inconsistent): two wrong pairs of one image are what repeated structure leaves.
+// Fewest inconsistent pairs that name their shared image when they are only most of its pairs
+// (InconsistentPairsVerdict::images_mostly_inconsistent): two wrong pairs of one image are what
+// repeated structure leaves. All of an image's pairs, however few, name it.
 inline constexpr int kMinInconsistentPairsOfAnImage = 3;
 
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): a pair whose

@@ -35,6 +35,12 @@
 namespace raytime {
 namespace {
 
+std::vector<std::string> Labels(const RefineInput& input, const std::vector<int>& images) {
+  std::vector<std::string> labels;
+  for (const int image : images) labels.push_back(input.Label(image));
+  return labels;
+}
+
 void ValidateInput(const RefineInput& input) {
   const size_t n = input.prior_world_from_cam.size();
   if (input.keypoints.size() != n) {
@@ -815,7 +821,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     spdlog::warn(fmt::format(
         "refine: guardrail fired (doubtful_images): after removing inconsistent pairs, the poses "
         "of images {} rest on one pair that nothing else checks",
-        fmt::join(removal.doubtful_images, ", ")));
+        fmt::join(Labels(input, removal.doubtful_images), ", ")));
   }
   spdlog::info(fmt::format("refine: decision: {}", summary.decision));
   if (pairs.fired) {
@@ -823,8 +829,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     constexpr size_t kLogged = 8;
     std::string listed;
     for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
-      listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ", pairs.pairs[p].image1,
-                            pairs.pairs[p].image2, pairs.pairs[p].median_px);
+      listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ",
+                            input.Label(pairs.pairs[p].image1), input.Label(pairs.pairs[p].image2),
+                            pairs.pairs[p].median_px);
     }
     if (pairs.pairs.size() > kLogged) listed += ", ...";
     spdlog::warn(fmt::format(
@@ -835,7 +842,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
             ? std::string()
             : fmt::format(
                   "; most pairs of image(s) {} are among them: their poses are likely wrong",
-                  fmt::join(pairs.images_mostly_inconsistent, ", "))));
+                  fmt::join(Labels(input, pairs.images_mostly_inconsistent), ", "))));
   }
   return summary;
 }

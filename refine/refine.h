@@ -45,8 +45,16 @@ struct RefineInput {
   // orientation prior towards them brings no information the matches lack, only their averaging
   // errors, so the basin-first solve finishes without one and does not probe it.
   bool prior_rotations_from_matches = false;
+  // Per image, its name for the log's verdicts (a user reads frames by name, not by index); empty:
+  // the log says indices.
+  std::vector<std::string> names;
 
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
+  // names[image], or its index when there are no names.
+  std::string Label(int image) const {
+    return image >= 0 && static_cast<size_t>(image) < names.size() ? names[image]
+                                                                   : std::to_string(image);
+  }
 };
 
 // The last pass's observations and where the solve put them (paper §3.2, X = O + t·D): what an
@@ -200,9 +208,10 @@ struct InconsistentPairsVerdict {
   double fraction_threshold = 0.0;  // max_inconsistent_pair_fraction
   std::vector<PairResidual> pairs;  // the inconsistent pairs, in input order
   // Images in at least kMinInconsistentPairsOfAnImage (guardrails.h) inconsistent pairs that are
-  // more than half of their pairs, ascending: a wrong pair involves two images, so when most of one
-  // image's pairs are unexplained, its pose (a frame the solve did not place) is the likelier
-  // culprit.
+  // more than half of their pairs, or all of whose pairs (one at least) are inconsistent,
+  // ascending: a wrong pair involves two images, so when most of one image's pairs are
+  // unexplained, its pose (a frame the solve did not place) is the likelier culprit. Named
+  // whether or not the test fired.
   std::vector<int> images_mostly_inconsistent;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num_pairs,

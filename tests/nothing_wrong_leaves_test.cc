@@ -11,6 +11,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -229,6 +230,45 @@ TEST_F(NothingWrongLeavesTest, AFailingEvaluationDoesNotKeepThePosesFromTheExpor
   EXPECT_EQ(StageEntry(summary, "evaluate").value("status", ""), "failed");
   EXPECT_EQ(StageEntry(summary, "export").value("status", ""), "ran");
   EXPECT_TRUE(fs::exists(workdir / "refined_transforms.json"));
+}
+
+// One image's focal length 1.5x too long: the solve kept every pair consistent by moving that
+// camera 3.5 m (the others 0.5 m), and the run ended ok with it exported. It is named by name and
+// left out of the export.
+TEST_F(NothingWrongLeavesTest, AFrameWithWrongIntrinsicsIsNamedAndLeftOut) {
+  const fs::path sample = fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11";
+  const fs::path scene = dir_ / "scene";
+  fs::copy(sample, scene, fs::copy_options::recursive);
+  const fs::path camera = scene / "gt_dense_cameras" / "0005.jpg.camera";
+  std::string contents;
+  {
+    std::ifstream in(camera);
+    contents.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // K's first two rows: fx 689.87 -> 1034.805, fy 691.03999999999996 -> 1036.56.
+  const size_t fx = contents.find("689.87 "), fy = contents.find("691.03999999999996 ");
+  ASSERT_NE(fx, std::string::npos);
+  ASSERT_NE(fy, std::string::npos);
+  contents.replace(fy, 18, "1036.56");
+  contents.replace(fx, 6, "1034.805");
+  std::ofstream(camera) << contents;
+  const fs::path workdir = dir_ / "run";
+  const CommandResult result =
+      RunRaytime(Demo(workdir.string(), "--set dataset.root=" + scene.string()));
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const json summary = ReadRunSummary(workdir);
+  EXPECT_EQ(summary["status"], "ok_with_warnings");
+  bool named = false;
+  for (const json& warning : summary["warnings"]) {
+    if (warning["code"] == "frame_doubts") named = warning["images"] == json::array({"0005.jpg"});
+  }
+  EXPECT_TRUE(named) << summary["warnings"].dump();
+  std::ifstream in(workdir / "refined_transforms.json");
+  const json transforms = json::parse(in);
+  EXPECT_EQ(transforms["frames"].size(), 10u);
+  for (const json& frame : transforms["frames"]) {
+    EXPECT_EQ(frame["file_path"].get<std::string>().find("0005.jpg"), std::string::npos);
+  }
 }
 
 // Trainers resolve file_path from the transforms.json's own folder; it named images/NAME below a

@@ -225,6 +225,24 @@ TEST(GuardrailsTest, InconsistentPairsNameTheImageMostOfWhosePairsAreUnexplained
   EXPECT_EQ(nlohmann::json(verdict)["images_mostly_inconsistent"], nlohmann::json::array({9}));
 }
 
+// A frame with one or two pairs, all unexplained, was exported 17.7° off (issue 30): fewer than
+// three inconsistent pairs named no image. Every one of its pairs unexplained names it; one of two
+// does not (it may be the other image's fault), and the test need not fire for the names.
+TEST(GuardrailsTest, AFrameAllOfWhosePairsAreUnexplainedIsNamedHoweverFewTheyAre) {
+  std::vector<PairResidual> pairs;
+  for (int i = 0; i < 11; ++i) pairs.push_back(MakePair(i, i + 1, 0.5));
+  pairs.push_back(MakePair(11, 12, 0.5));
+  pairs.push_back(MakePair(12, 13, 35.0));  // image 13: one pair, unexplained
+  pairs.push_back(MakePair(3, 14, 20.0));   // image 14: two pairs, both unexplained
+  pairs.push_back(MakePair(5, 14, 28.0));
+  InconsistentPairsVerdict verdict = CheckInconsistentPairs(pairs, 4.0, 0.0, 0.5);
+  EXPECT_FALSE(verdict.fired);  // 3 of 15 pairs
+  EXPECT_EQ(verdict.images_mostly_inconsistent, (std::vector<int>{13, 14}));
+  pairs.back().median_px = 0.6;  // image 14: one of two
+  verdict = CheckInconsistentPairs(pairs, 4.0, 0.0, 0.5);
+  EXPECT_EQ(verdict.images_mostly_inconsistent, std::vector<int>{13});
+}
+
 // A capture whose pairs all sit near a pixel (the Record3D desk subsample: median pair 0.98 px,
 // worst correct ones 4.1-4.5 px): with the median multiple the threshold rises to 8 x 1 px and
 // those pairs are consistent, while a wrong pair many times the median is still caught; an object

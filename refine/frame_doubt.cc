@@ -1,0 +1,145 @@
+#include "refine/frame_doubt.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <map>
+#include <stdexcept>
+#include <utility>
+
+#include "core/statistics.h"
+
+namespace raytime {
+namespace {
+
+// Matches sampled per pair for its median: enough for a median to a few percent, and memory that
+// does not grow with a capture's tens of millions of matches.
+constexpr int kSamplesPerPair = 200;
+
+// Undistorted pixel and unit ray of one observation.
+struct ObservedRay {
+  Eigen::Vector2d pixel;
+  Eigen::Vector3d ray;
+};
+
+ObservedRay RayOf(const CameraIntrinsics& camera, const Eigen::Vector2d& observed) {
+  ObservedRay out;
+  UndistortPixel(camera.params.data(), observed.data(), out.pixel.data());
+  PixelToUnitRay(camera.params.data(), out.pixel.data(), out.ray.data());
+  return out;
+}
+
+// |π_target(O_s + t R_s d_s) - û_target|, pixels; NaN without a positive ray time.
+double CrossProjection(const Rigid3& source_pose, const ObservedRay& source, double ray_time,
+                       const Rigid3& target_pose, const CameraIntrinsics& target_camera,
+                       const ObservedRay& target) {
+  if (!(ray_time > 0)) return std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Vector3d point = source_pose * (ray_time * source.ray);
+  const Eigen::Vector3d in_target = target_pose.Inverse() * point;
+  Eigen::Vector2d projected;
+  ProjectPinhole(target_camera.params.data(), in_target.data(), projected.data());
+  return (projected - target.pixel).norm();
+}
+
+}  // namespace
+
+FrameDoubtVerdict CheckFrameDoubts(
+    const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
+    const std::vector<CameraIntrinsics>& intrinsics, const Eigen::VectorXi& observation_image,
+    const Eigen::Matrix<double, Eigen::Dynamic, 2>& observation_pixel,
+    const Eigen::VectorXd& ray_times,
+    const Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor>& matches,
+    const FrameDoubtOptions& options) {
+  const int n = static_cast<int>(prior.size());
+  if (solution.size() != prior.size() || intrinsics.size() != prior.size() ||
+      observation_pixel.rows() != observation_image.size() ||
+      ray_times.size() != observation_image.size()) {
+    throw std::invalid_argument("CheckFrameDoubts: inconsistent sizes");
+  }
+  FrameDoubtVerdict verdict;
+  verdict.centre_change.assign(n, std::numeric_limits<double>::quiet_NaN());
+  verdict.residual_ratio.assign(n, std::numeric_limits<double>::quiet_NaN());
+
+  // Corrections after a Sim(3) fit of the solution onto the prior (a gauge change is no
+  // correction).
+  std::vector<Eigen::Vector3d> from, to;
+  for (int i = 0; i < n; ++i) {
+    from.push_back(solution[i].translation);
+    to.push_back(prior[i].translation);
+  }
+  Sim3 prior_from_solution;
+  try {
+    prior_from_solution = FitAlignment(from, to, AlignmentKind::kSim3);
+  } catch (const std::invalid_argument&) {
+    return verdict;  // fewer than three non-collinear centres
+  }
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& c : to) centroid += c / n;
+  std::vector<double> extent;
+  for (int i = 0; i < n; ++i) {
+    verdict.centre_change[i] = (to[i] - prior_from_solution * from[i]).norm();
+    extent.push_back((to[i] - centroid).norm());
+  }
+  verdict.median_centre_change = Median(verdict.centre_change, 0.0);
+  verdict.centre_change_threshold =
+      std::max(options.centre_change_factor * verdict.median_centre_change,
+               options.min_centre_change_fraction * Median(extent, 0.0));
+
+  // Per pair: a sample of its matches' cross-projection residuals (root mean square of the two
+  // directions), in match order.
+  struct PairSample {
+    int count = 0;
+    int seen = 0;
+    std::vector<double> values;
+  };
+  std::map<std::pair<int, int>, PairSample> pairs;
+  const auto key = [&](Eigen::Index m) {
+    const int a = observation_image(matches(m, 0)), b = observation_image(matches(m, 1));
+    return std::make_pair(std::min(a, b), std::max(a, b));
+  };
+  for (Eigen::Index m = 0; m < matches.rows(); ++m) ++pairs[key(m)].count;
+  for (Eigen::Index m = 0; m < matches.rows(); ++m) {
+    PairSample& pair = pairs[key(m)];
+    const int stride = std::max(1, pair.count / kSamplesPerPair);
+    if (pair.seen++ % stride != 0) continue;
+    const int oa = matches(m, 0), ob = matches(m, 1);
+    const int a = observation_image(oa), b = observation_image(ob);
+    const ObservedRay ra = RayOf(intrinsics[a], observation_pixel.row(oa).transpose());
+    const ObservedRay rb = RayOf(intrinsics[b], observation_pixel.row(ob).transpose());
+    const double ab =
+        CrossProjection(solution[a], ra, ray_times(oa), solution[b], intrinsics[b], rb);
+    const double ba =
+        CrossProjection(solution[b], rb, ray_times(ob), solution[a], intrinsics[a], ra);
+    double value = std::numeric_limits<double>::quiet_NaN();
+    if (std::isfinite(ab) && std::isfinite(ba)) {
+      value = std::sqrt(0.5 * (ab * ab + ba * ba));
+    } else if (std::isfinite(ab) || std::isfinite(ba)) {
+      value = std::isfinite(ab) ? ab : ba;
+    }
+    if (std::isfinite(value)) pair.values.push_back(value);
+  }
+  std::vector<double> all_pairs;
+  std::vector<std::vector<double>> of_image(n);
+  for (const auto& [images, sample] : pairs) {
+    if (sample.values.empty()) continue;
+    const double median = Median(sample.values, 0.0);
+    all_pairs.push_back(median);
+    of_image[images.first].push_back(median);
+    of_image[images.second].push_back(median);
+  }
+  if (all_pairs.empty()) return verdict;
+  verdict.checked = true;
+  verdict.median_pair_residual_px = Median(all_pairs, 0.0);
+  for (int i = 0; i < n; ++i) {
+    if (of_image[i].empty() || !(verdict.median_pair_residual_px > 0)) continue;
+    verdict.residual_ratio[i] = Median(of_image[i], 0.0) / verdict.median_pair_residual_px;
+    if (verdict.centre_change[i] > verdict.centre_change_threshold &&
+        verdict.residual_ratio[i] > options.residual_ratio) {
+      verdict.images.push_back(i);
+    }
+  }
+  return verdict;
+}
+
+}  // namespace raytime
