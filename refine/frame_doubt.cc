@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "core/statistics.h"
+#include "refine/guardrails.h"
 
 namespace raytime {
 namespace {
@@ -62,25 +63,12 @@ FrameDoubtVerdict CheckFrameDoubts(
   verdict.residual_ratio.assign(n, std::numeric_limits<double>::quiet_NaN());
 
   // Corrections after a Sim(3) fit of the solution onto the prior (a gauge change is no
-  // correction).
-  std::vector<Eigen::Vector3d> from, to;
-  for (int i = 0; i < n; ++i) {
-    from.push_back(solution[i].translation);
-    to.push_back(prior[i].translation);
-  }
-  Sim3 prior_from_solution;
-  try {
-    prior_from_solution = FitAlignment(from, to, AlignmentKind::kSim3);
-  } catch (const std::invalid_argument&) {
-    return verdict;  // fewer than three non-collinear centres
-  }
+  // correction); the prior's extent is its centres' median distance from their centroid.
+  if (!CentreChangesAfterSim3(prior, solution, &verdict.centre_change)) return verdict;
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  for (const Eigen::Vector3d& c : to) centroid += c / n;
+  for (const Rigid3& pose : prior) centroid += pose.translation / n;
   std::vector<double> extent;
-  for (int i = 0; i < n; ++i) {
-    verdict.centre_change[i] = (to[i] - prior_from_solution * from[i]).norm();
-    extent.push_back((to[i] - centroid).norm());
-  }
+  for (const Rigid3& pose : prior) extent.push_back((pose.translation - centroid).norm());
   verdict.median_centre_change = Median(verdict.centre_change, 0.0);
   verdict.centre_change_threshold =
       std::max(options.centre_change_factor * verdict.median_centre_change,

@@ -27,6 +27,27 @@ TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
   return verdict;
 }
 
+bool CentreChangesAfterSim3(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
+                            std::vector<double>* changes) {
+  std::vector<Eigen::Vector3d> prior_centres, solution_centres;
+  for (size_t i = 0; i < prior.size(); ++i) {
+    prior_centres.push_back(prior[i].translation);
+    solution_centres.push_back(solution[i].translation);
+  }
+  Sim3 prior_from_solution;
+  bool aligned = true;
+  try {
+    prior_from_solution = FitAlignment(solution_centres, prior_centres, AlignmentKind::kSim3);
+  } catch (const std::invalid_argument&) {
+    aligned = false;
+  }
+  changes->clear();
+  for (size_t i = 0; i < prior.size(); ++i) {
+    changes->push_back((prior_from_solution * solution_centres[i] - prior_centres[i]).norm());
+  }
+  return aligned;
+}
+
 WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
                           double expected, double factor) {
   WanderVerdict verdict;
@@ -34,21 +55,8 @@ WanderVerdict CheckWander(const std::vector<Rigid3>& prior, const std::vector<Ri
   verdict.expected = expected;
   verdict.threshold = factor * expected;
   if (prior.empty()) return verdict;
-  std::vector<Eigen::Vector3d> prior_centres, solution_centres;
-  for (size_t i = 0; i < prior.size(); ++i) {
-    prior_centres.push_back(prior[i].translation);
-    solution_centres.push_back(solution[i].translation);
-  }
-  Sim3 prior_from_solution;
-  try {
-    prior_from_solution = FitAlignment(solution_centres, prior_centres, AlignmentKind::kSim3);
-  } catch (const std::invalid_argument&) {
-    prior_from_solution = Sim3();
-  }
   std::vector<double> displacements;
-  for (size_t i = 0; i < prior.size(); ++i) {
-    displacements.push_back((prior_from_solution * solution_centres[i] - prior_centres[i]).norm());
-  }
+  CentreChangesAfterSim3(prior, solution, &displacements);
   verdict.median_displacement = UpperMedian(displacements, 0.0);
   verdict.fired = verdict.median_displacement > verdict.threshold;
   return verdict;

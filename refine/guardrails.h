@@ -18,6 +18,13 @@ TrustRegionVerdict CheckTrustRegion(const std::vector<Rigid3>& prior,
                                     const std::vector<Rigid3>& solution,
                                     double rotation_threshold_deg, double translation_threshold);
 
+// Per frame, the distance from the prior's centre to the solution's after a Sim(3) fit of the
+// solution's centres onto the prior's (Umeyama): how far the solve moved each frame, a change of
+// gauge taken out. False when fewer than three non-collinear centres determine no Sim(3): then
+// the distances are measured without alignment.
+bool CentreChangesAfterSim3(const std::vector<Rigid3>& prior, const std::vector<Rigid3>& solution,
+                            std::vector<double>* changes);
+
 // Median per-frame centre displacement of `solution` from `prior` after a Sim(3) fit of the
 // solution's centres onto the prior's (Umeyama), so that a gauge drift of a room solve does not
 // count as wander; fires above factor × expected. With fewer than three non-collinear centres no
