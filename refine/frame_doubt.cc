@@ -19,22 +19,24 @@ namespace {
 constexpr int kSamplesPerPair = 200;
 
 // Undistorted pixel and unit ray of one observation.
-struct ObservedRay {
+struct DoubtedObservationRay {
   Eigen::Vector2d pixel;
   Eigen::Vector3d ray;
 };
 
-ObservedRay RayOf(const CameraIntrinsics& camera, const Eigen::Vector2d& observed) {
-  ObservedRay out;
+DoubtedObservationRay DoubtedObservationRayOf(const CameraIntrinsics& camera,
+                                              const Eigen::Vector2d& observed) {
+  DoubtedObservationRay out;
   UndistortPixel(camera.params.data(), observed.data(), out.pixel.data());
   PixelToUnitRay(camera.params.data(), out.pixel.data(), out.ray.data());
   return out;
 }
 
 // |π_target(O_s + t R_s d_s) - û_target|, pixels; NaN without a positive ray time.
-double CrossProjection(const Rigid3& source_pose, const ObservedRay& source, double ray_time,
-                       const Rigid3& target_pose, const CameraIntrinsics& target_camera,
-                       const ObservedRay& target) {
+double CrossProjectionAtRayTime(const Rigid3& source_pose, const DoubtedObservationRay& source,
+                                double ray_time, const Rigid3& target_pose,
+                                const CameraIntrinsics& target_camera,
+                                const DoubtedObservationRay& target) {
   if (!(ray_time > 0)) return std::numeric_limits<double>::quiet_NaN();
   const Eigen::Vector3d point = source_pose * (ray_time * source.ray);
   const Eigen::Vector3d in_target = target_pose.Inverse() * point;
@@ -93,12 +95,14 @@ FrameDoubtVerdict CheckFrameDoubts(
     if (pair.seen++ % stride != 0) continue;
     const int oa = matches(m, 0), ob = matches(m, 1);
     const int a = observation_image(oa), b = observation_image(ob);
-    const ObservedRay ra = RayOf(intrinsics[a], observation_pixel.row(oa).transpose());
-    const ObservedRay rb = RayOf(intrinsics[b], observation_pixel.row(ob).transpose());
+    const DoubtedObservationRay ra =
+        DoubtedObservationRayOf(intrinsics[a], observation_pixel.row(oa).transpose());
+    const DoubtedObservationRay rb =
+        DoubtedObservationRayOf(intrinsics[b], observation_pixel.row(ob).transpose());
     const double ab =
-        CrossProjection(solution[a], ra, ray_times(oa), solution[b], intrinsics[b], rb);
+        CrossProjectionAtRayTime(solution[a], ra, ray_times(oa), solution[b], intrinsics[b], rb);
     const double ba =
-        CrossProjection(solution[b], rb, ray_times(ob), solution[a], intrinsics[a], ra);
+        CrossProjectionAtRayTime(solution[b], rb, ray_times(ob), solution[a], intrinsics[a], ra);
     double value = std::numeric_limits<double>::quiet_NaN();
     if (std::isfinite(ab) && std::isfinite(ba)) {
       value = std::sqrt(0.5 * (ab * ab + ba * ba));

@@ -11,13 +11,13 @@
 namespace raytime {
 namespace {
 
-double AngleBetweenDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+double ConventionAngleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return DegreesFromRadians(std::atan2(a.cross(b).norm(), a.dot(b)));
 }
 
-ConventionScore Score(const std::vector<Rigid3>& world_from_cam,
-                      const std::vector<MeasuredRelativePose>& pairs, PoseConvention convention,
-                      int min_pairs_with_parallax) {
+ConventionScore ScoreOfConvention(const std::vector<Rigid3>& world_from_cam,
+                                  const std::vector<MeasuredRelativePose>& pairs,
+                                  PoseConvention convention, int min_pairs_with_parallax) {
   std::vector<Rigid3> poses;
   poses.reserve(world_from_cam.size());
   for (const Rigid3& pose : world_from_cam) poses.push_back(ApplyPoseConvention(pose, convention));
@@ -29,7 +29,7 @@ ConventionScore Score(const std::vector<Rigid3>& world_from_cam,
     if (pair.median_parallax_deg < kMinDirectionParallaxDeg) continue;
     const Eigen::Vector3d& baseline = cam2_from_cam1.translation;
     if (!(baseline.norm() > 0)) continue;
-    direction_errors.push_back(AngleBetweenDeg(baseline, pair.cam2_from_cam1_direction));
+    direction_errors.push_back(ConventionAngleDeg(baseline, pair.cam2_from_cam1_direction));
   }
   ConventionScore score;
   score.convention = PoseConventionName(convention);
@@ -63,7 +63,7 @@ PriorConventionVerdict CheckPriorConvention(const std::vector<Rigid3>& world_fro
                                : std::numeric_limits<int>::max();
   for (size_t c = 0; c < PoseConventionNames().size(); ++c) {
     verdict.scores.push_back(
-        Score(world_from_cam, pairs, static_cast<PoseConvention>(c), min_parallax));
+        ScoreOfConvention(world_from_cam, pairs, static_cast<PoseConvention>(c), min_parallax));
   }
   const ConventionScore& native = verdict.scores.front();
   const auto best = std::min_element(
@@ -83,8 +83,8 @@ double MedianParallaxDeg(const Eigen::Matrix3d& cam2_from_cam1_rotation,
   std::vector<double> angles;
   angles.reserve(static_cast<size_t>(rays1.rows()));
   for (Eigen::Index k = 0; k < rays1.rows(); ++k) {
-    angles.push_back(AngleBetweenDeg(cam2_from_cam1_rotation * rays1.row(k).transpose(),
-                                     rays2.row(k).transpose()));
+    angles.push_back(ConventionAngleDeg(cam2_from_cam1_rotation * rays1.row(k).transpose(),
+                                        rays2.row(k).transpose()));
   }
   return Median(angles, 0.0);
 }

@@ -96,8 +96,8 @@ std::vector<Rigid3> PhonePrior(const std::vector<Rigid3>& truth) {
   return prior;
 }
 
-FrameDoubtVerdict Check(const FrameDoubtScene& scene, const std::vector<Rigid3>& prior,
-                        const std::vector<Rigid3>& solution, const FrameDoubtInput& in) {
+FrameDoubtVerdict CheckDoubtsOf(const FrameDoubtScene& scene, const std::vector<Rigid3>& prior,
+                                const std::vector<Rigid3>& solution, const FrameDoubtInput& in) {
   return CheckFrameDoubts(prior, solution,
                           std::vector<CameraIntrinsics>(prior.size(), scene.camera), in.image,
                           in.pixel, in.ray_time, in.matches);
@@ -108,7 +108,7 @@ TEST(FrameDoubtTest, AFrameThatMovedAwayFromWhatItSeesIsDoubted) {
   const std::vector<Rigid3> prior = PhonePrior(scene.truth);
   // A healthy solve: the truth.
   const FrameDoubtVerdict healthy =
-      Check(scene, prior, scene.truth, Observe(scene, scene.truth, scene.truth, -1, 0));
+      CheckDoubtsOf(scene, prior, scene.truth, Observe(scene, scene.truth, scene.truth, -1, 0));
   ASSERT_TRUE(healthy.checked);
   EXPECT_TRUE(healthy.images.empty());
   EXPECT_NEAR(healthy.median_pair_residual_px, 0.3, 0.2);
@@ -118,7 +118,7 @@ TEST(FrameDoubtTest, AFrameThatMovedAwayFromWhatItSeesIsDoubted) {
   std::vector<Rigid3> moved = scene.truth;
   moved[5].translation += 2.0 * (moved[5].rotation * Eigen::Vector3d::UnitZ());
   const FrameDoubtVerdict doubted =
-      Check(scene, prior, moved, Observe(scene, scene.truth, moved, -1, 0));
+      CheckDoubtsOf(scene, prior, moved, Observe(scene, scene.truth, moved, -1, 0));
   EXPECT_EQ(doubted.images, std::vector<int>{5}) << nlohmann::json(doubted).dump();
   EXPECT_GT(doubted.centre_change[5], doubted.centre_change_threshold);
   EXPECT_GT(doubted.residual_ratio[5], 1.25);
@@ -130,13 +130,13 @@ TEST(FrameDoubtTest, AGlitchTheSolveFixedAndAFrameThatOnlyFitsWorseAreNotDoubted
   std::vector<Rigid3> prior = PhonePrior(scene.truth);
   prior[5].translation += Eigen::Vector3d(2.0, 0, 0);
   const FrameDoubtVerdict glitch =
-      Check(scene, prior, scene.truth, Observe(scene, scene.truth, scene.truth, -1, 0));
+      CheckDoubtsOf(scene, prior, scene.truth, Observe(scene, scene.truth, scene.truth, -1, 0));
   EXPECT_TRUE(glitch.images.empty()) << nlohmann::json(glitch).dump();
   EXPECT_GT(glitch.centre_change[5], glitch.centre_change_threshold);
 
   // Frame 2's keypoints are noisier (motion blur) but it moved like the others.
-  const FrameDoubtVerdict blurred = Check(scene, PhonePrior(scene.truth), scene.truth,
-                                          Observe(scene, scene.truth, scene.truth, 2, 1.5));
+  const FrameDoubtVerdict blurred = CheckDoubtsOf(scene, PhonePrior(scene.truth), scene.truth,
+                                                  Observe(scene, scene.truth, scene.truth, 2, 1.5));
   EXPECT_TRUE(blurred.images.empty()) << nlohmann::json(blurred).dump();
   EXPECT_GT(blurred.residual_ratio[2], 1.25);
 }

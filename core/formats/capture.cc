@@ -246,7 +246,7 @@ Eigen::Matrix3d ScaleK(const Eigen::Matrix3d& K, int width, int height, int new_
 // intrinsics, so they cannot take part; a user who sees 23 of 24 images refined must be told why
 // (a photo whose metadata file is missing). Only where the frames themselves lie in that folder
 // (names without a folder part): elsewhere the folder may hold other things.
-void WarnOfImagesWithoutFrame(const CaptureRecording& recording, Warnings* warnings) {
+static void WarnOfImagesWithoutFrame(const CaptureRecording& recording, Warnings* warnings) {
   std::set<std::string> named;
   for (const CaptureFrame& frame : recording.frames) {
     if (frame.name.find('/') != std::string::npos) return;
