@@ -157,6 +157,29 @@ bool Completed(const json& entry) {
   return status == "ran" || status == "skipped" || status == "cached";
 }
 
+// Moves WORKDIR/`output` (a file or folder an earlier run wrote) to WORKDIR/stale/`output`,
+// replacing what an earlier move left there; false when there is nothing to move or it cannot be
+// moved (said in the log).
+bool MoveAside(const std::string& workdir, const std::string& output, const std::string& why) {
+  const fs::path from = fs::path(workdir) / output;
+  std::error_code error;
+  if (!fs::exists(fs::symlink_status(from, error))) return false;
+  const fs::path to = fs::path(workdir) / "stale" / output;
+  fs::remove_all(to, error);
+  fs::create_directories(to.parent_path(), error);
+  fs::rename(from, to, error);
+  if (error) {
+    spdlog::error(
+        fmt::format("cannot move the earlier run's {} aside ({}): it is not this run's "
+                    "result",
+                    from.string(), error.message()));
+    return false;
+  }
+  spdlog::warn(fmt::format("moved {} to {}: an earlier run wrote it, and {}", from.string(),
+                           to.string(), why));
+  return true;
+}
+
 // Files and folders that stages which did not complete in this run had written in an earlier one
 // (an export's refined/ and refined_transforms.json): moved to WORKDIR/stale/ when the run fails
 // or is interrupted, so that a failed run never leaves poses of other inputs or options under the
@@ -178,24 +201,29 @@ std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::s
       continue;  // a stage that does not configure wrote nothing under this configuration
     }
     for (const std::string& output : outputs) {
-      const fs::path from = fs::path(workdir) / output;
-      std::error_code error;
-      if (!fs::exists(fs::symlink_status(from, error))) continue;
-      const fs::path to = fs::path(workdir) / "stale" / output;
-      fs::remove_all(to, error);
-      fs::create_directories(to.parent_path(), error);
-      fs::rename(from, to, error);
-      if (error) {
-        spdlog::error(
-            fmt::format("cannot move the earlier run's {} aside ({}): it is not this "
-                        "run's result",
-                        from.string(), error.message()));
-        continue;
+      if (MoveAside(workdir, output, "this run did not reach its stage " + stage_spec.id)) {
+        moved.push_back(output);
       }
+    }
+  }
+  return moved;
+}
+
+// The outputs besides its HDF5 file that a stage's earlier run recorded and this run's options no
+// longer write (an export format or pose set dropped): moved aside, so that the work directory
+// does not mix this run's exports with an earlier run's.
+std::vector<std::string> MoveOutputsNoLongerWritten(const std::string& workdir,
+                                                    const std::string& stage_id,
+                                                    const json& previous_record,
+                                                    const std::vector<std::string>& outputs) {
+  std::vector<std::string> moved;
+  if (!previous_record.is_object() || !previous_record.contains("extra_outputs")) return moved;
+  for (const json& previous : previous_record["extra_outputs"]) {
+    if (!previous.is_string()) continue;
+    const std::string output = previous.get<std::string>();
+    if (std::find(outputs.begin(), outputs.end(), output) != outputs.end()) continue;
+    if (MoveAside(workdir, output, "stage " + stage_id + " no longer writes it")) {
       moved.push_back(output);
-      spdlog::warn(fmt::format(
-          "moved {} to {}: an earlier run wrote it, and this run did not reach its stage {}",
-          from.string(), to.string(), stage_spec.id));
     }
   }
   return moved;
@@ -380,11 +408,25 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           }
           const double seconds = SecondsSince(start);
           spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
+          // What the stage's earlier run in this work directory recorded (none: {}).
+          const json previous_record = fs::exists(record_path)
+                                           ? json::parse(ReadTextFile(record_path), nullptr, false)
+                                           : json::object();
           record = {{"key", key},
                     {"summary", stage_summary},
                     {"seconds", seconds},
                     {"finished_utc", UtcNow()},
-                    {"output_hash", HashFileContents(context.output_path)}};
+                    {"output_hash", HashFileContents(context.output_path)},
+                    {"extra_outputs", stage->ExtraOutputs()}};
+          const std::vector<std::string> moved = MoveOutputsNoLongerWritten(
+              workdir, stage_spec.id, previous_record, stage->ExtraOutputs());
+          if (!moved.empty()) {
+            run.Update([&](json& summary) {
+              for (const std::string& output : moved) {
+                summary["stale_outputs_moved"].push_back(output);
+              }
+            });
+          }
           entry["status"] = "ran";
           entry["seconds"] = seconds;
           if (cacheable) {

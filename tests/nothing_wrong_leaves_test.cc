@@ -208,6 +208,23 @@ TEST_F(NothingWrongLeavesTest, AFailedRunMovesAnEarlierRunsExportsAside) {
   EXPECT_TRUE(fs::exists(workdir / "refined_transforms.json"));
 }
 
+// A rerun whose export no longer writes a format left the earlier run's file beside the new
+// ones: a trainer reading it got the poses of other options.
+TEST_F(NothingWrongLeavesTest, AnExportARerunNoLongerWritesIsMovedAside) {
+  const fs::path workdir = dir_ / "demo";
+  ASSERT_EQ(RunRaytime(Demo(workdir.string())).exit_code, 0);
+  ASSERT_TRUE(fs::exists(workdir / "refined_transforms.json"));
+  const CommandResult rerun =
+      RunRaytime(Demo(workdir.string(), "--set export.formats=[colmap_text]"));
+  ASSERT_EQ(rerun.exit_code, 0) << rerun.output;
+  const json summary = ReadRunSummary(workdir);
+  EXPECT_EQ(summary["status"], "ok");
+  EXPECT_TRUE(fs::exists(workdir / "refined" / "images.txt"));
+  EXPECT_FALSE(fs::exists(workdir / "refined_transforms.json"));
+  EXPECT_TRUE(fs::exists(workdir / "stale" / "refined_transforms.json"));
+  EXPECT_EQ(summary["stale_outputs_moved"], json::array({"refined_transforms.json"}));
+}
+
 // Two images: the refiner solves their pair, but a Sim(3) fit of two centres is not defined, and
 // evaluate's failure used to stop the run before export.
 TEST_F(NothingWrongLeavesTest, AFailingEvaluationDoesNotKeepThePosesFromTheExport) {
