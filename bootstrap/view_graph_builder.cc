@@ -19,10 +19,9 @@ Eigen::Vector2d Keypoint(const ImageFeatures& features, uint32_t row) {
 }
 
 Eigen::Vector3d Bearing(const CameraIntrinsics& camera, const Eigen::Vector2d& pixel) {
-  double undistorted[2], ray[3];
-  UndistortPixel(camera.params.data(), pixel.data(), undistorted);
-  PixelToUnitRay(camera.params.data(), undistorted, ray);
-  return Eigen::Vector3d(ray[0], ray[1], ray[2]);
+  Eigen::Vector3d ray;
+  ObservedPixelToUnitRay(camera.params.data(), pixel.data(), ray.data());
+  return ray;
 }
 
 void CheckInput(const ImageSet& images, const std::vector<ImageFeatures>& features,

@@ -94,8 +94,7 @@ void DistortPixel(const T* intrinsics, const T* u, T* ud) {
 
 // Distorted (observed) pixel -> undistorted pixel (paper §3.2, û = undistort(u; f, c, d)).
 template <typename T>
-void UndistortPixel(const T* intrinsics, const T* ud, T* u,
-                    int iterations = kUndistortIterations) {
+void UndistortPixel(const T* intrinsics, const T* ud, T* u, int iterations = kUndistortIterations) {
   const T xd[2] = {(ud[0] - intrinsics[kCx]) / intrinsics[kFx],
                    (ud[1] - intrinsics[kCy]) / intrinsics[kFy]};
   T x[2];
@@ -115,6 +114,20 @@ void PixelToUnitRay(const T* intrinsics, const T* u, T* ray) {
   ray[0] *= inv_norm;
   ray[1] *= inv_norm;
   ray[2] *= inv_norm;
+}
+
+// Distorted (observed) pixel -> unit ray in the camera frame: UndistortPixel, then
+// PixelToUnitRay. `undistorted`, when given, receives the undistorted pixel between the two.
+template <typename T>
+void ObservedPixelToUnitRay(const T* intrinsics, const T* observed, T* ray,
+                            T* undistorted = nullptr) {
+  T u[2];
+  UndistortPixel(intrinsics, observed, u);
+  PixelToUnitRay(intrinsics, u, ray);
+  if (undistorted != nullptr) {
+    undistorted[0] = u[0];
+    undistorted[1] = u[1];
+  }
 }
 
 // Camera-frame point -> undistorted pixel (plain pinhole, paper §3.2 π_j).

@@ -27,8 +27,7 @@ struct DoubtedObservationRay {
 DoubtedObservationRay DoubtedObservationRayOf(const CameraIntrinsics& camera,
                                               const Eigen::Vector2d& observed) {
   DoubtedObservationRay out;
-  UndistortPixel(camera.params.data(), observed.data(), out.pixel.data());
-  PixelToUnitRay(camera.params.data(), out.pixel.data(), out.ray.data());
+  ObservedPixelToUnitRay(camera.params.data(), observed.data(), out.ray.data(), out.pixel.data());
   return out;
 }
 

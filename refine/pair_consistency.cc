@@ -15,11 +15,10 @@ double PositiveRayEpipolarDistance(const IntrinsicsVector& source_intrinsics,
                                    const Eigen::Vector2d& target_pixel) {
   const double* s = source_intrinsics.data();
   const double* k = target_intrinsics.data();
-  Eigen::Vector2d source_undistorted, target_undistorted;
-  UndistortPixel(s, source_pixel.data(), source_undistorted.data());
+  Eigen::Vector2d target_undistorted;
   UndistortPixel(k, target_pixel.data(), target_undistorted.data());
   Eigen::Vector3d ray;
-  PixelToUnitRay(s, source_undistorted.data(), ray.data());
+  ObservedPixelToUnitRay(s, source_pixel.data(), ray.data());
   // The ray's points in the target camera's frame are c + t e; with K the pinhole matrix, their
   // homogeneous pixels are a + t b, a = K c (the epipole), b = K e (the vanishing point), and the
   // residual's pixel is (a + t b) dehomogenized, which is what ProjectPinhole computes.

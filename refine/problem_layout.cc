@@ -179,8 +179,7 @@ ObservationRays FixedObservationRays(const RefineInput& input, const ProblemLayo
     const double* intrinsics = cameras.Of(obs.image).params.data();
     const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
                              input.keypoints[obs.image](obs.keypoint, 1)};
-    UndistortPixel(intrinsics, pixel, out.undistorted[o].data());
-    PixelToUnitRay(intrinsics, out.undistorted[o].data(), out.rays[o].data());
+    ObservedPixelToUnitRay(intrinsics, pixel, out.rays[o].data(), out.undistorted[o].data());
   }
   return out;
 }

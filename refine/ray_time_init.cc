@@ -21,10 +21,9 @@ std::vector<Eigen::Vector3d> RayDirections(const ProblemLayout& layout, const Re
     const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
                              input.keypoints[obs.image](obs.keypoint, 1)};
     const double* intrinsics = cameras.Of(obs.image).params.data();
-    double undistorted[2], ray[3];
-    UndistortPixel(intrinsics, pixel, undistorted);
-    PixelToUnitRay(intrinsics, undistorted, ray);
-    directions[o] = world_from_cam[obs.image].rotation * Eigen::Vector3d(ray[0], ray[1], ray[2]);
+    Eigen::Vector3d ray;
+    ObservedPixelToUnitRay(intrinsics, pixel, ray.data());
+    directions[o] = world_from_cam[obs.image].rotation * ray;
   }
   return directions;
 }
