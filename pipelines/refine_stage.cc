@@ -263,10 +263,9 @@ std::vector<MeasuredRelativePose> MeasuredRelativePoses(const ImageSet& images,
     const double* k = images.cameras.at(images.images.at(image).camera_index).params.data();
     const double observed[2] = {features.at(image).keypoints(keypoint, 0),
                                 features.at(image).keypoints(keypoint, 1)};
-    double pixel[2], ray[3];
-    UndistortPixel(k, observed, pixel);
-    PixelToUnitRay(k, pixel, ray);
-    return Eigen::Vector3d(ray[0], ray[1], ray[2]);
+    Eigen::Vector3d ray;
+    ObservedPixelToUnitRay(k, observed, ray.data());
+    return ray;
   };
   std::vector<MeasuredRelativePose> out;
   for (const PairMatches& pair : matches) {
@@ -295,7 +294,7 @@ std::vector<MeasuredRelativePose> MeasuredRelativePoses(const ImageSet& images,
   return out;
 }
 
-// The frames of one returned solve that refine/frame_doubt.h doubts, as image names.
+// refine/frame_doubt.h's verdict on one returned solve (images as indices into the solve's).
 FrameDoubtVerdict FrameDoubtsOf(const RefineInput& input, const RefineOutput& output,
                                 const FrameDoubtOptions& options) {
   const SolvedObservations& solved = output.solved_observations;
@@ -334,7 +333,7 @@ void AddFrameDoubtWarning(const FrameDoubtVerdict& verdict, const std::vector<st
       "units of the prior) and fit their matches worse (up to {:.2f}x the median pair's "
       "residual): wrong intrinsics, or a frame the solve could not place: {}",
       verdict.images.size(), worst_change, verdict.median_centre_change, worst_ratio,
-      fmt::format("{}", fmt::join(warning.images, ", ")));
+      fmt::join(warning.images, ", "));
   warnings->push_back(warning);
 }
 

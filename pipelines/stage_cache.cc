@@ -229,6 +229,14 @@ std::vector<std::string> MoveOutputsNoLongerWritten(const std::string& workdir,
   return moved;
 }
 
+// summary.json's stale_outputs_moved lists every output this run moved aside, however it came to
+// (a failed or interrupted run's summary always has the list).
+void AppendStaleOutputs(const std::vector<std::string>& moved, json* summary) {
+  json& list = (*summary)["stale_outputs_moved"];
+  if (!list.is_array()) list = json::array();
+  for (const std::string& output : moved) list.push_back(output);
+}
+
 }  // namespace
 
 void LogWarnings(const std::string& stage_id, const json& stage_summary) {
@@ -268,7 +276,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   };
   const InterruptAction on_interrupt([&](int signal) {
     run.Update([&](json& summary) {
-      summary["stale_outputs_moved"] = MoveStaleOutputs(spec, workdir, summary["stages"]);
+      AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"]), &summary);
       finish(summary, "interrupted");
       summary["signal"] = signal;
       summary["error"] =
@@ -306,11 +314,15 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
       const std::string record_path =
           (fs::path(workdir) / ".raytime" / (stage_spec.id + ".json")).string();
 
+      // What the stage's earlier run in this work directory recorded (none: {}).
+      const json previous_record = fs::exists(record_path)
+                                       ? json::parse(ReadTextFile(record_path), nullptr, false)
+                                       : json::object();
       // 1. This work directory already holds the result.
       json record;
       bool unchanged = !options.force && fs::exists(record_path) && fs::exists(context.output_path);
       if (unchanged) {
-        record = json::parse(ReadTextFile(record_path), nullptr, false);
+        record = previous_record;
         unchanged = !record.is_discarded() && record.value("key", "") == key;
         for (const auto& extra : stage->ExtraOutputs()) {
           unchanged = unchanged && fs::exists(fs::path(workdir) / extra);
@@ -408,10 +420,6 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           }
           const double seconds = SecondsSince(start);
           spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
-          // What the stage's earlier run in this work directory recorded (none: {}).
-          const json previous_record = fs::exists(record_path)
-                                           ? json::parse(ReadTextFile(record_path), nullptr, false)
-                                           : json::object();
           record = {{"key", key},
                     {"summary", stage_summary},
                     {"seconds", seconds},
@@ -421,11 +429,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
           const std::vector<std::string> moved = MoveOutputsNoLongerWritten(
               workdir, stage_spec.id, previous_record, stage->ExtraOutputs());
           if (!moved.empty()) {
-            run.Update([&](json& summary) {
-              for (const std::string& output : moved) {
-                summary["stale_outputs_moved"].push_back(output);
-              }
-            });
+            run.Update([&](json& summary) { AppendStaleOutputs(moved, &summary); });
           }
           entry["status"] = "ran";
           entry["seconds"] = seconds;
@@ -457,7 +461,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   } catch (const std::exception& e) {
     try {
       run.Update([&](json& summary) {
-        summary["stale_outputs_moved"] = MoveStaleOutputs(spec, workdir, summary["stages"]);
+        AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"]), &summary);
         finish(summary, "failed");
         summary["error"] = e.what();
       });
