@@ -30,4 +30,19 @@ std::vector<int> ConnectedComponents(int num_nodes, const std::vector<std::pair<
 std::vector<int> MaximumSpanningForest(int num_nodes, const std::vector<std::pair<int, int>>& edges,
                                        const std::vector<double>& weights);
 
+// One cut of a minimum cut tree: the nodes of one side (ascending) and the number of edges across
+// (parallel edges count each).
+struct MinimumCut {
+  std::vector<int> side;
+  int num_edges_across = 0;
+};
+
+// The n - 1 cuts of a Gomory–Hu tree of an undirected graph whose edges count one each
+// (Gusfield's algorithm: n - 1 maximum flows, no contractions): for every pair of nodes, the
+// fewest edges any cut separating them has is the smallest count among these cuts that separate
+// them, so the graph's weakest places are all here. Deterministic; a disconnected graph gives
+// cuts of 0 edges around its components. std::invalid_argument on an edge out of range.
+std::vector<MinimumCut> MinimumCutTree(int num_nodes,
+                                       const std::vector<std::pair<int, int>>& edges);
+
 }  // namespace raytime

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <limits>
 #include <random>
 
 #include "bootstrap/bootstrap.h"
@@ -123,6 +124,82 @@ TEST(ViewGraph, ComponentsAreOrderedBySize) {
   EXPECT_EQ(labels, (std::vector<int>{0, 0, 0, 2, 1, 1}));
   const std::vector<int> tree = MaximumSpanningForest(3, {{0, 1}, {1, 2}, {0, 2}}, {1.0, 5.0, 3.0});
   EXPECT_EQ(tree, (std::vector<int>{1, 2}));
+}
+
+// Two five-node cliques joined by two edges: the cut between any node of one and any of the other
+// is the two edges, with the clique as the side.
+TEST(ViewGraph, MinimumCutTreeFindsTheWeakLink) {
+  std::vector<std::pair<int, int>> edges;
+  for (int a = 0; a < 5; ++a) {
+    for (int b = a + 1; b < 5; ++b) {
+      edges.emplace_back(a, b);
+      edges.emplace_back(a + 5, b + 5);
+    }
+  }
+  edges.emplace_back(1, 7);
+  edges.emplace_back(3, 8);
+  const std::vector<MinimumCut> cuts = MinimumCutTree(10, edges);
+  ASSERT_EQ(cuts.size(), 9u);
+  int weak = 0;
+  for (const MinimumCut& cut : cuts) {
+    if (cut.num_edges_across == 2) {
+      ++weak;
+      const std::vector<int> right{5, 6, 7, 8, 9};
+      const std::vector<int> left{0, 1, 2, 3, 4};
+      EXPECT_TRUE(cut.side == right || cut.side == left);
+    } else {
+      // Inside a clique of five: one node against the rest, 4 edges (5 where a link leaves it).
+      EXPECT_GE(cut.num_edges_across, 4);
+    }
+  }
+  EXPECT_EQ(weak, 1);
+}
+
+// Against brute force on random graphs of 8 nodes: every pair of nodes' minimum cut (the fewest
+// edges across any subset holding one and not the other) is the smallest of the tree's cuts
+// separating them, and every tree cut's count is the edges its side really has across.
+TEST(ViewGraph, MinimumCutTreeHoldsEveryPairsMinimumCut) {
+  std::mt19937 rng(7);
+  constexpr int kNodes = 8;
+  for (int draw = 0; draw < 20; ++draw) {
+    std::vector<std::pair<int, int>> edges;
+    std::bernoulli_distribution edge(0.45);
+    for (int a = 0; a < kNodes; ++a) {
+      for (int b = a + 1; b < kNodes; ++b) {
+        if (edge(rng)) edges.emplace_back(a, b);
+        if (edge(rng) && edge(rng)) edges.emplace_back(a, b);  // a parallel edge, sometimes
+      }
+    }
+    const auto across = [&](unsigned mask) {
+      int count = 0;
+      for (const auto& [a, b] : edges) count += ((mask >> a) & 1u) != ((mask >> b) & 1u);
+      return count;
+    };
+    const std::vector<MinimumCut> cuts = MinimumCutTree(kNodes, edges);
+    ASSERT_EQ(cuts.size(), static_cast<size_t>(kNodes - 1));
+    std::vector<unsigned> masks;
+    for (const MinimumCut& cut : cuts) {
+      unsigned mask = 0;
+      for (const int node : cut.side) mask |= 1u << node;
+      EXPECT_EQ(across(mask), cut.num_edges_across);
+      masks.push_back(mask);
+    }
+    for (int s = 0; s < kNodes; ++s) {
+      for (int t = s + 1; t < kNodes; ++t) {
+        int brute = std::numeric_limits<int>::max();
+        for (unsigned mask = 0; mask < (1u << kNodes); ++mask) {
+          if (((mask >> s) & 1u) && !((mask >> t) & 1u)) brute = std::min(brute, across(mask));
+        }
+        int tree = std::numeric_limits<int>::max();
+        for (size_t k = 0; k < cuts.size(); ++k) {
+          if (((masks[k] >> s) & 1u) != ((masks[k] >> t) & 1u)) {
+            tree = std::min(tree, cuts[k].num_edges_across);
+          }
+        }
+        EXPECT_EQ(tree, brute) << "draw " << draw << ", nodes " << s << " and " << t;
+      }
+    }
+  }
 }
 
 TEST(RotationAveraging, ExactOnNoiseFreeGraph) {
