@@ -41,7 +41,8 @@ struct ExportStageOptions {
   // guardrail names them): a trainer given a frame the solve did not place learns a wrong view.
   bool leave_out_unexplained_images = true;
   // A refined set's frames that moved far more than the others and fit their matches worse
-  // (frame_doubts: wrong intrinsics, say): their poses are likely wrong.
+  // (frame_doubts: wrong intrinsics, say), and the images of parts of the match graph the pair
+  // removal nearly cut loose (loose_parts): their poses are likely wrong.
   bool leave_out_doubted_images = true;
 
   template <class Visitor>
@@ -51,8 +52,9 @@ struct ExportStageOptions {
       "Leave out of a refined set's export the images most of whose pairs the solve left "
       "unexplained (inconsistent_pairs names them: their poses are likely wrong)");
     v("leave_out_doubted_images", leave_out_doubted_images,
-      "Leave out of a refined set's export the frames that moved far more than the others and "
-      "fit their matches worse (frame_doubts names them: wrong intrinsics, say)");
+      "Leave out of a refined set's export the frames the refine stage doubted: moved far more "
+      "than the others and fit their matches worse (frame_doubts), or not held to the rest by the "
+      "matches (loose_parts)");
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
@@ -122,7 +124,10 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   const std::vector<std::string> doubted = leave_out_doubted
                                                ? EraseListed(reader, kDoubtedImagesJson, &poses)
                                                : std::vector<std::string>();
-  if (unrefined.empty() && unexplained.empty() && doubted.empty()) return poses;
+  const std::vector<std::string> loose = leave_out_doubted
+                                             ? EraseListed(reader, kLooseImagesJson, &poses)
+                                             : std::vector<std::string>();
+  if (unrefined.empty() && unexplained.empty() && doubted.empty() && loose.empty()) return poses;
   if (poses.world_from_cam.empty()) {
     throw InputError("export: no pose of '" + name +
                      "' is left to export (a guardrail returned the prior, found most pairs "
@@ -149,6 +154,10 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   warn("doubted_not_exported", doubted,
        "moved far more than the others and fit their matches worse (frame_doubts: their poses "
        "are likely wrong)",
+       "leave_out_doubted_images");
+  warn("loose_not_exported", loose,
+       "are not held to the rest of the match graph by the matches (loose_parts, or a component "
+       "placed by a coarse prior: their placement may be wrong)",
        "leave_out_doubted_images");
   return poses;
 }

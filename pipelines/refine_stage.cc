@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -408,17 +409,24 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
         warning.images.size(), pairs.pair_threshold_px, fmt::join(warning.images, ", "));
     warnings->push_back(warning);
   }
-  const PairRemovalSummary& removal = summary.pair_removal;
-  if (!removal.doubtful_images.empty()) {
-    Warning warning{"doubtful_images",
-                    "after removing the pairs the basin solution left unexplained, the poses of " +
-                        std::to_string(removal.doubtful_images.size()) +
-                        " image(s) rest on one pair that nothing else checks (it may be a wrong "
-                        "one)",
-                    {},
-                    {},
-                    {{"pairs_kept_for_connectivity", removal.kept.size()}}};
-    for (const int image : removal.doubtful_images) warning.images.push_back(names.at(image));
+  const LoosePartsVerdict& loose = summary.loose_parts;
+  if (!loose.images.empty()) {
+    Warning warning{"loose_parts", "", {}, {}, {{"cuts", nlohmann::json::array()}}};
+    for (const int image : loose.images) warning.images.push_back(names.at(image));
+    int fewest_left = std::numeric_limits<int>::max();
+    for (const LooseCut& cut : loose.cuts) {
+      fewest_left = std::min(fewest_left, cut.pairs_across - cut.pairs_removed);
+      nlohmann::json named = cut;
+      named["images"] = nlohmann::json::array();
+      for (const int image : cut.images) named["images"].push_back(names.at(image));
+      warning.details["cuts"].push_back(named);
+    }
+    warning.message = fmt::format(
+        "the matches do not hold the placement of {} image(s): they hang on the rest of the match "
+        "graph by {} pair(s) or few matches, or the pair removal took most of the pairs that held "
+        "them (see details.cuts); a misplaced part looks consistent there. Left out of the "
+        "refined export: {}",
+        warning.images.size(), fewest_left, fmt::join(warning.images, ", "));
     warnings->push_back(warning);
   }
 }
@@ -507,6 +515,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     }
     // A self-calibrated camera must come from one solve: only the largest component then.
     const size_t num_solved = options_.refine.SelfCalibrates() ? 1 : components.size();
+    // Images of parts the matches do not hold to the rest (loose_parts; and, after a prior the
+    // bootstrap repaired, the smaller components), left out of the export.
+    std::vector<std::string> loose;
     if (components.size() > 1) {
       Warning warning;
       warning.code = "disconnected_graph";
@@ -524,6 +535,15 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
                              "the images of the others are not in the refined poses"
                            : "each is refined in its own gauge, anchored to the prior only: "
                              "their relative placement is the prior's");
+      // A prior the prior stage found coarse and repaired from the match graph (or the
+      // bootstrap's own) places the smaller components by the coarse poses it kept for them
+      // (the bootstrap reaches the largest only): nothing holds them to the largest one.
+      if (num_solved > 1 && prior_rotations_from_matches) {
+        warning.message +=
+            ", and that prior was repaired from the matches as coarse: the smaller components' "
+            "images are left out of the refined export";
+        loose.insert(loose.end(), warning.images.begin(), warning.images.end());
+      }
       warning.details = {{"component_sizes", nlohmann::json::array()},
                          {"refined_components", num_solved}};
       for (const auto& component : components) {
@@ -581,6 +601,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
         for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
           unexplained.push_back(names.at(image));
         }
+        for (const int image : summary.loose_parts.images) loose.push_back(names.at(image));
         // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
         // independent measurement to stand out from: its own errors (a translation-averaging
         // drift at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
@@ -633,6 +654,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteJson(kUnrefinedImagesJson, unrefined);
     writer.WriteJson(kUnexplainedImagesJson, unexplained);
     writer.WriteJson(kDoubtedImagesJson, doubted);
+    writer.WriteJson(kLooseImagesJson, loose);
     writer.Commit();
     return result;
   }

@@ -33,6 +33,11 @@ inline constexpr const char* kUnexplainedImagesJson = "unexplained_images";
 // and fit their matches worse (refine/frame_doubt.h: wrong intrinsics, a frame the solve could
 // not place). Written by refine, read by export.
 inline constexpr const char* kDoubtedImagesJson = "doubted_images";
+// JSON document beside a refined pose set: the names of the images whose placement the matches do
+// not hold (refine/loose_parts.h: parts hanging on a pair or two, or whose pairs the wrong-pair
+// removal took; and, after a prior repaired as coarse, the smaller components of the match
+// graph). Written by refine, read by export.
+inline constexpr const char* kLooseImagesJson = "loose_images";
 // JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";

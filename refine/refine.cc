@@ -464,6 +464,23 @@ double FinishAnnealScale(const RefineOptions& options, double basin_median_px) {
   return options.finish_noise_multiple > 0 && target < options.loss_scale_px2 ? target : 0.0;
 }
 
+// refine/loose_parts.h's verdict on the input's match graph, less the pairs the removal took.
+LoosePartsVerdict CheckLooseParts(const RefineInput& input, const PairRemovalSummary& removal) {
+  const std::set<std::pair<int, int>> removed = PairKeys(removal.removed);
+  std::vector<GraphPair> graph;
+  for (const PairMatchIndices& pair : input.pairs) {
+    if (pair.matches.rows() == 0) continue;
+    graph.push_back({pair.image1, pair.image2, static_cast<int>(pair.matches.rows()),
+                     removed.count({pair.image1, pair.image2}) > 0});
+  }
+  LoosePartsVerdict verdict;
+  verdict.cuts = FindLooseCuts(static_cast<int>(input.prior_world_from_cam.size()), graph);
+  std::set<int> images;
+  for (const LooseCut& cut : verdict.cuts) images.insert(cut.images.begin(), cut.images.end());
+  verdict.images.assign(images.begin(), images.end());
+  return verdict;
+}
+
 // The basin-first solve (RefineOptions::basin_first): basin pass, wrong-pair removal with basin
 // solves again (when enabled), orientation-prior probe, finish. When pairs are removed, *pruned
 // holds the input without them, which the later passes and the posterior checks use.
@@ -529,35 +546,6 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       PassSettings again = basin;
       again.name = "basin_round" + std::to_string(removal.rounds + 1);
       summary->passes.push_back(RunPass(*active, options, again, prior, state));
-    }
-  }
-  if (!removal.removed.empty() || !removal.kept.empty()) {
-    std::vector<int> remaining(input.prior_world_from_cam.size(), 0);
-    std::vector<bool> lost(input.prior_world_from_cam.size(), false);
-    const std::vector<std::pair<int, int>> active_edges = MatchedEdges(*active);
-    for (const auto& [image1, image2] : active_edges) {
-      ++remaining[image1];
-      ++remaining[image2];
-    }
-    for (const PairResidual& pair : removal.removed) lost[pair.image1] = lost[pair.image2] = true;
-    // A kept pair bridges two parts of the graph: the smaller part's placement rests on it.
-    std::vector<bool> doubtful(lost.size(), false);
-    for (const PairResidual& kept : removal.kept) {
-      std::vector<std::pair<int, int>> edges = active_edges;
-      edges.erase(std::remove(edges.begin(), edges.end(), std::make_pair(kept.image1, kept.image2)),
-                  edges.end());
-      const std::vector<int> labels = ConnectedComponents(static_cast<int>(lost.size()), edges);
-      const int side1 = labels[kept.image1];
-      const int side2 = labels[kept.image2];
-      const auto size1 = std::count(labels.begin(), labels.end(), side1);
-      const auto size2 = std::count(labels.begin(), labels.end(), side2);
-      const int smaller = size1 < size2 || (size1 == size2 && side1 > side2) ? side1 : side2;
-      for (size_t i = 0; i < labels.size(); ++i) doubtful[i] = doubtful[i] || labels[i] == smaller;
-    }
-    for (size_t i = 0; i < lost.size(); ++i) {
-      if (doubtful[i] || (lost[i] && remaining[i] <= 1)) {
-        removal.doubtful_images.push_back(static_cast<int>(i));
-      }
     }
   }
   const PassState basin_state = *state;
@@ -759,11 +747,10 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         options.inconsistent_pair_median_multiple, options.max_inconsistent_pair_fraction);
     if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
   }
-  // After the removal, a pose resting on one pair nothing else checks looks consistent whether
-  // that pair is right or not (the pose simply follows it); it disagreed with the solution once.
-  if (!summary.pair_removal.doubtful_images.empty()) {
-    summary.guardrails_fired.push_back("doubtful_images");
-  }
+  // A part resting on a pair or two nothing else checks looks consistent whether they are right or
+  // not (its poses simply follow them), as does one whose disagreeing pairs the removal took.
+  summary.loose_parts = CheckLooseParts(input, summary.pair_removal);
+  if (!summary.loose_parts.images.empty()) summary.guardrails_fired.push_back("loose_parts");
 
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);
@@ -817,11 +804,24 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                         : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
                                       removal.kept.size())));
   }
-  if (!removal.doubtful_images.empty()) {
+  for (const LooseCut& cut : summary.loose_parts.cuts) {
+    // A part inside a larger loose one is in the summary, not in the log.
+    const auto holds = [&](const LooseCut& other) {
+      return other.images.size() > cut.images.size() &&
+             std::includes(other.images.begin(), other.images.end(), cut.images.begin(),
+                           cut.images.end());
+    };
+    const auto& cuts = summary.loose_parts.cuts;
+    if (std::any_of(cuts.begin(), cuts.end(), holds)) continue;
     spdlog::warn(fmt::format(
-        "refine: guardrail fired (doubtful_images): after removing inconsistent pairs, the poses "
-        "of images {} rest on one pair that nothing else checks",
-        fmt::join(Labels(input, removal.doubtful_images), ", ")));
+        "refine: guardrail fired (loose_parts): {} image(s) held to the rest by {} pair(s) of "
+        "{} matches{}; the matches do not hold their placement: {}",
+        cut.images.size(), cut.pairs_across - cut.pairs_removed,
+        cut.matches_across - cut.matches_removed,
+        cut.pairs_removed == 0 ? std::string()
+                               : fmt::format(" (the pair removal took {} of {} pairs across)",
+                                             cut.pairs_removed, cut.pairs_across),
+        fmt::join(Labels(input, cut.images), ", ")));
   }
   spdlog::info(fmt::format("refine: decision: {}", summary.decision));
   if (pairs.fired) {
@@ -867,7 +867,8 @@ nlohmann::json RefineSummary::ToJson() const {
             {"solver_failed", solver_failed},
             {"trust_region", trust_region},
             {"wander", wander},
-            {"inconsistent_pairs", inconsistent_pairs}}}};
+            {"inconsistent_pairs", inconsistent_pairs},
+            {"loose_parts", loose_parts}}}};
 }
 
 }  // namespace raytime

@@ -18,6 +18,7 @@
 #include "core/camera.h"
 #include "core/geometry.h"
 #include "refine/gauge_polish.h"
+#include "refine/loose_parts.h"
 #include "refine/refine_options.h"
 
 namespace raytime {
@@ -254,17 +255,21 @@ struct PairRemovalSummary {
   // Inconsistent pairs left in because removing them would split the match graph, with their
   // measure when they were kept.
   std::vector<PairResidual> kept;
-  // Images whose pose the removal leaves resting on evidence nothing else checks: the images of
-  // the smaller part of the graph a kept pair alone connects, and an image that lost pairs and is
-  // left with at most one (its pairs disagreed: the one left may be the wrong one). The check
-  // "doubtful_images" fires (RefineSummary::guardrails_fired, flag only). Sorted.
-  std::vector<int> doubtful_images;
   // "consistent": no pair above the threshold at the last basin solution; "stable": exactly the
   // removed pairs are; "max_rounds": the bound was reached with another set above it.
   std::string stop_reason;
 };
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairRemovalSummary, enabled, rounds, removed, kept,
-                                   doubtful_images, stop_reason)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairRemovalSummary, enabled, rounds, removed, kept, stop_reason)
+
+// Parts of the match graph the matches do not hold (refine/loose_parts.h): held by one pair, by
+// two with few matches, or by fewer pairs than the wrong-pair removal took across. The check
+// "loose_parts" fires when there is one (flag only; the refine stage names the images and the
+// export leaves them out).
+struct LoosePartsVerdict {
+  std::vector<LooseCut> cuts;
+  std::vector<int> images;  // the cuts' sides together, ascending
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(LoosePartsVerdict, cuts, images)
 
 // How the images' cameras became the solve's intrinsics blocks (refine/camera_blocks.h).
 struct CameraBlocksSummary {
@@ -303,8 +308,9 @@ struct RefineSummary {
   TrustRegionVerdict trust_region;
   WanderVerdict wander;
   InconsistentPairsVerdict inconsistent_pairs;
+  LoosePartsVerdict loose_parts;
   // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs",
-  // "doubtful_images" (flag only), in this order.
+  // "loose_parts" (flag only), in this order.
   std::vector<std::string> guardrails_fired;
   bool returned_prior = false;
   // What was returned, one word: "accepted" (no check fired), "re_solved" (accepted after

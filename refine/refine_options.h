@@ -168,7 +168,7 @@ struct RefineOptions {
   // solved again from the prior without the inconsistent ones, until the solution leaves exactly
   // those it was solved without above the threshold, at most this many times; the probe and the
   // finish then use the remaining pairs. A removal that would split the match graph is not made
-  // (that pair stays, and the images it holds are reported as doubtful). The 4 px threshold
+  // (that pair stays; the images it alone holds fire loose_parts, refine/loose_parts.h). The 4 px threshold
   // separates castle-P19's 44 wrong pairs from its correct ones at the basin solution from an
   // exact and an 8° prior alike.
   int max_pair_removal_rounds = 0;

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <set>
 #include <string>
 #include <utility>
@@ -16,6 +17,7 @@
 #include "evaluate/pose_errors.h"
 #include "refine/cross_projection_cost.h"
 #include "refine/guardrails.h"
+#include "refine/loose_parts.h"
 #include "refine/pair_consistency.h"
 #include "refine/problem_layout.h"
 #include "refine/refine.h"
@@ -655,7 +657,7 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
   EXPECT_TRUE(summary.guardrails_fired.empty());
   EXPECT_EQ(summary.decision, "re_solved");
   EXPECT_EQ(summary.ToJson()["pair_removal"]["removed"].size(), 6u);
-  EXPECT_TRUE(removal.doubtful_images.empty()) << "every camera keeps two or more pairs";
+  EXPECT_TRUE(summary.loose_parts.images.empty()) << "every camera keeps two or more pairs";
   const double error = MeanRotationErrorDeg(output.world_from_cam, scene.ground_truth);
   EXPECT_LT(error, 0.1);
 
@@ -669,8 +671,8 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
 
 // A camera whose only two pairs are both wrong, each to another copy, so they disagree: the
 // removal takes out the one the basin solution leaves off, the camera then follows the other, which
-// looks consistent but may be as wrong; the camera is listed as doubtful and the check fires.
-TEST(RefineGuardrailTest, BasinFirstFlagsACameraLeftOnOneUncheckedPair) {
+// looks consistent but may be as wrong; the camera is named a loose part and the check fires.
+TEST(RefineGuardrailTest, BasinFirstNamesACameraLeftOnOneUncheckedPair) {
   SyntheticScene scene = MakeSyntheticScene(Scene());
   const int last = static_cast<int>(scene.ground_truth.size()) - 1;
   std::vector<PairMatchIndices> pairs;
@@ -694,12 +696,94 @@ TEST(RefineGuardrailTest, BasinFirstFlagsACameraLeftOnOneUncheckedPair) {
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   ASSERT_EQ(summary.pair_removal.removed.size(), 1u);
   EXPECT_EQ(summary.pair_removal.removed[0].image2, last);
-  EXPECT_EQ(summary.pair_removal.doubtful_images, std::vector<int>{last});
+  EXPECT_EQ(summary.loose_parts.images, std::vector<int>{last});
+  ASSERT_EQ(summary.loose_parts.cuts.size(), 1u);
+  EXPECT_EQ(summary.loose_parts.cuts[0].pairs_across, 2);
+  EXPECT_EQ(summary.loose_parts.cuts[0].pairs_removed, 1);
   EXPECT_FALSE(summary.inconsistent_pairs.fired) << "the pose follows the pair that is left";
-  EXPECT_EQ(summary.guardrails_fired, std::vector<std::string>{"doubtful_images"});
+  EXPECT_EQ(summary.guardrails_fired, std::vector<std::string>{"loose_parts"});
   EXPECT_EQ(summary.decision, "flagged");
   EXPECT_FALSE(summary.returned_prior);
-  EXPECT_EQ(summary.ToJson()["pair_removal"]["doubtful_images"][0], last);
+  EXPECT_EQ(summary.ToJson()["guardrails"]["loose_parts"]["images"][0], last);
+}
+
+// A corridor of 30 frames, each paired with the next three (100 matches a pair). Without removal,
+// a part held by one pair, or two with few matches, is loose. The removal takes pairs in three
+// ways: five of the six that hold the first ten frames to the rest (a part cut
+// nearly loose), two of one frame's six (wrong pairs at one frame: its four others hold it), and
+// five far-apart pairs spread along the corridor (each cut keeps most of its pairs).
+TEST(GuardrailsTest, LooseCutsNameAPartHeldByFewPairsOrMostOfWhosePairsWereRemoved) {
+  constexpr int kFrames = 30;
+  const auto corridor = [] {
+    std::vector<GraphPair> pairs;
+    for (int i = 0; i < kFrames; ++i) {
+      for (int j = i + 1; j <= std::min(i + 3, kFrames - 1); ++j) pairs.push_back({i, j, 100});
+    }
+    return pairs;
+  };
+  const auto remove = [](std::vector<GraphPair>* pairs, const std::set<std::pair<int, int>>& keys) {
+    for (GraphPair& pair : *pairs) pair.removed = keys.count({pair.image1, pair.image2}) > 0;
+  };
+
+  std::vector<GraphPair> pairs = corridor();
+  remove(&pairs, {{7, 10}, {8, 10}, {8, 11}, {9, 11}, {9, 12}});  // (9, 10) is left
+  std::vector<LooseCut> cuts = FindLooseCuts(kFrames, pairs);
+  ASSERT_EQ(cuts.size(), 1u);
+  std::vector<int> first_ten(10);
+  std::iota(first_ten.begin(), first_ten.end(), 0);
+  EXPECT_EQ(cuts[0].images, first_ten);
+  EXPECT_EQ(cuts[0].pairs_across, 6);
+  EXPECT_EQ(cuts[0].pairs_removed, 5);
+  EXPECT_EQ(cuts[0].matches_across, 600);
+  EXPECT_EQ(cuts[0].matches_removed, 500);
+
+  // Three of six removed is not most of them.
+  remove(&pairs, {{8, 10}, {8, 11}, {9, 11}});
+  EXPECT_TRUE(FindLooseCuts(kFrames, pairs).empty());
+  // Most by pairs but not by matches: the pair left holds more than the three removed.
+  pairs = corridor();
+  remove(&pairs, {{7, 10}, {8, 10}, {8, 11}, {9, 11}});
+  for (GraphPair& pair : pairs) {
+    if (!pair.removed && pair.image1 <= 9 && pair.image2 >= 10) pair.num_matches = 450;
+  }
+  EXPECT_TRUE(FindLooseCuts(kFrames, pairs).empty());
+
+  pairs = corridor();
+  remove(&pairs, {{14, 15}, {14, 16}});
+  EXPECT_TRUE(FindLooseCuts(kFrames, pairs).empty()) << "frame 14 keeps four pairs";
+  pairs = corridor();
+  remove(&pairs, {{1, 4}, {6, 9}, {11, 14}, {17, 20}, {23, 26}});
+  EXPECT_TRUE(FindLooseCuts(kFrames, pairs).empty()) << "every cut keeps most of its pairs";
+
+  // No removal: the first ten frames held by one pair, then by two pairs of 40 matches each, then
+  // by two of 100 (enough).
+  const auto held_by = [&](int matches, const std::set<std::pair<int, int>>& across) {
+    std::vector<GraphPair> held;
+    for (GraphPair pair : corridor()) {
+      const bool crosses = pair.image1 <= 9 && pair.image2 >= 10;
+      if (crosses && !across.count({pair.image1, pair.image2})) continue;
+      if (crosses) pair.num_matches = matches;
+      held.push_back(pair);
+    }
+    return FindLooseCuts(kFrames, held);
+  };
+  cuts = held_by(100, {{9, 10}});
+  ASSERT_EQ(cuts.size(), 1u);
+  EXPECT_EQ(cuts[0].images, first_ten);
+  EXPECT_EQ(cuts[0].pairs_removed, 0);
+  cuts = held_by(40, {{9, 10}, {9, 11}});
+  ASSERT_EQ(cuts.size(), 1u);
+  EXPECT_EQ(cuts[0].images, first_ten);
+  EXPECT_EQ(cuts[0].matches_across, 80);
+  EXPECT_TRUE(held_by(50, {{9, 10}, {9, 11}}).empty());
+
+  // One frame that lost three of its four pairs (an end frame): named alone.
+  pairs = corridor();
+  remove(&pairs, {{26, 29}, {27, 29}, {28, 29}});
+  pairs.push_back({5, 29, 100});
+  cuts = FindLooseCuts(kFrames, pairs);
+  ASSERT_EQ(cuts.size(), 1u);
+  EXPECT_EQ(cuts[0].images, std::vector<int>{29});
 }
 
 // Ray times stuck in the arctan's flat tail (from far-off priors) make the cross-projection

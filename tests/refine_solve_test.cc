@@ -659,7 +659,6 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "pair_removal.rounds",
       "pair_removal.removed",
       "pair_removal.kept",
-      "pair_removal.doubtful_images",
       "pair_removal.stop_reason",
       "decision",
       "guardrails",
@@ -695,6 +694,9 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "guardrails.inconsistent_pairs.pairs[].median_px",
       "guardrails.inconsistent_pairs.pairs[].num_matches",
       "guardrails.inconsistent_pairs.images_mostly_inconsistent",
+      "guardrails.loose_parts",
+      "guardrails.loose_parts.cuts",
+      "guardrails.loose_parts.images",
   };
   EXPECT_EQ(keys, expected);
   // Values come from the fields of the same name.

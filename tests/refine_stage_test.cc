@@ -472,6 +472,74 @@ TEST(RefineStageTest, AnImageMostOfWhosePairsAreUnexplainedIsNamedAndLeftOutOfTh
   EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
 }
 
+// Issue 30 item 11: a frame held to the others by one pair is a part the matches do not hold (no
+// second pair checks it, nothing fixes its distance): loose_parts names it, the export leaves it
+// out (loose_not_exported) unless asked to keep it.
+TEST(RefineStageTest, AFrameHeldByOnePairIsNamedAndLeftOutOfTheExport) {
+  TempDir dir("refine_stage");
+  std::vector<CameraIntrinsics> cameras;
+  SceneInputs scene = MakePerImageScene(&cameras);
+  scene.matches.erase(
+      std::remove_if(scene.matches.begin(), scene.matches.end(),
+                     [](const PairMatches& pair) { return pair.image2 == 5 && pair.image1 != 4; }),
+      scene.matches.end());
+  PoseSet refined;
+  const nlohmann::json summary = RunRefine(scene, dir, &refined);
+  const nlohmann::json* loose = FindWarning(summary, "loose_parts");
+  ASSERT_NE(loose, nullptr) << summary["warnings"].dump();
+  EXPECT_EQ((*loose)["images"], nlohmann::json::array({"0005.jpg"}));
+  ASSERT_EQ((*loose)["details"]["cuts"].size(), 1u);
+  EXPECT_EQ((*loose)["details"]["cuts"][0]["pairs_across"], 1);
+  EXPECT_EQ((*loose)["details"]["cuts"][0]["images"], nlohmann::json::array({"0005.jpg"}));
+  EXPECT_EQ(summary["guardrails"]["fired"], nlohmann::json::array({"loose_parts"}));
+
+  const nlohmann::json exported = RunExport(dir);
+  const nlohmann::json* left_out = FindWarning(exported, "loose_not_exported");
+  ASSERT_NE(left_out, nullptr) << exported.dump();
+  EXPECT_EQ((*left_out)["images"], nlohmann::json::array({"0005.jpg"}));
+  EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 5u);
+  EXPECT_EQ(ReadJsonFile(dir / "refined_transforms.json")["frames"].size(), 5u);
+  RunExport(dir, "{poses: [refined], formats: [colmap_text], leave_out_doubted_images: false}");
+  EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
+
+  // With two pairs (of ~200 matches each) the frame is held.
+  TempDir held_dir("refine_stage");
+  const SceneInputs held = MakePerImageScene(&cameras);
+  const nlohmann::json held_summary = RunRefine(held, held_dir, &refined);
+  EXPECT_EQ(FindWarning(held_summary, "loose_parts"), nullptr) << held_summary["warnings"].dump();
+}
+
+// The smaller components of a match graph in pieces are placed by the prior: by a phone's, they
+// are exported (named in disconnected_graph); by one the prior stage repaired from the matches as
+// coarse (or the bootstrap's), nothing places them and they are left out.
+TEST(RefineStageTest, ComponentsPlacedByACoarsePriorAreLeftOutOfTheExport) {
+  const SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/false);
+  const std::vector<std::string> smaller{"0005.jpg", "0006.jpg", "0007.jpg"};
+  for (const bool repaired : {false, true}) {
+    SCOPED_TRACE(repaired ? "repaired prior" : "given prior");
+    TempDir dir("refine_stage");
+    PoseSet refined;
+    const nlohmann::json summary =
+        repaired ? RunRefine(scene, dir, &refined,
+                             "{preset: plain, num_threads: 1, trust_region: false}",
+                             Provenance{"prior", {{"source", "bootstrap"}}, "", ""})
+                 : RunRefine(scene, dir, &refined);
+    const nlohmann::json* warning = FindWarning(summary, "disconnected_graph");
+    ASSERT_NE(warning, nullptr) << summary["warnings"].dump();
+    EXPECT_EQ((*warning)["images"], nlohmann::json(smaller));
+    const nlohmann::json exported = RunExport(dir);
+    const nlohmann::json* left_out = FindWarning(exported, "loose_not_exported");
+    if (repaired) {
+      ASSERT_NE(left_out, nullptr) << exported.dump();
+      EXPECT_EQ((*left_out)["images"], nlohmann::json(smaller));
+      EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 5u);
+    } else {
+      EXPECT_EQ(left_out, nullptr) << exported.dump();
+      EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 8u);
+    }
+  }
+}
+
 // Format 3dgs of the same run, with the prior beside the refined set: the five images a guardrail
 // left unrefined are in no 3dgs export (the refined set lacks them, not_in_every_pose_set), so both
 // folders hold the same three images and split, and the points come from the refined solve's ray
@@ -527,7 +595,8 @@ TEST(RefineStageTest, ExportOfARefinedSetWithNothingRefinedFails) {
     RunExport(dir);
     FAIL() << "expected an InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' is left to export"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("no pose of 'refined' is left to export"),
+              std::string::npos)
         << e.what();
   }
   EXPECT_FALSE(std::filesystem::exists(dir / "refined"));
