@@ -26,6 +26,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <nlohmann/json.hpp>
@@ -139,6 +140,22 @@ void ReadYamlField(const YAML::Node& node, T& field, const std::string& path,
     ThrowInput(
         path, YamlLine(node),
         "option '" + key + "' must be " + TypeName<T>() + ", got '" + YAML::Dump(node) + "'");
+  }
+  // yaml-cpp reads .nan and .inf as numbers; no option means either (a NaN fails every rule
+  // quietly, and JSON would report it as null).
+  if constexpr (std::is_same_v<T, double> || std::is_same_v<T, std::vector<double>>) {
+    bool finite = true;
+    if constexpr (std::is_same_v<T, double>) {
+      finite = std::isfinite(field);
+    } else {
+      for (const double element : field) finite = finite && std::isfinite(element);
+    }
+    if (!finite) {
+      ThrowInput(path, YamlLine(node),
+                 "option '" + key + "' must be " +
+                     (IsVector<T>::value ? "a list of finite numbers" : "a finite number") +
+                     ", got '" + YAML::Dump(node) + "'");
+    }
   }
   if constexpr (std::is_same_v<T, std::string>) {
     RequireUtf8(field, path, YamlLine(node), "option '" + key + "'");

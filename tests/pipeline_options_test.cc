@@ -71,6 +71,21 @@ TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
       << message;
   EXPECT_NE(message.find("degrees"), std::string::npos) << message;
   EXPECT_EQ(message.find(spec.path), std::string::npos) << message;
+  // YAML's .nan and .inf are numbers to yaml-cpp: refused as such, not reported as "got null".
+  for (const char* value : {".nan", ".inf", "-.inf"}) {
+    const std::string refused =
+        ErrorOf([&] { ApplyOverride(&spec, std::string("prior.level_deg=") + value); });
+    EXPECT_NE(refused.find("option 'level_deg' must be a finite number, got '" +
+                           std::string(value) + "'"),
+              std::string::npos)
+        << refused;
+    EXPECT_EQ(refused.find("null"), std::string::npos) << refused;
+  }
+  const std::string in_file = WritePipeline(dir, "  - refine: {gnc_scales: [1e4, .nan]}\n");
+  const std::string list_message = ErrorOf([&] { LoadPipeline(in_file); });
+  EXPECT_NE(list_message.find(in_file + ":4:"), std::string::npos) << list_message;
+  EXPECT_NE(list_message.find("must be a list of finite numbers"), std::string::npos)
+      << list_message;
   // Relations wait until every override is in place: prior.path may come after prior.source.
   ApplyOverride(&spec, "prior.source=file");
   EXPECT_NE(ErrorOf([&] { ValidatePipeline(spec); }).find("prior.path is not set"),
