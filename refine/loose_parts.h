@@ -20,7 +20,8 @@
 
 namespace raytime {
 
-// One image pair of the match graph: its images, its used matches and whether the removal took it.
+// One image pair of the match graph: its images, its used matches and whether the removal took it
+// (and the returned solution leaves it unexplained: refine.cc CheckLooseParts).
 struct GraphPair {
   int image1 = 0;
   int image2 = 0;
@@ -32,7 +33,7 @@ struct GraphPair {
 struct LooseCut {
   std::vector<int> images;  // the smaller side (fewer images; ties: the side without image 0)
   int pairs_across = 0;     // pairs across the cut before the removal
-  int pairs_removed = 0;    // of them, removed
+  int pairs_removed = 0;    // of them, removed (and unexplained at the returned solution)
   int matches_across = 0;   // their used matches
   int matches_removed = 0;
 };
