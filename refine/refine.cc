@@ -208,7 +208,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   }
 
   const bool self_calibration = pass.self_calibration;
-  pass.solver = options.solver == "auto" && !self_calibration && options.use_evaluation_cache
+  pass.solver = options.solver == "ray_time_lm" || (options.solver == "auto" && !self_calibration)
                     ? "ray_time_lm"
                     : "ceres";
   std::vector<double> solved_ray_times;

@@ -73,11 +73,13 @@ struct RefineOptions {
   // every residual recomputes its chain with automatic differentiation (same values and
   // Jacobians, slower).
   bool use_evaluation_cache = true;
-  // The solver of each pass (§3.4, §3.7): "auto" = the ray-time Levenberg–Marquardt solver
+  // The solver of each pass (§3.4, §3.7): "ray_time_lm" = the ray-time Levenberg–Marquardt solver
   // (refine/ray_time_lm_solver.h: the ray times eliminated in closed form, no Ceres, any thread
-  // count deterministic) when the pass holds every intrinsic and use_evaluation_cache is on, Ceres
-  // otherwise; "ceres" = Ceres' SPARSE_SCHUR for every pass (the paper's mapping). Both minimize
-  // the same objective with the same step rule; their paths differ in the last digits.
+  // count deterministic), which holds every intrinsic; "ceres" = Ceres' SPARSE_SCHUR for every
+  // pass (the paper's mapping); "auto" = the ray-time LM for the passes that hold every intrinsic,
+  // Ceres for those that self-calibrate. Both minimize the same objective with the same step
+  // rule; their paths differ in the last digits. The only switch: no other option changes it (a
+  // combination that cannot run is refused, CheckRelations).
   std::string solver = "auto";
   // Threads for the cache and the ray-time LM solver (and for Ceres when not deterministic);
   // 0 = hardware concurrency.
@@ -168,9 +170,9 @@ struct RefineOptions {
   // solved again from the prior without the inconsistent ones, until the solution leaves exactly
   // those it was solved without above the threshold, at most this many times; the probe and the
   // finish then use the remaining pairs. A removal that would split the match graph is not made
-  // (that pair stays; the images it alone holds fire loose_parts, refine/loose_parts.h). The 4 px threshold
-  // separates castle-P19's 44 wrong pairs from its correct ones at the basin solution from an
-  // exact and an 8° prior alike.
+  // (that pair stays; the images it alone holds fire loose_parts, refine/loose_parts.h). The 4 px
+  // threshold separates castle-P19's 44 wrong pairs from its correct ones at the basin solution
+  // from an exact and an 8° prior alike.
   int max_pair_removal_rounds = 0;
   // Basin-first finish anneal (issue 12, beyond the paper's fixed nominal scale): after the
   // nominal-scale finish, one more pass (`finish_anneal`; the finish's λR, held towards the
@@ -236,9 +238,9 @@ struct RefineOptions {
       "Shared evaluation cache: undistortion and ray points once per observation, once per solve "
       "when no intrinsic is refined (§3.7); false = automatic differentiation of every residual");
     v("solver", solver,
-      "Solver per pass: the ray-time LM (closed-form ray-time elimination) when no intrinsic is "
-      "refined, else Ceres (auto); or Ceres always",
-      OneOf({"auto", "ceres"}));
+      "Solver per pass: the ray-time LM (closed-form ray-time elimination, intrinsics held), "
+      "Ceres, or auto (the ray-time LM where no intrinsic is refined, else Ceres)",
+      OneOf({"auto", "ceres", "ray_time_lm"}));
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
     v("deterministic", deterministic,
       "Bit-identical results whatever the thread count (Ceres on one thread; the ray-time LM "
@@ -318,6 +320,16 @@ struct RefineOptions {
             "finish_noise_multiple needs basin_first (the finish anneals from the basin solve)");
     require(max_pair_removal_rounds == 0 || basin_first,
             "max_pair_removal_rounds needs basin_first (the pairs are judged at the basin solve)");
+    require(solver != "ray_time_lm" || !SelfCalibrates(),
+            "solver 'ray_time_lm' holds every intrinsic; self-calibration (refine_focal, "
+            "refine_principal_point, refine_distortion) needs solver 'ceres' or 'auto'");
+    // The cache is Ceres' residual evaluation; turning it off used to switch an auto solve to
+    // Ceres silently.
+    require(use_evaluation_cache || solver == "ceres" || (solver == "auto" && SelfCalibrates()),
+            "use_evaluation_cache: false changes how Ceres evaluates its residuals (automatic "
+            "differentiation of each), and solver '" +
+                solver +
+                "' runs no Ceres pass here: set solver: ceres to compare the two evaluations");
   }
 
   // True when any intrinsic is refined.

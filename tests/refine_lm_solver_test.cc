@@ -214,6 +214,44 @@ TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
   }
 }
 
+// `solver` is the only switch (issue 31): ray_time_lm runs the ray-time LM whatever else is set,
+// auto runs it where every intrinsic is held; turning the evaluation cache off no longer switches
+// an auto solve to Ceres: a combination that cannot mean what it says is refused.
+TEST(RayTimeLmSolverTest, SolverIsTheOnlySwitch) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 1.0, 0.1, 3);
+  RefineOptions options;
+  options.trust_region = false;
+  options.num_threads = 1;
+  RefineOutput output;
+  for (const std::string solver : {"auto", "ray_time_lm"}) {
+    options.solver = solver;
+    EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ray_time_lm") << solver;
+  }
+  options.solver = "ceres";
+  options.use_evaluation_cache = false;
+  EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ceres");
+  const auto refusal = [&](const RefineOptions& refused) {
+    try {
+      RefinePoses(scene.input, refused, &output);
+    } catch (const std::exception& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  for (const std::string solver : {"auto", "ray_time_lm"}) {
+    options.solver = solver;
+    EXPECT_NE(refusal(options).find("use_evaluation_cache: false"), std::string::npos) << solver;
+  }
+  options.use_evaluation_cache = true;
+  options.solver = "ray_time_lm";
+  options.refine_focal = true;
+  EXPECT_NE(refusal(options).find("solver 'ray_time_lm' holds every intrinsic"), std::string::npos);
+  options.solver = "auto";
+  EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ceres")
+      << "self-calibration runs on Ceres";
+}
+
 // An image no residual reaches is held at its start (its only term is the prior, whose minimum
 // is there), and the others still converge; a held image does not enter the reduced system.
 TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
