@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/camera.h"
+#include "tests/numeric_jacobian.h"
 
 namespace raytime {
 namespace {
@@ -126,26 +127,19 @@ Eigen::Matrix<double, 2, kNumDerivs> DistortJacobianJet(const Intrinsics& params
   return jac;
 }
 
-// Central differences with a step relative to each variable's size (focal ~1e3 px, distortion
-// ~1e-1), small enough for O(h^2) truncation and large enough that rounding stays ~1e-10.
+// The numeric Jacobian (tests/numeric_jacobian.h) in the intrinsics, then the distorted pixel.
 Eigen::Matrix<double, 2, kNumDerivs> UndistortJacobianNumeric(const Intrinsics& params,
                                                               const std::array<double, 2>& ud) {
-  Eigen::Matrix<double, 2, kNumDerivs> jac;
-  for (int k = 0; k < kNumDerivs; ++k) {
-    Intrinsics p_plus = params, p_minus = params;
-    std::array<double, 2> ud_plus = ud, ud_minus = ud;
-    double& plus = k < kNumIntrinsics ? p_plus[k] : ud_plus[k - kNumIntrinsics];
-    double& minus = k < kNumIntrinsics ? p_minus[k] : ud_minus[k - kNumIntrinsics];
-    const double h = 1e-5 * std::max(1.0, std::abs(plus));
-    plus += h;
-    minus -= h;
-    double u_plus[2], u_minus[2];
-    UndistortPixel(p_plus.data(), ud_plus.data(), u_plus);
-    UndistortPixel(p_minus.data(), ud_minus.data(), u_minus);
-    jac(0, k) = (u_plus[0] - u_minus[0]) / (2 * h);
-    jac(1, k) = (u_plus[1] - u_minus[1]) / (2 * h);
-  }
-  return jac;
+  Eigen::VectorXd x(kNumDerivs);
+  for (int k = 0; k < kNumIntrinsics; ++k) x(k) = params[k];
+  x(kNumIntrinsics) = ud[0];
+  x(kNumIntrinsics + 1) = ud[1];
+  const auto undistort = [](const Eigen::VectorXd& v) {
+    Eigen::Vector2d u;
+    UndistortPixel(v.data(), v.data() + kNumIntrinsics, u.data());
+    return u;
+  };
+  return NumericJacobian(undistort, x, 1e-5);
 }
 
 TEST(CameraTest, UndistortJetDerivativesMatchCentralDifferences) {
