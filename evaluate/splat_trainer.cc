@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/interrupt.h"
 #include "core/process.h"
+#include "core/timing.h"
 
 namespace fs = std::filesystem;
 
@@ -133,8 +134,7 @@ void RunCommand(const SplatTrainerOptions& options, const SplatJob& job, SplatRu
     std::lock_guard<std::mutex> lock(mutex);
     running = false;
   }
-  summary->seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  summary->seconds = SecondsSince(start);
   if (Interrupting()) AwaitInterruptExit();
   // Whatever the command left running in the background (a viewer, a server) ends with it: a
   // hook that returns must not leave a GPU busy.

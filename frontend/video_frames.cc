@@ -12,6 +12,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/timing.h"
 
 namespace fs = std::filesystem;
 
@@ -104,7 +105,7 @@ ImageSet ExtractVideoFrames(const VideoFramesOptions& options, const std::string
     }
     *frames = std::move(kept);
   }
-  local.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  local.seconds = SecondsSince(start);
   spdlog::info(fmt::format("video: kept {} of {} frames of {} in {}", local.num_frames_written,
                            local.num_frames_read, options.video, folder));
   if (summary) *summary = local;

@@ -11,6 +11,7 @@
 #include "core/error.h"
 #include "core/formats/colmap_database.h"
 #include "core/hdf5_store.h"
+#include "core/timing.h"
 #include "evaluate/classical_control.h"
 #include "pipelines/stages.h"
 
@@ -64,8 +65,7 @@ class ClassicalStage : public StageWithOptions<ClassicalStageOptions> {
     // (the mapper takes its cameras from there).
     WriteColmapDatabase(database, images, features, pairs,
                         options_.control.refine_intrinsics ? "OPENCV" : "");
-    const double export_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double export_s = SecondsSince(start);
     spdlog::info(fmt::format("classical: exported {} images and {} pairs to {} ({:.2f} s)",
                              images.images.size(), pairs.size(), database, export_s));
 

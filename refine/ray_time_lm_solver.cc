@@ -11,6 +11,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/timing.h"
+
 namespace raytime {
 namespace {
 
@@ -641,16 +643,13 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
                                    int stage, int num_stages) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  auto seconds_since = [](Clock::time_point t) {
-    return std::chrono::duration<double>(Clock::now() - t).count();
-  };
   const ArctanLoss loss{scale_px2, problem_.match_loss_weight};
   GncStageSummary summary;
   summary.loss_scale_px2 = scale_px2;
   auto timed_cost = [&](const State& state) {
     const auto t0 = Clock::now();
     const double cost = Cost(problem_, state, scale_px2, num_threads_, system_);
-    summary.residual_seconds += seconds_since(t0);
+    summary.residual_seconds += SecondsSince(t0);
     return cost;
   };
   double cost = timed_cost(state_);
@@ -666,7 +665,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
     auto t0 = Clock::now();
     BuildReducedSystem(loss, radius);
     ++summary.jacobian_evaluations;
-    summary.jacobian_seconds += seconds_since(t0);
+    summary.jacobian_seconds += SecondsSince(t0);
     // Ceres' gradient test: the max norm of the full gradient (cameras, and ray times projected
     // onto their bound) at or below kGradientTolerance is a stationary point.
     if (total_.gradient_max_norm <= kGradientTolerance) {
@@ -694,7 +693,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
       camera_step = factorization_.solve(rhs);
       model_decrease = BackSubstitute(loss, radius, camera_step, &ray_time_step);
     }
-    summary.linear_solver_seconds += seconds_since(t0);
+    summary.linear_solver_seconds += SecondsSince(t0);
     ++summary.iterations;
 
     bool accepted = false;
@@ -768,13 +767,13 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
     }
     if (Clock::now() - last_progress >= kProgressInterval) {
       last_progress = Clock::now();
-      spdlog::info(fmt::format(
-          "refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s", stage,
-          num_stages, scale_px2, summary.iterations, cost, seconds_since(start)));
+      spdlog::info(
+          fmt::format("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
+                      stage, num_stages, scale_px2, summary.iterations, cost, SecondsSince(start)));
     }
   }
   summary.final_cost = cost;
-  summary.seconds = seconds_since(start);
+  summary.seconds = SecondsSince(start);
   return summary;
 }
 
