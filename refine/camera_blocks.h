@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "core/camera.h"
-#include "refine/refine.h"
+#include "refine/refine_types.h"
 
 namespace raytime {
 

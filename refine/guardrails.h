@@ -5,7 +5,7 @@
 
 #include <vector>
 
-#include "refine/refine.h"
+#include "refine/refine_types.h"
 
 namespace raytime {
 

@@ -12,7 +12,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
-#include "refine/refine.h"
+#include "refine/refine_types.h"
 
 namespace raytime {
 

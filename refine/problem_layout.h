@@ -8,7 +8,7 @@
 #include <Eigen/Core>
 
 #include "refine/camera_blocks.h"
-#include "refine/refine.h"
+#include "refine/refine_types.h"
 
 namespace raytime {
 

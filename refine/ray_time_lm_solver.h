@@ -26,7 +26,7 @@
 
 #include "core/geometry.h"
 #include "refine/ray_geometry.h"
-#include "refine/refine.h"
+#include "refine/refine_types.h"
 
 namespace raytime {
 
