@@ -21,7 +21,7 @@
 namespace raytime {
 
 // One image pair of the match graph: its images, its used matches and whether the removal took it
-// (and the returned solution leaves it unexplained: refine.cc CheckLooseParts).
+// (and the returned solution leaves it unexplained: basin_first.h CheckLooseParts).
 struct GraphPair {
   int image1 = 0;
   int image2 = 0;

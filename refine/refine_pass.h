@@ -1,0 +1,62 @@
+// One pass of the refiner (issue 31: refine/ by job): layout → ray-time initialization →
+// problem → GNC on the ray-time LM or Ceres (RefineOptions::solver) → gauge polish, with the
+// state a later pass starts from and what the checks read of the last one. The recipes (one pass,
+// the staged room recipe, basin-first) chain passes: refine.cc, basin_first.h.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "core/geometry.h"
+#include "refine/camera_blocks.h"
+#include "refine/problem_layout.h"
+#include "refine/refine_options.h"
+#include "refine/refine_types.h"
+
+namespace raytime {
+
+// What differs between the passes of one run.
+struct PassSettings {
+  std::string name;
+  int max_matches_per_pair = 0;
+  double orientation_weight = 0.0;
+  std::vector<double> scales;
+  bool refine_focal = false;
+  bool refine_principal_point = false;
+  bool refine_distortion = false;
+  bool start_unsolved_at_closest_approach = false;  // StartRayTimesAtClosestApproach
+};
+
+// State carried from one pass to the next (the staged recipe's warm start), and the last pass's
+// layout (its used matches) for the inconsistent-pairs test.
+struct PassState {
+  std::vector<Rigid3> world_from_cam;
+  CameraBlocks cameras;  // the intrinsics blocks, at their current values
+  std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
+  ProblemLayout layout;
+};
+
+// Solves one pass from *state (poses, intrinsics blocks, solved ray times) with the poses' prior
+// terms towards `anchor`, and leaves its solution and layout in *state.
+RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
+                          const PassSettings& settings, const std::vector<Rigid3>& anchor,
+                          PassState* state);
+
+// The last pass's observations, their solved ray times and its used matches (RefineOutput).
+SolvedObservations SolvedObservationsOf(const PassState& state);
+
+// Per image pair with matches in `layout`, its median positive-ray epipolar distance at the given
+// poses and intrinsics blocks (PairResidualMedians' plain arrays from the layout; input order).
+std::vector<PairResidual> PairResidualsAt(const RefineInput& input, const ProblemLayout& layout,
+                                          const std::vector<Rigid3>& world_from_cam,
+                                          const CameraBlocks& cameras);
+
+// The same at the last pass's solved poses and intrinsics, on its used matches.
+std::vector<PairResidual> SolvedPairResiduals(const RefineInput& input, const PassState& state);
+
+// The blocks of the last pass's layout and the fewest observations one of them has.
+void CountBlocks(const PassState& state, CameraBlocksSummary* summary);
+
+}  // namespace raytime
