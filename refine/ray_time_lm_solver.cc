@@ -23,7 +23,7 @@ using Block6 = std::array<double, 36>;  // 6x6, row-major
 using Row6 = std::array<double, 6>;
 
 // Ceres' trust-region defaults (ceres::Solver::Options), so that an iteration limit or tolerance
-// set for gnc_solver.h means the same here.
+// set for ceres_gnc.h means the same here.
 constexpr double kInitialRadius = 1e4;
 constexpr double kMaxRadius = 1e16;
 constexpr double kMinRadius = 1e-32;
@@ -36,7 +36,6 @@ constexpr double kParameterTolerance = 1e-8;
 // summed into its own copy of the reduced system, and the copies are added in chunk order: the
 // sums, hence the solve, are bit-identical on any number of threads.
 constexpr int kNumChunks = 8;
-constexpr std::chrono::seconds kProgressInterval{15};
 
 Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   Eigen::Matrix3d m;
@@ -437,7 +436,7 @@ class Solver {
   }
 
   GncStageSummary SolveStage(double scale_px2, int max_iterations, double function_tolerance,
-                             int stage, int num_stages);
+                             GncProgress* progress);
 
   void Store(RayTimeLmProblem* problem) const {
     problem->world_from_cam = state_.world_from_cam;
@@ -640,7 +639,7 @@ double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
 }
 
 GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double function_tolerance,
-                                   int stage, int num_stages) {
+                                   GncProgress* progress) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   const ArctanLoss loss{scale_px2, problem_.match_loss_weight};
@@ -658,7 +657,6 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
   summary.message = "Maximum number of iterations reached.";
   double radius = kInitialRadius;
   double decrease_factor = 2.0;
-  auto last_progress = Clock::now();
   std::vector<double> ray_time_step;
   State candidate;
   while (summary.iterations < max_iterations) {
@@ -765,17 +763,29 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
         break;
       }
     }
-    if (Clock::now() - last_progress >= kProgressInterval) {
-      last_progress = Clock::now();
-      spdlog::info(
-          fmt::format("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
-                      stage, num_stages, scale_px2, summary.iterations, cost, SecondsSince(start)));
-    }
+    progress->Report(summary.iterations, cost);
   }
   summary.final_cost = cost;
   summary.seconds = SecondsSince(start);
   return summary;
 }
+
+// The ray-time LM as the GNC driver's back-end (gnc.h).
+class RayTimeLmStageBackend : public GncBackend {
+ public:
+  RayTimeLmStageBackend(RayTimeLmProblem* problem, int num_threads)
+      : solver_(problem, num_threads) {}
+  GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
+                             GncProgress* progress) override {
+    return solver_.SolveStage(scale_px2, settings.max_iterations, settings.function_tolerance,
+                              progress);
+  }
+  const char* Name() const override { return "ray-time LM"; }
+  void Store(RayTimeLmProblem* problem) const { solver_.Store(problem); }
+
+ private:
+  Solver solver_;
+};
 
 }  // namespace
 
@@ -823,23 +833,10 @@ void PosePriorJacobian(const Rigid3& world_from_cam, const Rigid3& prior_world_f
 }
 
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
-                                               const RayTimeLmSettings& settings) {
-  Solver solver(problem, settings.num_threads);
-  std::vector<GncStageSummary> stages;
-  const int num_stages = static_cast<int>(settings.scales.size());
-  for (int s = 0; s < num_stages; ++s) {
-    const double scale = settings.scales[s];
-    GncStageSummary stage = solver.SolveStage(scale, settings.max_iterations,
-                                              settings.function_tolerance, s + 1, num_stages);
-    spdlog::info(
-        fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
-                    "{:.2f} s ({}, ray-time LM)",
-                    s + 1, num_stages, scale, stage.iterations, stage.initial_cost,
-                    stage.final_cost, stage.seconds, stage.termination));
-    stages.push_back(stage);
-    if (stage.termination == "FAILURE") break;
-  }
-  solver.Store(problem);
+                                               const GncSettings& settings) {
+  RayTimeLmStageBackend backend(problem, settings.num_threads);
+  std::vector<GncStageSummary> stages = SolveGnc(&backend, settings);
+  backend.Store(problem);
   return stages;
 }
 

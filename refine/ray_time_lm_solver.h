@@ -17,7 +17,7 @@
 // with the pose priors of refine/pose_prior_cost.h. The step is Ceres' LM step (trust-region
 // radius μ, diagonal D = diag(JᵀJ) clamped to [1e-6, 1e32], the robust loss as Ceres' corrector
 // applies a loss with ρ'' < 0: J and r scaled by sqrt(w ρ')), so the iteration and tolerances mean
-// what they mean in gnc_solver.h; the path differs in the last digits (no Jacobi scaling, a
+// what they mean in ceres_gnc.h; the path differs in the last digits (no Jacobi scaling, a
 // rotation perturbation R ← Exp(φ)·R instead of Ceres' quaternion manifold).
 #pragma once
 
@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "core/geometry.h"
+#include "refine/gnc.h"
 #include "refine/ray_geometry.h"
 #include "refine/refine_types.h"
 
@@ -58,13 +59,6 @@ struct RayTimeLmProblem {
   double orientation_weight = 0.0;
 };
 
-struct RayTimeLmSettings {
-  std::vector<double> scales;  // arctan scales a, px², in solve order (gnc_solver.h)
-  int max_iterations = 100;    // per stage, accepted and rejected steps
-  double function_tolerance = 1e-6;
-  int num_threads = 1;  // any count gives the same bits
-};
-
 // The residual and its Jacobians in the local parameters: source pose (φ, δO) with
 // R_s ← Exp(φ)·R_s and O_s ← O_s + δO, the ray time, the target pose likewise. Plain arguments so
 // it tests against numeric differentiation.
@@ -87,9 +81,9 @@ void PosePriorJacobian(const Rigid3& world_from_cam, const Rigid3& prior_world_f
                        Eigen::Matrix<double, 6, 1>* residual,
                        Eigen::Matrix<double, 6, 6>* jacobian);
 
-// Solves every stage of the schedule in place; stops after a stage that fails (the reduced system
-// could not be factorized at any damping). Logs one line per stage and progress on long stages.
+// Solves every stage of the schedule in place (the GNC driver, gnc.h, with this solver as its
+// back-end); a stage fails when the reduced system could not be factorized at any damping.
 std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
-                                               const RayTimeLmSettings& settings);
+                                               const GncSettings& settings);
 
 }  // namespace raytime

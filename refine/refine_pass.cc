@@ -11,8 +11,8 @@
 
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "refine/ceres_gnc.h"
 #include "refine/gauge_polish.h"
-#include "refine/gnc_solver.h"
 #include "refine/pair_consistency.h"
 #include "refine/ray_geometry.h"
 #include "refine/ray_time_init.h"
@@ -187,25 +187,21 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
                   pass.ray_time_init.median_depth, pass.build_seconds, pass.solver));
 
   const auto solve_start = std::chrono::steady_clock::now();
+  GncSettings gnc;
+  gnc.scales = settings.scales;
+  gnc.max_iterations = options.max_iterations;
+  gnc.function_tolerance = options.function_tolerance;
   if (lm_problem) {
-    RayTimeLmSettings solver_settings;
-    solver_settings.scales = settings.scales;
-    solver_settings.max_iterations = options.max_iterations;
-    solver_settings.function_tolerance = options.function_tolerance;
-    solver_settings.num_threads = options.Threads();
-    pass.stages = SolveGncRayTimeLm(&*lm_problem, solver_settings);
+    gnc.num_threads = options.Threads();
+    pass.stages = SolveGncRayTimeLm(&*lm_problem, gnc);
     // The eliminated group is every ray time (§3.4), by construction.
     pass.elimination_group_size = pass.num_ray_times;
     state->world_from_cam = lm_problem->world_from_cam;
     solved_ray_times = std::move(lm_problem->ray_times);
     lm_problem.reset();
   } else {
-    GncSolverSettings solver_settings;
-    solver_settings.scales = settings.scales;
-    solver_settings.max_iterations = options.max_iterations;
-    solver_settings.function_tolerance = options.function_tolerance;
-    solver_settings.num_threads = options.deterministic ? 1 : options.Threads();
-    pass.stages = SolveGnc(&*ceres_problem, solver_settings, &pass.elimination_group_size);
+    gnc.num_threads = options.deterministic ? 1 : options.Threads();
+    pass.stages = SolveGncWithCeres(&*ceres_problem, gnc, &pass.elimination_group_size);
     state->world_from_cam = ceres_problem->WorldFromCam();
     state->cameras.cameras = ceres_problem->Intrinsics();
     solved_ray_times = ceres_problem->ray_times();

@@ -291,7 +291,7 @@ TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
   }
   ASSERT_GT(problem.residuals.size(), 100u);
   problem.match_loss_weight = 1.0 / problem.residuals.size();
-  RayTimeLmSettings settings;
+  GncSettings settings;
   settings.scales = {1e4, 1e3, 1e2};
   settings.function_tolerance = 1e-12;
   const std::vector<GncStageSummary> stages = SolveGncRayTimeLm(&problem, settings);

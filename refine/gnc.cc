@@ -1,0 +1,40 @@
+#include "refine/gnc.h"
+
+#include <spdlog/spdlog.h>
+
+#include "core/timing.h"
+
+namespace raytime {
+
+GncProgress::GncProgress(int stage, int num_stages, double scale_px2)
+    : stage_(stage), num_stages_(num_stages), scale_px2_(scale_px2) {}
+
+void GncProgress::Report(int iteration, double cost) {
+  constexpr std::chrono::seconds kProgressInterval{15};
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_ < kProgressInterval) return;
+  last_ = now;
+  spdlog::info(
+      fmt::format("refine: GNC stage {}/{} a = {:g} px²: iteration {}, cost {:.6g}, {:.0f} s",
+                  stage_, num_stages_, scale_px2_, iteration, cost, SecondsSince(start_)));
+}
+
+std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& settings) {
+  std::vector<GncStageSummary> stages;
+  const int num_stages = static_cast<int>(settings.scales.size());
+  for (int s = 0; s < num_stages; ++s) {
+    const double scale = settings.scales[s];
+    GncProgress progress(s + 1, num_stages, scale);
+    GncStageSummary stage = backend->SolveStage(scale, settings, &progress);
+    spdlog::info(
+        fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
+                    "{:.2f} s ({}, {})",
+                    s + 1, num_stages, scale, stage.iterations, stage.initial_cost,
+                    stage.final_cost, stage.seconds, stage.termination, backend->Name()));
+    stages.push_back(stage);
+    if (stage.termination == "FAILURE") break;
+  }
+  return stages;
+}
+
+}  // namespace raytime

@@ -1,0 +1,54 @@
+// Graduated non-convexity (paper §3.5), one driver for both solvers (issue 31): the arctan scale
+// is annealed over a list of stages on one problem, each stage warm-started from the previous
+// stage's parameters; matches, caches and sparsity are built once. A back-end solves one stage:
+// the ray-time Levenberg–Marquardt (ray_time_lm_solver.h) or Ceres (ceres_gnc.h).
+#pragma once
+
+#include <chrono>
+#include <vector>
+
+#include "refine/refine_types.h"
+
+namespace raytime {
+
+struct GncSettings {
+  std::vector<double> scales;  // arctan scales a, px², in solve order; the last is nominal
+  int max_iterations = 100;    // per stage, accepted and rejected steps
+  double function_tolerance = 1e-6;
+  // The back-end's threads: the ray-time LM gives the same bits on any count; Ceres is
+  // deterministic on 1 (RefineOptions::deterministic).
+  int num_threads = 1;
+};
+
+// A long solve (hundreds of cameras, millions of residuals: minutes per stage) says it is alive:
+// at most one log line every 15 s. It only reads the solve, so results do not depend on it.
+class GncProgress {
+ public:
+  GncProgress(int stage, int num_stages, double scale_px2);
+  // The stage's iteration count and the cost at its last accepted step.
+  void Report(int iteration, double cost);
+
+ private:
+  int stage_;
+  int num_stages_;
+  double scale_px2_;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_ = start_;
+};
+
+class GncBackend {
+ public:
+  virtual ~GncBackend() = default;
+  // Solves one stage at arctan scale `scale_px2` from the current parameters and leaves them at
+  // its solution; termination "FAILURE" ends the schedule.
+  virtual GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
+                                     GncProgress* progress) = 0;
+  // For the stage's log line ("ray-time LM", "Ceres").
+  virtual const char* Name() const = 0;
+};
+
+// Solves every stage of settings.scales in order with one log line per stage; stops after a stage
+// that fails.
+std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& settings);
+
+}  // namespace raytime
