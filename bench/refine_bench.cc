@@ -18,7 +18,7 @@
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
 #include "refine/refine.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 
 namespace raytime {
 namespace {

@@ -19,7 +19,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/geometry.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {

@@ -17,7 +17,7 @@
 
 #include "core/error.h"
 #include "core/formats/colmap_database.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

@@ -12,8 +12,8 @@
 
 #include "core/atomic_file.h"
 #include "core/formats/colmap_model.h"
+#include "testing/random_draws.h"
 #include "tests/colmap_command.h"
-#include "tests/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "core/geometry.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {

@@ -22,7 +22,7 @@
 #include "core/formats/tum.h"
 #include "core/geometry.h"
 #include "core/warnings.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

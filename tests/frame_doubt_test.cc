@@ -11,7 +11,7 @@
 #include "core/camera.h"
 #include "core/geometry.h"
 #include "refine/frame_doubt.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {

@@ -13,7 +13,7 @@
 
 #include "core/error.h"
 #include "core/version.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace fs = std::filesystem;
 

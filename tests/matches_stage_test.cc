@@ -13,7 +13,7 @@
 #include "core/hdf5_store.h"
 #include "pipelines/stage.h"
 #include "temp_dir.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {

@@ -14,7 +14,7 @@
 
 #include "core/error.h"
 #include "core/pair_selection.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {

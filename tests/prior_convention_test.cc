@@ -13,7 +13,7 @@
 
 #include "core/geometry.h"
 #include "refine/prior_convention.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {
@@ -149,7 +149,9 @@ TEST_P(PriorConventionTest, PriorsInAnotherConventionAreRefusedWithTheRepairThat
           << m.name << " at " << level << "°: " << nlohmann::json(verdict).dump();
       // From one spot, a repair and that repair followed by X -> X⁻¹·F read the same relative
       // rotations (the same prior in another world frame): either may be named, and either fits.
-      if (!pan) EXPECT_EQ(verdict.better_convention, m.repair) << m.name << " at " << level << "°";
+      if (!pan) {
+        EXPECT_EQ(verdict.better_convention, m.repair) << m.name << " at " << level << "°";
+      }
       const PriorConventionVerdict repaired = CheckPriorConvention(
           Converted(given, ParsePoseConvention(verdict.better_convention)), pairs);
       EXPECT_FALSE(repaired.refused) << m.name << " repaired: " << nlohmann::json(repaired).dump();

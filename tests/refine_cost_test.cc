@@ -18,8 +18,8 @@
 #include "refine/evaluation_cache.h"
 #include "refine/problem_layout.h"
 #include "refine/ray_time_problem.h"
+#include "testing/synthetic_scene.h"
 #include "tests/numeric_jacobian.h"
-#include "tests/refine_synthetic.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

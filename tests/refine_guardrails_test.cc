@@ -21,7 +21,7 @@
 #include "refine/pair_consistency.h"
 #include "refine/problem_layout.h"
 #include "refine/refine.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

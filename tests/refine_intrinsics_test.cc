@@ -15,7 +15,7 @@
 #include "core/error.h"
 #include "refine/camera_blocks.h"
 #include "refine/refine.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

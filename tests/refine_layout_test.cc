@@ -10,7 +10,7 @@
 #include "core/statistics.h"
 #include "refine/problem_layout.h"
 #include "refine/ray_time_init.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

@@ -11,9 +11,9 @@
 
 #include "refine/pose_prior_cost.h"
 #include "refine/refine.h"
+#include "testing/random_draws.h"
+#include "testing/synthetic_scene.h"
 #include "tests/numeric_jacobian.h"
-#include "tests/random_draws.h"
-#include "tests/refine_synthetic.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

@@ -13,7 +13,7 @@
 
 #include "refine/gauge_polish.h"
 #include "refine/refine.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {

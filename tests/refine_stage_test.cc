@@ -18,7 +18,7 @@
 #include "evaluate/pose_errors.h"
 #include "pipelines/stage.h"
 #include "temp_dir.h"
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 
 namespace raytime {
 namespace {

@@ -16,8 +16,8 @@
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
 #include "refine/problem_layout.h"
-#include "tests/random_draws.h"
-#include "tests/refine_synthetic.h"
+#include "testing/random_draws.h"
+#include "testing/synthetic_scene.h"
 
 namespace raytime {
 

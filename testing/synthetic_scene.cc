@@ -1,4 +1,4 @@
-#include "tests/refine_synthetic.h"
+#include "testing/synthetic_scene.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <random>
 
 #include "core/camera.h"
-#include "tests/random_draws.h"
+#include "testing/random_draws.h"
 
 namespace raytime {
 namespace {
