@@ -195,6 +195,7 @@ TEST(ColmapDatabaseReal, ImportAgreesWithSqlAndEpipolarGeometry) {
   ASSERT_EQ(db.pairs.size(), pairs_sql.size());
   ASSERT_EQ(db.pairs.size(), 10u);
   long total_matches = 0, total_inliers = 0;
+  std::vector<double> all_errors;
   for (const PairMatches& pair : db.pairs) {
     const std::string& n1 = db.images.images[pair.image1].name;
     const std::string& n2 = db.images.images[pair.image2].name;
@@ -213,8 +214,14 @@ TEST(ColmapDatabaseReal, ImportAgreesWithSqlAndEpipolarGeometry) {
       errors.push_back(
           Sampson(pair.geometry.F, Eigen::Vector2d(k1(0), k1(1)), Eigen::Vector2d(k2(0), k2(1))));
     }
-    EXPECT_LT(UpperMedian(errors, 0.0), 1.0) << n1 << " " << n2;
+    // Per pair below half COLMAP's 4 px inlier threshold: its RANSAC is seeded per thread from
+    // the clock, and one run in CI left 0005-0009 with a poorer F (upper median 1.04 px, usually
+    // 0.15-0.19 px). A wrong reading (transposed, column-major) is off by tens of pixels.
+    EXPECT_LT(UpperMedian(errors, 0.0), 2.0) << n1 << " " << n2;
+    all_errors.insert(all_errors.end(), errors.begin(), errors.end());
   }
+  // Over every pair's inliers the fit is sub-pixel (per pair 0.10-0.52 px in six runs).
+  EXPECT_LT(UpperMedian(all_errors, 0.0), 0.5);
   const auto totals = Query(f.database,
                             "SELECT (SELECT sum(rows) FROM matches), (SELECT sum(rows) FROM "
                             "two_view_geometries)");
