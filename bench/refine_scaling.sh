@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # How the refiner's all-match solve scales with the capture (issue 14; a benchmark, not a test):
-# synthetic corridor captures (bench/synthetic_capture.cc: 1,000 keypoints per frame, window 10,
+# synthetic corridor captures (testing/synthetic_capture.cc: 1,000 keypoints per frame, window 10,
 # 5 % wrong matches, 0.5 px noise, a 2° i.i.d. prior) of increasing length, each solved by
 # `raytime refine --preset basin --max_matches_per_pair 0` in its own process. Prints per size:
 # matches, residuals, ray times, iterations, solve seconds, seconds per iteration, peak memory of
@@ -18,7 +18,7 @@ build=${RAYTIME_BUILD:-build}
 out=${OUT:-work/refine_scaling}
 threads=${THREADS:-0}
 raytime=$build/cli/raytime
-generator=$build/bench/synthetic_capture
+generator=$build/testing/synthetic_capture
 for tool in "$raytime" "$generator"; do
   [[ -x $tool ]] || { echo "error: $tool not found; build it (scripts/build.sh)" >&2; exit 2; }
 done

@@ -1,4 +1,4 @@
-// The synthetic capture generator of the scaling benchmark (bench/synthetic_capture.cc, issue 14)
+// The synthetic capture generator of the scaling benchmark (testing/synthetic_capture.cc, issue 14)
 // end to end: its files are raytime's schema (the raytime binary refines them), its prior is the
 // ladder's perturbation of its ground truth, and the all-match solve on the ray-time LM solver
 // recovers the ground truth from it.
