@@ -378,6 +378,12 @@ TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
               summary["metrics"]["refined"]["none"]["mean_rotation_deg"].get<double>(), 1e-6);
   EXPECT_NEAR(errors["mean_centre_m"].get<double>(),
               summary["metrics"]["refined"]["none"]["mean_centre_m"].get<double>(), 1e-6);
+  // The flags are snake_case like the stages' (issue 31); the kebab-case spellings stay aliases.
+  result = RunRaytime("evaluate --est " + run_dir +
+                      "/refined --est_format colmap --gt data/sample/fountain-P11 "
+                      "--gt_format strecha --align none --success_deg 2 --json");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  EXPECT_EQ(json::parse(result.output)["mean_rotation_deg"], errors["mean_rotation_deg"]);
 }
 
 TEST_F(PipelineTest, StageAloneWritesOnlyItsSummaryOnStdout) {

@@ -1,0 +1,151 @@
+#include "pipelines/commands.h"
+
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+
+#include "core/atomic_file.h"
+#include "core/error.h"
+#include "core/formats/dataset.h"
+#include "core/hdf5_store.h"
+#include "core/process.h"
+#include "core/sweep_row.h"
+#include "evaluate/pose_errors.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+// Campaign plots are drawn by scripts/plot_campaign.py (matplotlib), found in RAYTIME_SCRIPT_DIR
+// or, by default, in the source tree this binary was built from.
+constexpr const char* kPython = "/usr/bin/python3";
+constexpr int kPlotExitNoMatplotlib = 3;  // plot_campaign.py: matplotlib is not installed
+
+fs::path ScriptDirectory() {
+  const char* env = std::getenv("RAYTIME_SCRIPT_DIR");
+  return env != nullptr && *env != '\0' ? env : RAYTIME_DEFAULT_SCRIPT_DIR;
+}
+
+// Reads the poses of `path` in `format`; "hdf5" reads pose set `set` (or the only one there).
+PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& format,
+                               const std::string& set) {
+  if (format != "hdf5") return ReadPoseFile(format, path);
+  const Hdf5Reader reader(path);
+  std::string name = set;
+  if (name.empty()) {
+    const auto names = reader.PoseSetNames();
+    if (names.size() != 1) {
+      ThrowInput(path, 0,
+                 "holds " + std::to_string(names.size()) +
+                     " pose sets: choose one with --est-set/--gt-set");
+    }
+    name = names.front();
+  }
+  return reader.ReadPoseSet(name);
+}
+
+}  // namespace
+
+int RunEvaluateCommand(const std::string& est, const std::string& est_format,
+                       const std::string& est_set, const std::string& gt,
+                       const std::string& gt_format, const std::string& gt_set,
+                       const std::string& align, double success_deg, bool as_json) {
+  PoseErrorOptions options;
+  options.alignment = align;
+  options.success_rotation_deg = success_deg;
+  const PoseErrorSummary errors =
+      ComputePoseErrors(ReadPosesForEvaluation(est, est_format, est_set),
+                        ReadPosesForEvaluation(gt, gt_format, gt_set), options);
+  if (as_json) {
+    std::cout << errors.ToJson().dump(2) << "\n";
+    return 0;
+  }
+  std::printf("%-24s %12s %12s\n", "frame", "rot [deg]", "centre [m]");
+  for (const auto& frame : errors.frames) {
+    std::printf("%-24s %12.5f %12.5f\n", frame.name.c_str(), frame.rotation_deg, frame.centre_m);
+  }
+  std::printf(
+      "alignment %s, %d frames: rotation mean %.5f median %.5f deg; centre mean %.5f "
+      "median %.5f m; success (< %.2f deg): %s\n"
+      "relative rotation (no alignment), %d pairs: mean %.5f median %.5f deg\n",
+      errors.alignment.c_str(), errors.num_frames, errors.mean_rotation_deg,
+      errors.median_rotation_deg, errors.mean_centre_m, errors.median_centre_m, success_deg,
+      errors.success ? "yes" : "no", errors.num_relative_pairs, errors.mean_relative_rotation_deg,
+      errors.median_relative_rotation_deg);
+  if (errors.alignment != "none") {
+    std::printf(
+        "the alignment's own rotation, RMS from the centres left after it: %.5f deg (rotation "
+        "errors that differ by less are not told apart)\n",
+        errors.alignment_rotation_sigma_deg);
+  }
+  for (const auto& name : errors.only_in_estimate) {
+    std::printf("not scored: %s has no ground truth\n", name.c_str());
+  }
+  for (const auto& name : errors.only_in_ground_truth) {
+    std::printf("not scored: %s is missing from the estimate\n", name.c_str());
+  }
+  return 0;
+}
+
+int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
+                     const CampaignReportOptions& options) {
+  const std::string sweep_path = (fs::path(sweep_dir) / "sweep.json").string();
+  if (!fs::exists(sweep_path)) {
+    ThrowInput(sweep_path, 0,
+               "no such file; `raytime run PIPELINE.yaml --workdir DIR` writes it for a pipeline "
+               "with a sweep section");
+  }
+  const std::vector<SweepRow> rows = ReadSweepRows(sweep_path);
+  CampaignReport report;
+  try {
+    report = AggregateCampaign(rows, options);
+  } catch (const InputError& e) {
+    ThrowInput(sweep_path, 0, e.what());
+  }
+  if (out_dir.empty()) out_dir = sweep_dir;
+  fs::create_directories(out_dir);
+  const std::string markdown_path = (fs::path(out_dir) / "report.md").string();
+  const std::string cells_path = (fs::path(out_dir) / "report_cells.csv").string();
+  WriteTextFileAtomically(markdown_path, CampaignReportMarkdown(report, sweep_path));
+  WriteTextFileAtomically(cells_path, CampaignCellsCsv(report));
+  spdlog::info(
+      fmt::format("report: {} runs ({} failed), {} scene(s), {} level(s), {} arm(s): {}, {}",
+                  report.total_runs, report.failed_runs.size(), report.scenes.size(),
+                  report.levels.size(), report.arms.size(), markdown_path, cells_path));
+  // Table 4's cells, when the sweep trained 3DGS (splat stages).
+  const std::string splat_path = (fs::path(out_dir) / "report_splat.csv").string();
+  if (!report.splat_cells.empty()) {
+    WriteTextFileAtomically(splat_path, CampaignSplatCsv(report));
+    spdlog::info(fmt::format("report: downstream 3DGS (Table 4) cells: {}", splat_path));
+  }
+
+  const std::string script = (ScriptDirectory() / "plot_campaign.py").string();
+  if (!fs::exists(kPython)) {
+    spdlog::warn(fmt::format("report: {} not found, no plots written", kPython));
+    return 0;
+  }
+  if (!fs::exists(script)) {
+    spdlog::warn(fmt::format(
+        "report: plot script {} not found (set RAYTIME_SCRIPT_DIR), no plots written", script));
+    return 0;
+  }
+  const ProcessStatus status = RunProcess({kPython, script, cells_path, out_dir});
+  if (status.exit_code == kPlotExitNoMatplotlib) {
+    spdlog::warn(
+        "report: matplotlib is missing, no plots written (report.md and "
+        "report_cells.csv are complete)");
+  } else if (!status.Succeeded()) {
+    throw std::runtime_error("report: " + script + " failed (" + status.Describe() + "); " +
+                             markdown_path + " and " + cells_path + " were written");
+  } else {
+    spdlog::info(fmt::format(
+        "report: plots success_vs_level and median_error_vs_level (.png, .svg) in {}", out_dir));
+  }
+  return 0;
+}
+
+}  // namespace raytime
