@@ -195,6 +195,111 @@ std::vector<MergedTrack> MergeTracks(const TrackObservations& obs,
   return tracks;
 }
 
+namespace {
+
+// The pinhole images of the export (`ordered`, name order): one pinhole camera per distorted
+// camera in use, numbered in order of first use (evaluate/undistortion.h); the undistortion's
+// scale per camera into *summary.
+ImageSet PinholeImagesOf(const std::vector<const ImageInfo*>& ordered, const ImageSet& images,
+                         const UndistortionOptions& undistortion, TrainerExportSummary* summary) {
+  ImageSet pinhole;
+  pinhole.image_root = "images";
+  std::map<int, int> pinhole_of_camera;
+  for (const ImageInfo* info : ordered) {
+    if (info->camera_index < 0 || info->camera_index >= static_cast<int>(images.cameras.size())) {
+      throw std::invalid_argument("image " + info->name + " has camera index " +
+                                  std::to_string(info->camera_index) + " out of range");
+    }
+    auto [it, added] =
+        pinhole_of_camera.emplace(info->camera_index, static_cast<int>(pinhole.cameras.size()));
+    if (added) {
+      const CameraIntrinsics& camera = images.cameras[info->camera_index];
+      pinhole.cameras.push_back(UndistortedCamera(camera, undistortion));
+      summary->undistortion_scale_x.push_back(double(pinhole.cameras.back().width) / camera.width);
+      summary->undistortion_scale_y.push_back(double(pinhole.cameras.back().height) /
+                                              camera.height);
+    }
+    const CameraIntrinsics& camera = pinhole.cameras[it->second];
+    pinhole.images.push_back({info->name, camera.width, camera.height, it->second});
+  }
+  return pinhole;
+}
+
+// The ray-time source's observations in the exported images (a match counts when both of its
+// ends do): their undistorted pixels and ray points (SPEC §3 "Ray point"), the source rows kept and
+// each image's rows; colours are filled as the images are read.
+struct ExportedObservations {
+  TrackObservations tracks;
+  std::vector<int> source_rows;            // rows of source.rays kept, in order
+  std::vector<std::vector<int>> of_image;  // per exported image, its rows of `tracks`
+};
+
+ExportedObservations ObservationsInExport(const RayTimeSource& source,
+                                          const std::vector<const ImageInfo*>& ordered,
+                                          const std::map<std::string, int>& index_of,
+                                          const ImageSet& images, const ImageSet& pinhole) {
+  ExportedObservations out;
+  out.of_image.resize(ordered.size());
+  const RayTimeObservations& rays = source.rays;
+  std::vector<int> image_of_row(rays.image_names.size(), -1);
+  for (size_t r = 0; r < rays.image_names.size(); ++r) {
+    const auto it = index_of.find(rays.image_names[r]);
+    if (it != index_of.end() && source.poses.Has(rays.image_names[r])) {
+      image_of_row[r] = it->second;
+    }
+  }
+  std::vector<int> kept(rays.observations.rows(), -1);
+  for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
+    const int image = image_of_row[rays.observations(o, 0)];
+    if (image < 0) continue;
+    kept[o] = static_cast<int>(out.source_rows.size());
+    out.of_image[image].push_back(kept[o]);
+    out.source_rows.push_back(static_cast<int>(o));
+  }
+  const auto m = static_cast<Eigen::Index>(out.source_rows.size());
+  out.tracks.image.resize(m);
+  out.tracks.points.resize(m, 3);
+  out.tracks.pixels.resize(m, 2);
+  out.tracks.colours.setZero(m, 3);
+  for (Eigen::Index k = 0; k < m; ++k) {
+    const int o = out.source_rows[k];
+    const int image = image_of_row[rays.observations(o, 0)];
+    const ImageInfo& info = *ordered[image];
+    const CameraIntrinsics& distorted = images.cameras[info.camera_index];
+    const CameraIntrinsics& camera = pinhole.cameras[pinhole.images[image].camera_index];
+    out.tracks.image(k) = image;
+    const Eigen::Vector2d u = UndistortedPixel(distorted, camera, rays.pixels.row(o).transpose());
+    out.tracks.pixels.row(k) = u;
+    // The ray of the undistorted pixel, X = O + t·R·ray (SPEC §3 "Ray point").
+    const double t = rays.ray_times(o);
+    if (std::isfinite(t)) {
+      const Eigen::Vector3d ray = Eigen::Vector3d((u.x() - camera.cx()) / camera.fx(),
+                                                  (u.y() - camera.cy()) / camera.fy(), 1.0)
+                                      .normalized();
+      const Rigid3& pose = source.poses.world_from_cam.at(info.name);
+      out.tracks.points.row(k) = (pose.translation + t * (pose.rotation * ray)).transpose();
+    } else {
+      out.tracks.points.row(k).setConstant(kNaN);
+    }
+  }
+  std::vector<Eigen::Index> matches;
+  for (Eigen::Index r = 0; r < rays.matches.rows(); ++r) {
+    const int a = kept[rays.matches(r, 0)], b = kept[rays.matches(r, 1)];
+    if (a >= 0 && b >= 0) {
+      matches.push_back(a);
+      matches.push_back(b);
+    }
+  }
+  out.tracks.matches.resize(static_cast<Eigen::Index>(matches.size() / 2), 2);
+  for (size_t i = 0; i < matches.size(); ++i) {
+    out.tracks.matches(static_cast<Eigen::Index>(i / 2), static_cast<Eigen::Index>(i % 2)) =
+        static_cast<int>(matches[i]);
+  }
+  return out;
+}
+
+}  // namespace
+
 TrainerExportSummary ExportForTrainers(const ImageSet& images,
                                        const std::map<std::string, PoseSet>& poses,
                                        const std::optional<RayTimeSource>& source,
@@ -225,88 +330,13 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
   for (const ImageInfo* info : ordered) names.push_back(info->name);
   const TrainTestSplit split = SplitEveryNth(names, options.test_every);
 
-  // The pinhole cameras: one per distorted camera in use, numbered in order of first use.
-  ImageSet pinhole;
-  pinhole.image_root = "images";
-  std::map<int, int> pinhole_of_camera;
-  for (const ImageInfo* info : ordered) {
-    if (info->camera_index < 0 || info->camera_index >= static_cast<int>(images.cameras.size())) {
-      throw std::invalid_argument("image " + info->name + " has camera index " +
-                                  std::to_string(info->camera_index) + " out of range");
-    }
-    auto [it, added] =
-        pinhole_of_camera.emplace(info->camera_index, static_cast<int>(pinhole.cameras.size()));
-    if (added) {
-      const CameraIntrinsics& camera = images.cameras[info->camera_index];
-      pinhole.cameras.push_back(UndistortedCamera(camera, options.undistortion));
-      summary.undistortion_scale_x.push_back(double(pinhole.cameras.back().width) / camera.width);
-      summary.undistortion_scale_y.push_back(double(pinhole.cameras.back().height) / camera.height);
-    }
-    const CameraIntrinsics& camera = pinhole.cameras[it->second];
-    pinhole.images.push_back({info->name, camera.width, camera.height, it->second});
-  }
-
-  // The source's observations in exported images (a match counts when both of its ends do).
-  std::vector<int> observation_rows;  // rows of source->rays kept, in order
-  std::vector<std::vector<int>> observations_of_image(num_images);
-  TrackObservations track_obs;
-  if (source) {
-    const RayTimeObservations& rays = source->rays;
-    std::vector<int> image_of_row(rays.image_names.size(), -1);
-    for (size_t r = 0; r < rays.image_names.size(); ++r) {
-      const auto it = index_of.find(rays.image_names[r]);
-      if (it != index_of.end() && source->poses.Has(rays.image_names[r])) {
-        image_of_row[r] = it->second;
-      }
-    }
-    std::vector<int> kept(rays.observations.rows(), -1);
-    for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
-      const int image = image_of_row[rays.observations(o, 0)];
-      if (image < 0) continue;
-      kept[o] = static_cast<int>(observation_rows.size());
-      observations_of_image[image].push_back(kept[o]);
-      observation_rows.push_back(static_cast<int>(o));
-    }
-    const auto m = static_cast<Eigen::Index>(observation_rows.size());
-    track_obs.image.resize(m);
-    track_obs.points.resize(m, 3);
-    track_obs.pixels.resize(m, 2);
-    track_obs.colours.setZero(m, 3);
-    for (Eigen::Index k = 0; k < m; ++k) {
-      const int o = observation_rows[k];
-      const int image = image_of_row[rays.observations(o, 0)];
-      const ImageInfo& info = *ordered[image];
-      const CameraIntrinsics& distorted = images.cameras[info.camera_index];
-      const CameraIntrinsics& camera = pinhole.cameras[pinhole.images[image].camera_index];
-      track_obs.image(k) = image;
-      const Eigen::Vector2d u = UndistortedPixel(distorted, camera, rays.pixels.row(o).transpose());
-      track_obs.pixels.row(k) = u;
-      // The ray of the undistorted pixel, X = O + t·R·ray (SPEC §3 "Ray point").
-      const double t = rays.ray_times(o);
-      if (std::isfinite(t)) {
-        const Eigen::Vector3d ray = Eigen::Vector3d((u.x() - camera.cx()) / camera.fx(),
-                                                    (u.y() - camera.cy()) / camera.fy(), 1.0)
-                                        .normalized();
-        const Rigid3& pose = source->poses.world_from_cam.at(info.name);
-        track_obs.points.row(k) = (pose.translation + t * (pose.rotation * ray)).transpose();
-      } else {
-        track_obs.points.row(k).setConstant(kNaN);
-      }
-    }
-    std::vector<Eigen::Index> matches;
-    for (Eigen::Index r = 0; r < rays.matches.rows(); ++r) {
-      const int a = kept[rays.matches(r, 0)], b = kept[rays.matches(r, 1)];
-      if (a >= 0 && b >= 0) {
-        matches.push_back(a);
-        matches.push_back(b);
-      }
-    }
-    track_obs.matches.resize(static_cast<Eigen::Index>(matches.size() / 2), 2);
-    for (size_t i = 0; i < matches.size(); ++i) {
-      track_obs.matches(static_cast<Eigen::Index>(i / 2), static_cast<Eigen::Index>(i % 2)) =
-          static_cast<int>(matches[i]);
-    }
-  }
+  const ImageSet pinhole = PinholeImagesOf(ordered, images, options.undistortion, &summary);
+  ExportedObservations exported;
+  exported.of_image.resize(num_images);
+  if (source) exported = ObservationsInExport(*source, ordered, index_of, images, pinhole);
+  TrackObservations& track_obs = exported.tracks;
+  const std::vector<int>& observation_rows = exported.source_rows;
+  const std::vector<std::vector<int>>& observations_of_image = exported.of_image;
 
   // The images, once, into a folder every pose set's images/ links to.
   fs::create_directories(root);
