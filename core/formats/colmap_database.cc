@@ -365,45 +365,47 @@ ColmapCamera ColmapCameraWithModel(const CameraIntrinsics& intrinsics, uint32_t 
                    "' is not supported for export (PINHOLE or OPENCV)");
 }
 
-ColmapDatabase ReadColmapDatabase(const std::string& path) {
-  if (!fs::is_regular_file(path)) ThrowInput(path, 0, "no such file (COLMAP database.db expected)");
-  const Sqlite db(path, SQLITE_OPEN_READONLY);
-  CheckTables(db);
+namespace {
 
-  // Cameras (only those an image uses are converted: an unused camera of an unsupported model is
-  // no reason to fail, as in FromColmapModel).
+// The table cameras by id (only those an image uses are converted later: an unused camera of an
+// unsupported model is no reason to fail, as in FromColmapModel).
+std::map<int64_t, ColmapCamera> ReadDatabaseCameras(const Sqlite& db, const std::string& path) {
   std::map<int64_t, ColmapCamera> cameras;
-  {
-    Statement stmt(db, "SELECT camera_id, model, width, height, params FROM cameras");
-    while (stmt.Step("cannot read table cameras")) {
-      ColmapCamera camera;
-      const int64_t id = stmt.Int(0);
-      const int64_t model = stmt.Int(1);
-      const std::string where = "table cameras, camera_id " + std::to_string(id);
-      if (id <= 0 || id > std::numeric_limits<uint32_t>::max()) {
-        ThrowInput(path, 0, where + ": invalid camera id");
-      }
-      if (model < 0 || model >= kNumColmapModels) {
-        ThrowInput(path, 0, where + ": unknown camera model id " + std::to_string(model));
-      }
-      if (stmt.Int(2) <= 0 || stmt.Int(3) <= 0) ThrowInput(path, 0, where + ": invalid size");
-      camera.camera_id = static_cast<uint32_t>(id);
-      camera.model = kColmapModelNames[model];
-      camera.width = static_cast<uint64_t>(stmt.Int(2));
-      camera.height = static_cast<uint64_t>(stmt.Int(3));
-      const std::string params = stmt.Blob(4);
-      if (params.size() % sizeof(double) != 0) {
-        ThrowInput(path, 0,
-                   where + ": params blob of " + std::to_string(params.size()) +
-                       " bytes is not a list of float64");
-      }
-      camera.params.resize(params.size() / sizeof(double));
-      if (!params.empty()) std::memcpy(camera.params.data(), params.data(), params.size());
-      cameras[id] = camera;
+  Statement stmt(db, "SELECT camera_id, model, width, height, params FROM cameras");
+  while (stmt.Step("cannot read table cameras")) {
+    ColmapCamera camera;
+    const int64_t id = stmt.Int(0);
+    const int64_t model = stmt.Int(1);
+    const std::string where = "table cameras, camera_id " + std::to_string(id);
+    if (id <= 0 || id > std::numeric_limits<uint32_t>::max()) {
+      ThrowInput(path, 0, where + ": invalid camera id");
     }
+    if (model < 0 || model >= kNumColmapModels) {
+      ThrowInput(path, 0, where + ": unknown camera model id " + std::to_string(model));
+    }
+    if (stmt.Int(2) <= 0 || stmt.Int(3) <= 0) ThrowInput(path, 0, where + ": invalid size");
+    camera.camera_id = static_cast<uint32_t>(id);
+    camera.model = kColmapModelNames[model];
+    camera.width = static_cast<uint64_t>(stmt.Int(2));
+    camera.height = static_cast<uint64_t>(stmt.Int(3));
+    const std::string params = stmt.Blob(4);
+    if (params.size() % sizeof(double) != 0) {
+      ThrowInput(path, 0,
+                 where + ": params blob of " + std::to_string(params.size()) +
+                     " bytes is not a list of float64");
+    }
+    camera.params.resize(params.size() / sizeof(double));
+    if (!params.empty()) std::memcpy(camera.params.data(), params.data(), params.size());
+    cameras[id] = camera;
   }
+  return cameras;
+}
 
-  // Images, sorted by name: COLMAP id -> index.
+// The table images, sorted by name, into out->images (their cameras converted once each, in
+// order of first use); *image_index maps COLMAP's image id to the index.
+void ReadDatabaseImages(const Sqlite& db, const std::string& path,
+                        const std::map<int64_t, ColmapCamera>& cameras, ColmapDatabase* out,
+                        std::map<int64_t, int>* image_index) {
   struct DbImage {
     int64_t image_id;
     std::string name;
@@ -418,13 +420,11 @@ ColmapDatabase ReadColmapDatabase(const std::string& path) {
   }
   std::sort(db_images.begin(), db_images.end(),
             [](const DbImage& a, const DbImage& b) { return a.name < b.name; });
-  ColmapDatabase out;
-  std::map<int64_t, int> image_index;
   std::map<int64_t, int> camera_index;
   for (const DbImage& image : db_images) {
     const std::string where = "table images, image_id " + std::to_string(image.image_id);
     if (image.name.empty()) ThrowInput(path, 0, where + ": empty name");
-    if (!out.images.images.empty() && out.images.images.back().name == image.name) {
+    if (!out->images.images.empty() && out->images.images.back().name == image.name) {
       ThrowInput(path, 0, where + ": two images are named " + image.name);
     }
     const auto camera = cameras.find(image.camera_id);
@@ -436,16 +436,29 @@ ColmapDatabase ReadColmapDatabase(const std::string& path) {
     auto [it, inserted] = camera_index.emplace(image.camera_id, 0);
     if (inserted) {
       try {
-        out.images.cameras.push_back(IntrinsicsFromColmap(camera->second));
+        out->images.cameras.push_back(IntrinsicsFromColmap(camera->second));
       } catch (const InputError& e) {
         ThrowInput(path, 0, std::string("table cameras: ") + e.what());
       }
-      it->second = static_cast<int>(out.images.cameras.size()) - 1;
+      it->second = static_cast<int>(out->images.cameras.size()) - 1;
     }
-    const CameraIntrinsics& intrinsics = out.images.cameras[it->second];
-    image_index[image.image_id] = static_cast<int>(out.images.images.size());
-    out.images.images.push_back({image.name, intrinsics.width, intrinsics.height, it->second});
+    const CameraIntrinsics& intrinsics = out->images.cameras[it->second];
+    (*image_index)[image.image_id] = static_cast<int>(out->images.images.size());
+    out->images.images.push_back({image.name, intrinsics.width, intrinsics.height, it->second});
   }
+}
+
+}  // namespace
+
+ColmapDatabase ReadColmapDatabase(const std::string& path) {
+  if (!fs::is_regular_file(path)) ThrowInput(path, 0, "no such file (COLMAP database.db expected)");
+  const Sqlite db(path, SQLITE_OPEN_READONLY);
+  CheckTables(db);
+
+  const std::map<int64_t, ColmapCamera> cameras = ReadDatabaseCameras(db, path);
+  ColmapDatabase out;
+  std::map<int64_t, int> image_index;
+  ReadDatabaseImages(db, path, cameras, &out, &image_index);
   const auto name_of = [&](int64_t image_id) {
     const auto it = image_index.find(image_id);
     return it == image_index.end() ? std::string("?") : out.images.images[it->second].name;
