@@ -135,23 +135,19 @@ LoosePartsVerdict CheckLooseParts(const RefineInput& input, const PairRemovalSum
   return verdict;
 }
 
-void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
-                   const PassSettings& nominal, const std::vector<Rigid3>& prior, PassState* state,
-                   RefineSummary* summary, std::optional<RefineInput>* pruned) {
-  PassSettings basin;
-  basin.name = "basin";
-  basin.max_matches_per_pair = options.basin_max_matches_per_pair;
-  basin.orientation_weight = 0.0;
-  basin.scales = options.StageScales();
-  const PassState start = *state;
-  summary->passes.push_back(RunPass(input, options, basin, prior, state));
+namespace {
 
-  // Wrong-pair removal: every pair of the input is judged at the current basin solution (on the
-  // basin's capped matches), and the basin is solved again from the prior without the ones above
-  // the threshold, until the solution leaves exactly the pairs it was solved without (or none)
-  // above it. Judging the removed pairs again matters: a solution pulled off by wrong pairs leaves
-  // some correct ones off too, and they come back once it is right. Solving from the prior again
-  // (not from the pulled-off solution) gives the GNC schedule its whole basin.
+// Wrong-pair removal: every pair of the input is judged at the current basin solution (on the
+// basin's capped matches), and the basin is solved again from the prior without the ones above
+// the threshold, until the solution leaves exactly the pairs it was solved without (or none)
+// above it. Judging the removed pairs again matters: a solution pulled off by wrong pairs leaves
+// some correct ones off too, and they come back once it is right. Solving from the prior again
+// (not from the pulled-off solution, `start`) gives the GNC schedule its whole basin. Returns the
+// input the later passes use (*pruned when pairs were removed).
+const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOptions& options,
+                                    const PassSettings& basin, const std::vector<Rigid3>& prior,
+                                    const PassState& start, PassState* state,
+                                    RefineSummary* summary, std::optional<RefineInput>* pruned) {
   const RefineInput* active = &input;
   PairRemovalSummary& removal = summary->pair_removal;
   removal.enabled = options.max_pair_removal_rounds > 0;
@@ -199,6 +195,16 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       summary->passes.push_back(RunPass(*active, options, again, prior, state));
     }
   }
+  return active;
+}
+
+// The orientation-prior probe: a pass with λR from the basin solution; the finish keeps λR only
+// when the matches' median residual rises by at most orientation_prior_max_increase under it, and
+// otherwise starts from the basin solution again. Not run for a prior estimated from these
+// matches.
+void ProbeOrientationPrior(const RefineInput& active, const RefineOptions& options,
+                           const PassSettings& basin, const std::vector<Rigid3>& prior,
+                           PassState* state, RefineSummary* summary) {
   const PassState basin_state = *state;
 
   OrientationPriorProbe& probe = summary->orientation_prior;
@@ -207,7 +213,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   probe.max_increase = options.orientation_prior_max_increase;
   probe.free_residual_median_px = summary->passes.back().residual_median_px;
   probe.free_match_cost_px2 = summary->passes.back().match_cost_px2;
-  probe.prior_from_matches = input.prior_rotations_from_matches && options.orientation_weight > 0;
+  probe.prior_from_matches = active.prior_rotations_from_matches && options.orientation_weight > 0;
   if (probe.prior_from_matches) {
     spdlog::info(fmt::format(
         "refine: orientation prior (λR = {:g}) not used: the prior's rotations were estimated "
@@ -219,7 +225,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
     probe_pass.name = "orientation_probe";
     probe_pass.orientation_weight = options.orientation_weight;
     probe_pass.scales = {options.loss_scale_px2};
-    summary->passes.push_back(RunPass(*active, options, probe_pass, prior, state));
+    summary->passes.push_back(RunPass(active, options, probe_pass, prior, state));
     probe.prior_residual_median_px = summary->passes.back().residual_median_px;
     probe.prior_match_cost_px2 = summary->passes.back().match_cost_px2;
     probe.increase = probe.free_residual_median_px > 0
@@ -249,6 +255,25 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
       *state = basin_state;
     }
   }
+}
+
+}  // namespace
+
+void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
+                   const PassSettings& nominal, const std::vector<Rigid3>& prior, PassState* state,
+                   RefineSummary* summary, std::optional<RefineInput>* pruned) {
+  PassSettings basin;
+  basin.name = "basin";
+  basin.max_matches_per_pair = options.basin_max_matches_per_pair;
+  basin.orientation_weight = 0.0;
+  basin.scales = options.StageScales();
+  const PassState start = *state;
+  summary->passes.push_back(RunPass(input, options, basin, prior, state));
+
+  const RefineInput* active =
+      RemoveWrongPairs(input, options, basin, prior, start, state, summary, pruned);
+  ProbeOrientationPrior(*active, options, basin, prior, state, summary);
+  const OrientationPriorProbe& probe = summary->orientation_prior;
 
   PassSettings finish = nominal;
   finish.name = "finish";
