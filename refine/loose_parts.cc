@@ -50,11 +50,14 @@ std::vector<LooseCut> FindLooseCuts(int num_images, const std::vector<GraphPair>
     if (!pair.removed) after.emplace_back(pair.image1, pair.image2);
   }
   std::set<std::vector<int>> sides;
-  for (const auto* edges : {&before, &after}) {
-    for (const MinimumCut& cut : MinimumCutTree(num_images, *edges)) {
+  const auto add_cuts_of = [&](const std::vector<std::pair<int, int>>& edges) {
+    for (const MinimumCut& cut : MinimumCutTree(num_images, edges)) {
       sides.insert(SmallerSide(num_images, cut.side));
     }
-  }
+  };
+  add_cuts_of(before);
+  // Without a removal (the usual solve) the graph after it is the same one: its tree once.
+  if (after.size() < before.size()) add_cuts_of(after);
   std::vector<LooseCut> loose;
   for (const std::vector<int>& side : sides) {
     LooseCut cut = CountAcross(num_images, side, pairs);
