@@ -11,7 +11,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/dataset.h"
+#include "formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
 #include "core/version.h"

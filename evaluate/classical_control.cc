@@ -10,8 +10,8 @@
 
 #include "core/camera.h"
 #include "core/error.h"
-#include "core/formats/colmap_database.h"
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_database.h"
+#include "formats/colmap_model.h"
 #include "core/options.h"
 #include "core/process.h"
 #include "core/timing.h"

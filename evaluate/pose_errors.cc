@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <type_traits>
 #include <stdexcept>
 
 #include "core/error.h"
@@ -180,14 +181,42 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
   return summary;
 }
 
+void to_json(nlohmann::json& json, const PoseErrorStatistics& statistics) {
+  json = nlohmann::json::object();
+  PoseErrorStatistics::VisitFields(statistics, [&](const char* key, const auto& value) {
+    if constexpr (std::is_floating_point_v<std::decay_t<decltype(value)>>) {
+      json[key] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+    } else {
+      json[key] = value;
+    }
+  });
+}
+
+void from_json(const nlohmann::json& json, PoseErrorStatistics& statistics) {
+  PoseErrorStatistics::VisitFields(statistics, [&](const char* key, auto& value) {
+    using Field = std::decay_t<decltype(value)>;
+    const auto it = json.find(key);
+    const bool present = it != json.end() && !it->is_null();
+    if constexpr (std::is_floating_point_v<Field>) {
+      value = present && it->is_number() ? it->template get<Field>()
+                                         : std::numeric_limits<Field>::quiet_NaN();
+    } else {
+      value = present ? it->template get<Field>() : Field{};
+    }
+  });
+}
+
 nlohmann::json PoseErrorSummary::ToJson(bool with_frames) const {
-  nlohmann::json out = *this;
+  nlohmann::json out = static_cast<const PoseErrorStatistics&>(*this);
+  out["alignment"] = alignment;
+  if (with_frames) out["frames"] = frames;
+  out["only_in_estimate"] = only_in_estimate;
+  out["only_in_ground_truth"] = only_in_ground_truth;
   const Eigen::Quaterniond& q = gt_from_estimate.rotation;
   const Eigen::Vector3d& t = gt_from_estimate.translation;
   out["gt_from_estimate"] = {{"scale", gt_from_estimate.scale},
                              {"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
                              {"translation", {t.x(), t.y(), t.z()}}};
-  if (!with_frames) out.erase("frames");
   return out;
 }
 

@@ -36,8 +36,10 @@ struct FrameError {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FrameError, name, rotation_deg, centre_m)
 
-struct PoseErrorSummary {
-  std::string alignment;
+// The numbers of one pose set's errors under one alignment: what the evaluate stage reports and
+// what a sweep's rows (pipelines/sweep_row.h) and the campaign report read back. Field names are
+// the JSON keys and a sweep's CSV columns (VisitFields).
+struct PoseErrorStatistics {
   int num_frames = 0;
   double mean_rotation_deg = 0.0;
   double median_rotation_deg = 0.0;
@@ -65,21 +67,44 @@ struct PoseErrorSummary {
   // collinear (no rotation about their line is fitted).
   double alignment_rotation_sigma_deg = 0.0;
   bool success = false;
+
+  // Every field with its name, in declaration order.
+  template <class Self, class Visitor>
+  static void VisitFields(Self& self, Visitor&& v) {
+    v("num_frames", self.num_frames);
+    v("mean_rotation_deg", self.mean_rotation_deg);
+    v("median_rotation_deg", self.median_rotation_deg);
+    v("mean_centre_m", self.mean_centre_m);
+    v("median_centre_m", self.median_centre_m);
+    v("scene_scale_m", self.scene_scale_m);
+    v("mean_centre_relative", self.mean_centre_relative);
+    v("median_centre_relative", self.median_centre_relative);
+    v("num_relative_pairs", self.num_relative_pairs);
+    v("mean_relative_rotation_deg", self.mean_relative_rotation_deg);
+    v("median_relative_rotation_deg", self.median_relative_rotation_deg);
+    v("alignment_rotation_sigma_deg", self.alignment_rotation_sigma_deg);
+    v("success", self.success);
+  }
+};
+// A number that is not finite is written as null. Read back, a number absent or null (a summary
+// written before the field existed, a collinear fit) is NaN, a count 0, success false.
+void to_json(nlohmann::json& json, const PoseErrorStatistics& statistics);
+void from_json(const nlohmann::json& json, PoseErrorStatistics& statistics);
+
+struct PoseErrorSummary : PoseErrorStatistics {
+  std::string alignment;
   Sim3 gt_from_estimate;  // the fitted alignment (identity for "none")
   std::vector<FrameError> frames;
   std::vector<std::string> only_in_estimate;  // reported, never silently dropped
   std::vector<std::string> only_in_ground_truth;
 
-  // The fields by name; gt_from_estimate as {scale, rotation_wxyz, translation}.
+  // The statistics, alignment, frames and name lists by name; gt_from_estimate as {scale,
+  // rotation_wxyz, translation}.
   nlohmann::json ToJson(bool with_frames = true) const;
 };
-// Every field but gt_from_estimate, which ToJson writes.
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PoseErrorSummary, alignment, num_frames, mean_rotation_deg,
-                                   median_rotation_deg, mean_centre_m, median_centre_m,
-                                   scene_scale_m, mean_centre_relative, median_centre_relative,
-                                   num_relative_pairs, mean_relative_rotation_deg,
-                                   median_relative_rotation_deg, alignment_rotation_sigma_deg,
-                                   success, frames, only_in_estimate, only_in_ground_truth)
+inline void to_json(nlohmann::json& json, const PoseErrorSummary& summary) {
+  json = summary.ToJson();
+}
 
 // Frame pairs scored by the relative rotation error at most (memory and time stay bounded on
 // captures of thousands of frames).

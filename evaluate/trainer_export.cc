@@ -16,8 +16,8 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
-#include "core/formats/nerfstudio.h"
+#include "formats/colmap_model.h"
+#include "formats/nerfstudio.h"
 #include "core/graph.h"
 #include "core/statistics.h"
 #include "core/timing.h"

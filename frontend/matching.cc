@@ -151,7 +151,7 @@ std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptio
   if (options.pairs == "prior") {
     throw InputError(
         "matching: pairs 'prior' are chosen from the prior's poses by the matches stage "
-        "(core/pair_selection.h) and handed to MatchImagePairs");
+        "(pipelines/pair_selection.h) and handed to MatchImagePairs");
   }
   std::vector<std::pair<int, int>> pairs;
   for (int i = 0; i < num_images; ++i) {

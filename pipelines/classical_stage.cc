@@ -9,7 +9,7 @@
 #include <filesystem>
 
 #include "core/error.h"
-#include "core/formats/colmap_database.h"
+#include "formats/colmap_database.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
 #include "evaluate/classical_control.h"

@@ -8,7 +8,7 @@
 #include <cmath>
 
 #include "core/error.h"
-#include "core/formats/colmap_database.h"
+#include "formats/colmap_database.h"
 #include "core/hdf5_store.h"
 #include "pipelines/stages.h"
 

@@ -9,10 +9,10 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/dataset.h"
+#include "formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/process.h"
-#include "core/sweep_row.h"
+#include "pipelines/sweep_row.h"
 #include "evaluate/pose_errors.h"
 
 namespace fs = std::filesystem;

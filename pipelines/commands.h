@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "evaluate/campaign_report.h"
+#include "pipelines/campaign_report.h"
 
 namespace raytime {
 

@@ -7,8 +7,8 @@
 #include <algorithm>
 #include <filesystem>
 
-#include "core/formats/dataset.h"
-#include "core/formats/stray.h"
+#include "formats/dataset.h"
+#include "formats/stray.h"
 #include "core/hdf5_store.h"
 #include "frontend/video_frames.h"
 #include "pipelines/stages.h"

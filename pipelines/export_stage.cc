@@ -10,9 +10,9 @@
 #include <optional>
 
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
-#include "core/formats/nerfstudio.h"
-#include "core/formats/tum.h"
+#include "formats/colmap_model.h"
+#include "formats/nerfstudio.h"
+#include "formats/tum.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "evaluate/trainer_export.h"

@@ -8,7 +8,7 @@
 #include <filesystem>
 
 #include "bootstrap/prior_repair.h"
-#include "core/formats/dataset.h"
+#include "formats/dataset.h"
 #include "core/geometry.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"

@@ -9,7 +9,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/strecha.h"
+#include "formats/strecha.h"
 #include "frontend/image_reading.h"
 
 namespace fs = std::filesystem;

@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "core/formats/dataset.h"
+#include "formats/dataset.h"
 
 namespace raytime {
 

@@ -116,7 +116,7 @@ SweepRow SweepRowFromRun(const std::string& label,
     }
     for (const auto& [alignment, errors] : by_alignment.items()) {
       if (!errors.is_object()) continue;
-      row.errors[arm][alignment] = SweepPoseErrors::FromJson(errors);
+      row.errors[arm][alignment] = errors.get<PoseErrorStatistics>();
     }
   }
   for (const auto& [pose_set, id] : pose_sets.items()) {

@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/sweep_row.h"
-#include "evaluate/campaign_report.h"
+#include "pipelines/sweep_row.h"
+#include "pipelines/campaign_report.h"
 
 namespace raytime {
 namespace {
@@ -78,8 +78,10 @@ SweepRow Row(const std::string& scene, const std::string& level, const std::stri
       {"dataset.root", "data/strecha/" + scene}, {"prior.level_deg", level}, {"prior.seed", seed}};
   row.status = "ok";
   row.seconds = 1.0;
+  // What a run that reported nothing reads as: every number NaN.
+  const PoseErrorStatistics not_reported = nlohmann::json::object().get<PoseErrorStatistics>();
   for (const auto& [arm, errors] : arms) {
-    SweepPoseErrors& sim3 = row.errors[arm]["sim3"];
+    PoseErrorStatistics& sim3 = row.errors[arm]["sim3"] = not_reported;
     sim3.mean_rotation_deg = sim3.median_rotation_deg = errors.sim3_deg;
     sim3.mean_centre_m = 0.01 * errors.sim3_deg;
     sim3.success = errors.sim3_deg < 1.0;
@@ -88,7 +90,7 @@ SweepRow Row(const std::string& scene, const std::string& level, const std::stri
     sim3.mean_relative_rotation_deg = 0.5 * errors.sim3_deg;
     // Only scene B reports the alignment's own rotation (NaN in A: rows of older runs).
     if (scene == "B") sim3.alignment_rotation_sigma_deg = 0.1 * errors.sim3_deg;
-    SweepPoseErrors& none = row.errors[arm]["none"];
+    PoseErrorStatistics& none = row.errors[arm]["none"] = not_reported;
     none.mean_rotation_deg = errors.none_deg;
     none.mean_centre_m = 0.02 * errors.none_deg;
     row.pose_set_stage[arm] = WriterOf(arm);

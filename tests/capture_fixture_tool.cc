@@ -29,8 +29,8 @@
 #include <string>
 #include <vector>
 
-#include "core/formats/colmap_model.h"
-#include "core/formats/strecha.h"
+#include "formats/colmap_model.h"
+#include "formats/strecha.h"
 #include "evaluate/perturbation.h"
 #include "tests/capture_fixtures.h"
 

@@ -12,7 +12,7 @@
 #include <utility>
 #include <vector>
 
-#include "core/formats/strecha.h"
+#include "formats/strecha.h"
 #include "core/types.h"
 
 namespace fs = std::filesystem;

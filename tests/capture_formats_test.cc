@@ -10,9 +10,9 @@
 #include <string>
 
 #include "core/error.h"
-#include "core/formats/capture.h"
-#include "core/formats/dataset.h"
-#include "core/formats/npz.h"
+#include "formats/capture.h"
+#include "formats/dataset.h"
+#include "formats/npz.h"
 #include "tests/capture_fixtures.h"
 #include "tests/expect_pose.h"
 #include "tests/temp_dir.h"

@@ -11,8 +11,8 @@
 #include <set>
 
 #include "core/error.h"
-#include "core/formats/dataset.h"
-#include "core/formats/stray.h"
+#include "formats/dataset.h"
+#include "formats/stray.h"
 #include "core/hdf5_store.h"
 #include "core/provenance.h"
 #include "frontend/video_frames.h"

@@ -24,7 +24,7 @@
 #include <string>
 #include <vector>
 
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "core/hdf5_store.h"
 #include "core/provenance.h"
 #include "evaluate/pose_errors.h"

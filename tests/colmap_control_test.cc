@@ -22,9 +22,9 @@
 #include <string>
 
 #include "core/atomic_file.h"
-#include "core/formats/colmap_database.h"
-#include "core/formats/colmap_model.h"
-#include "core/formats/strecha.h"
+#include "formats/colmap_database.h"
+#include "formats/colmap_model.h"
+#include "formats/strecha.h"
 #include "core/statistics.h"
 #include "evaluate/classical_control.h"
 #include "evaluate/pose_errors.h"

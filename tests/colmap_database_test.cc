@@ -16,7 +16,7 @@
 #include <string>
 
 #include "core/error.h"
-#include "core/formats/colmap_database.h"
+#include "formats/colmap_database.h"
 #include "testing/random_draws.h"
 #include "tests/temp_dir.h"
 

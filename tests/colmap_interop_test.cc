@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "core/atomic_file.h"
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "testing/random_draws.h"
 #include "tests/colmap_command.h"
 #include "tests/temp_dir.h"

@@ -1,4 +1,4 @@
-// Round trips and error reporting of the file formats (core/formats): COLMAP text and binary,
+// Round trips and error reporting of the file formats (formats): COLMAP text and binary,
 // nerfstudio transforms.json, TUM trajectories and Strecha cameras. Poses must survive every
 // conversion to 1e-9 and intrinsics exactly (SPEC §2, §7), and bad input must name the file,
 // the line or frame, and what was expected.
@@ -15,11 +15,11 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
-#include "core/formats/dataset.h"
-#include "core/formats/nerfstudio.h"
-#include "core/formats/strecha.h"
-#include "core/formats/tum.h"
+#include "formats/colmap_model.h"
+#include "formats/dataset.h"
+#include "formats/nerfstudio.h"
+#include "formats/strecha.h"
+#include "formats/tum.h"
 #include "core/geometry.h"
 #include "core/warnings.h"
 #include "testing/random_draws.h"

@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/formats/strecha.h"
+#include "formats/strecha.h"
 #include "core/geometry.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"

@@ -22,7 +22,7 @@
 
 #include "core/camera.h"
 #include "core/error.h"
-#include "core/formats/strecha.h"
+#include "formats/strecha.h"
 #include "core/geometry.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/formats/dataset.h"
-#include "core/formats/strecha.h"
+#include "formats/dataset.h"
+#include "formats/strecha.h"
 #include "core/intrinsics.h"
 #include "tests/temp_dir.h"
 

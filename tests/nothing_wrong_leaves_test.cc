@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "core/formats/colmap_model.h"
-#include "core/formats/strecha.h"
+#include "formats/colmap_model.h"
+#include "formats/strecha.h"
 #include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;

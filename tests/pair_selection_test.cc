@@ -1,4 +1,4 @@
-// Prior-guided pair selection (core/pair_selection.h, SPEC §5, issue 10) on synthetic camera rings
+// Prior-guided pair selection (pipelines/pair_selection.h, SPEC §5, issue 10) on synthetic camera rings
 // with known answers: the nearest cameras on the ring are chosen, k is respected, the window is
 // joined, opposite and far cameras are never paired, images without a pose get window pairs only.
 #include <gtest/gtest.h>
@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/pair_selection.h"
+#include "pipelines/pair_selection.h"
 #include "testing/random_draws.h"
 
 namespace raytime {

@@ -13,7 +13,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "core/hdf5_store.h"
 #include "evaluate/pose_errors.h"
 #include "pipelines/stage.h"

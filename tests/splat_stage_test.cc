@@ -17,7 +17,7 @@
 #include <sstream>
 #include <string>
 
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "core/types.h"
 #include "tests/raytime_command.h"
 #include "tests/temp_dir.h"

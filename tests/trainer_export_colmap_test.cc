@@ -23,8 +23,8 @@
 #include <vector>
 
 #include "core/atomic_file.h"
-#include "core/formats/colmap_model.h"
-#include "core/formats/dataset.h"
+#include "formats/colmap_model.h"
+#include "formats/dataset.h"
 #include "core/statistics.h"
 #include "tests/colmap_command.h"
 #include "tests/raytime_command.h"

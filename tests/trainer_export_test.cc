@@ -16,7 +16,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "evaluate/trainer_export.h"
 #include "evaluate/undistortion.h"
 #include "tests/temp_dir.h"

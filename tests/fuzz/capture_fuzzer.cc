@@ -1,4 +1,4 @@
-// libFuzzer target: the capture and dataset readers that take a folder (core/formats/record3d.h,
+// libFuzzer target: the capture and dataset readers that take a folder (formats/record3d.h,
 // polycam.h, stray.h, scanner3d.h, nerfcapture.h, mobilebrick.h, scannetpp.h, arkitscenes.h,
 // lamar.h), through the two entry points every caller uses: ReadPoseFile (the pose file of
 // `prior.format`) and LoadDataset (the dataset stage), whose warnings are then turned into JSON
@@ -20,7 +20,7 @@
 //
 // Besides crashes and escaping exceptions, the target stops on a value that is not finite in what
 // a reader returns (a pose, an intrinsic, a timestamp): the readers reject NaN and infinity in
-// their files (core/formats/text_util.h, PoseFromCameraToWorld), so one that appears anyway came
+// their files (formats/text_util.h, PoseFromCameraToWorld), so one that appears anyway came
 // from arithmetic on valid-looking values (an overflow) and would reach the stages unnoticed.
 //
 // With RAYTIME_FUZZ_VERBOSE set in the environment (replay executables, when checking that seeds
@@ -38,9 +38,9 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/formats/dataset.h"
-#include "core/formats/stray.h"
-#include "core/formats/text_util.h"
+#include "formats/dataset.h"
+#include "formats/stray.h"
+#include "formats/text_util.h"
 #include "core/warnings.h"
 #include "tests/fuzz/capture_fuzz.h"
 #include "tests/fuzz/fuzz_util.h"

@@ -1,10 +1,10 @@
-// libFuzzer target: COLMAP database.db files (core/formats/colmap_database.h,
+// libFuzzer target: COLMAP database.db files (formats/colmap_database.h,
 // ReadColmapDatabase), byte-level. The input is the SQLite file.
 #include <string>
 #include <string_view>
 
 #include "core/error.h"
-#include "core/formats/colmap_database.h"
+#include "formats/colmap_database.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

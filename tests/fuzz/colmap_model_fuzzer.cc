@@ -1,4 +1,4 @@
-// libFuzzer target: COLMAP sparse models, text and binary (core/formats/colmap_model.h,
+// libFuzzer target: COLMAP sparse models, text and binary (formats/colmap_model.h,
 // ReadColmapModel, then FromColmapModel as every caller does).
 //
 // Input: one format byte ('b' binary, anything else text), then the contents of cameras,
@@ -8,7 +8,7 @@
 #include <string_view>
 
 #include "core/error.h"
-#include "core/formats/colmap_model.h"
+#include "formats/colmap_model.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

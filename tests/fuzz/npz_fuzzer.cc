@@ -1,4 +1,4 @@
-// libFuzzer target: NumPy .npz archives (core/formats/npz.h, ReadNpz), the one binary format of the
+// libFuzzer target: NumPy .npz archives (formats/npz.h, ReadNpz), the one binary format of the
 // capture readers (MobileBrick's cameras_arkit.npz; capture_mobilebrick reaches it only behind a
 // valid sequence folder).
 //
@@ -7,7 +7,7 @@
 #include <string_view>
 
 #include "core/error.h"
-#include "core/formats/npz.h"
+#include "formats/npz.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,10 +1,10 @@
-// libFuzzer target: Strecha `.camera` files (core/formats/strecha.h, ReadStrechaCamera). The
+// libFuzzer target: Strecha `.camera` files (formats/strecha.h, ReadStrechaCamera). The
 // input is the file.
 #include <string>
 #include <string_view>
 
 #include "core/error.h"
-#include "core/formats/strecha.h"
+#include "formats/strecha.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,10 +1,10 @@
-// libFuzzer target: nerfstudio / instant-ngp transforms.json (core/formats/nerfstudio.h,
+// libFuzzer target: nerfstudio / instant-ngp transforms.json (formats/nerfstudio.h,
 // ReadTransformsJson). The input is the file.
 #include <string>
 #include <string_view>
 
 #include "core/error.h"
-#include "core/formats/nerfstudio.h"
+#include "formats/nerfstudio.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,4 +1,4 @@
-// libFuzzer target: TUM trajectories (core/formats/tum.h, ReadTumTrajectory).
+// libFuzzer target: TUM trajectories (formats/tum.h, ReadTumTrajectory).
 //
 // The input is the trajectory file; everything after a line "@@NAMES@@" is the optional names
 // list, one name per line.
@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/formats/tum.h"
+#include "formats/tum.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
