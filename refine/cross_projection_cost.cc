@@ -4,49 +4,23 @@ namespace raytime {
 
 namespace {
 
-// What the target side gives the source-side Jacobians: du/dX (2x3) and the normalized
-// projection (xn, yn), whose derivative in K_t is the projection's own term.
-struct TargetDerivatives {
-  double du_dX[2][3];
-  double xn, yn;
-};
-
-// r = K_t·proj(R_j^T (X - O_j)) - û_t for the world point X, with `pinhole` the target's fx, fy,
-// cx, cy (kFx..kCy, the start of an intrinsics block). With `derivatives`, also du/dX and, when
-// `target_pose_jacobian` is not null, the 2x7 Jacobian in the target pose: d(R^T v)/dq for the
-// quaternion formula of RotationFromQuaternion (rows p0..p2, columns x, y, z, w), d(R^T v)/dO =
-// -R^T.
+// r = K_t·proj(R_j^T (X - O_j)) - û_t for the world point X (TargetResidual), with `pinhole` the
+// target's fx, fy, cx, cy (kFx..kCy, the start of an intrinsics block). With `derivatives`, also
+// ∂r/∂X and, when `target_pose_jacobian` is not null, the 2x7 Jacobian in the target pose:
+// d(R^T v)/dq for the quaternion formula of RotationFromQuaternion (rows p0..p2, columns x, y, z,
+// w), d(R^T v)/dO = -R^T.
 void ProjectIntoTarget(const double* point, const double* target_pose, const double* pinhole,
                        const double* target_undistorted, double* residuals,
-                       TargetDerivatives* derivatives, double* target_pose_jacobian) {
+                       TargetResidualDerivative* derivatives, double* target_pose_jacobian) {
   double R[9];
   RotationFromQuaternion(target_pose, R);
-  const double* centre = target_pose + kPoseCentreOffset;
-  const double v[3] = {point[0] - centre[0], point[1] - centre[1], point[2] - centre[2]};
-  double p[3];  // R^T v
-  for (int c = 0; c < 3; ++c) p[c] = R[c] * v[0] + R[3 + c] * v[1] + R[6 + c] * v[2];
-  const double fx = pinhole[kFx];
-  const double fy = pinhole[kFy];
-  const double inv_z = 1.0 / p[2];
-  const double xn = p[0] * inv_z;
-  const double yn = p[1] * inv_z;
-  residuals[0] = fx * xn + pinhole[kCx] - target_undistorted[0];
-  residuals[1] = fy * yn + pinhole[kCy] - target_undistorted[1];
+  double v[3], p[3];  // X - O, R^T v
+  TargetResidual(R, target_pose + kPoseCentreOffset, pinhole, point, target_undistorted, v, p,
+                 residuals);
   if (derivatives == nullptr) return;
-
-  // du/dp (2x3) and du/dX = du/dp · R^T (2x3).
-  const double du_dp[2][3] = {{fx * inv_z, 0.0, -fx * xn * inv_z},
-                              {0.0, fy * inv_z, -fy * yn * inv_z}};
-  double(&du_dX)[2][3] = derivatives->du_dX;
-  for (int a = 0; a < 2; ++a) {
-    for (int r = 0; r < 3; ++r) {
-      du_dX[a][r] =
-          du_dp[a][0] * R[3 * r] + du_dp[a][1] * R[3 * r + 1] + du_dp[a][2] * R[3 * r + 2];
-    }
-  }
-  derivatives->xn = xn;
-  derivatives->yn = yn;
+  *derivatives = DifferentiateTargetResidual(R, pinhole, p);
   if (target_pose_jacobian == nullptr) return;
+  const double(&du_dp)[2][3] = derivatives->du_dp;
   const double x = target_pose[0], y = target_pose[1], z = target_pose[2], w = target_pose[3];
   const double dp_dq[3][4] = {
       {2 * (y * v[1] + z * v[2]), 2 * (-2 * y * v[0] + x * v[1] - w * v[2]),
@@ -61,7 +35,9 @@ void ProjectIntoTarget(const double* point, const double* target_pose, const dou
       J[kPoseBlockSize * a + q] =
           du_dp[a][0] * dp_dq[0][q] + du_dp[a][1] * dp_dq[1][q] + du_dp[a][2] * dp_dq[2][q];
     }
-    for (int r = 0; r < 3; ++r) J[kPoseBlockSize * a + kPoseCentreOffset + r] = -du_dX[a][r];
+    for (int r = 0; r < 3; ++r) {
+      J[kPoseBlockSize * a + kPoseCentreOffset + r] = -derivatives->du_dX[a][r];
+    }
   }
 }
 
@@ -81,7 +57,7 @@ bool EvaluateCached(const ObservationCache& cache, int source_index, int target_
   constexpr int kTargetPose = kTwoCameras ? 4 : 3;
   const CachedObservation& source = cache[source_index];
   const CachedObservation& target = cache[target_index];
-  TargetDerivatives target_side;
+  TargetResidualDerivative target_side;
   ProjectIntoTarget(source.point, parameters[kTargetPose], parameters[kTargetIntrinsics],
                     target.undistorted, residuals, jacobians ? &target_side : nullptr,
                     jacobians ? jacobians[kTargetPose] : nullptr);
@@ -158,8 +134,8 @@ FixedIntrinsicsCrossProjectionCost::FixedIntrinsicsCrossProjectionCost(
       target_pinhole_{target_intrinsics[kFx], target_intrinsics[kFy], target_intrinsics[kCx],
                       target_intrinsics[kCy]} {}
 
-// X = O_i + t·w with w = R_i·d (RayPointInWorld's arithmetic, so the values are the cached
-// variant's bit for bit); dX/dO_i = I, dX/dt = w, dX/dq_i = t·d(R(q)·d)/dq for the quaternion
+// X = O_i + t·w with w = R_i·d (RayPoint, so the values are the cached variant's bit for bit);
+// dX/dO_i = I, dX/dt = w, dX/dq_i = t·d(R(q)·d)/dq for the quaternion
 // formula of RotationFromQuaternion (rows w0..w2, columns x, y, z, w).
 bool FixedIntrinsicsCrossProjectionCost::Evaluate(double const* const* parameters,
                                                   double* residuals, double** jacobians) const {
@@ -168,13 +144,9 @@ bool FixedIntrinsicsCrossProjectionCost::Evaluate(double const* const* parameter
   const double* d = source_ray_;
   double R[9];
   RotationFromQuaternion(source_pose, R);
-  const double* centre = source_pose + kPoseCentreOffset;
   double point[3], w[3];
-  for (int r = 0; r < 3; ++r) {
-    w[r] = R[3 * r] * d[0] + R[3 * r + 1] * d[1] + R[3 * r + 2] * d[2];
-    point[r] = centre[r] + t * w[r];
-  }
-  TargetDerivatives target_side;
+  RayPoint(R, source_pose + kPoseCentreOffset, t, d, w, point);
+  TargetResidualDerivative target_side;
   ProjectIntoTarget(point, parameters[2], target_pinhole_, target_undistorted_, residuals,
                     jacobians ? &target_side : nullptr, jacobians ? jacobians[2] : nullptr);
   if (jacobians == nullptr) return true;

@@ -12,7 +12,9 @@
 //   one-block variant's.
 // With every intrinsic held (no self-calibration, the default) a third variant has no intrinsics
 // block at all: blocks source pose (7), source ray time (1), target pose (7).
-// Each in two implementations of the same function:
+// Each in up to three implementations of the same function, whose value is computed by the
+// arithmetic of refine/ray_geometry.h that the ray-time LM's kernel also uses (RayPoint,
+// TargetResidual; tests/refine_lm_solver_test.cc checks the values agree):
 // - Cached*CrossProjectionCost reads û and X with their derivatives from the ObservationCache and
 //   only projects ("gradient surgery", §3.7);
 // - FixedIntrinsicsCrossProjectionCost holds the source's unit ray and the target's undistorted
@@ -120,10 +122,7 @@ void CrossProjectionResidual(const T* source_intrinsics, const T* source_pose, c
   UndistortPixel(target_intrinsics, target_pixel, target_undistorted);
   T point[3];
   RayPointInWorld(source_intrinsics, source_pose, ray_time, source_undistorted, point);
-  T projected[2];
-  ProjectWorldPoint(target_intrinsics, target_pose, point, projected);
-  residual[0] = projected[0] - target_undistorted[0];
-  residual[1] = projected[1] - target_undistorted[1];
+  TargetResidualAtPose(target_intrinsics, target_pose, point, target_undistorted, residual);
 }
 
 // Both observations' images on one intrinsics block.

@@ -10,6 +10,7 @@
 
 #include "core/statistics.h"
 #include "refine/guardrails.h"
+#include "refine/ray_geometry.h"
 
 namespace raytime {
 namespace {
@@ -37,11 +38,18 @@ double CrossProjectionAtRayTime(const Rigid3& source_pose, const DoubtedObservat
                                 const CameraIntrinsics& target_camera,
                                 const DoubtedObservationRay& target) {
   if (!(ray_time > 0)) return std::numeric_limits<double>::quiet_NaN();
-  const Eigen::Vector3d point = source_pose * (ray_time * source.ray);
-  const Eigen::Vector3d in_target = target_pose.Inverse() * point;
-  Eigen::Vector2d projected;
-  ProjectPinhole(target_camera.params.data(), in_target.data(), projected.data());
-  return (projected - target.pixel).norm();
+  // Row-major rotations, as refine/ray_geometry.h takes them (Eigen's default is column-major).
+  using RowMajor = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+  const RowMajor source_rotation = source_pose.rotation.toRotationMatrix();
+  const RowMajor target_rotation = target_pose.rotation.toRotationMatrix();
+  double direction[3], point[3], offset[3], p_cam[3];
+  RayPoint(source_rotation.data(), source_pose.translation.data(), ray_time, source.ray.data(),
+           direction, point);
+  Eigen::Vector2d residual;
+  TargetResidual(target_rotation.data(), target_pose.translation.data(),
+                 target_camera.params.data(), point, target.pixel.data(), offset, p_cam,
+                 residual.data());
+  return residual.norm();
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include <cmath>
 
 #include "core/timing.h"
+#include "refine/ray_geometry.h"
 
 namespace raytime {
 namespace {
@@ -320,30 +321,19 @@ struct State {
 // r = π_t(O_s + t·R_s·d) - û and, when `source` is not null, its Jacobians (2x6 row-major in
 // (φ, δO) of each pose, 2x1 in the ray time); R row-major, K = fx, fy, cx, cy. X moves with the
 // source pose as dX = δO - [t R_s d]× φ, and p = R_tᵀ(X - O_t) with the target pose as
-// dp = R_tᵀ(-δO + [v]× φ) (R ← Exp(φ) R, so Rᵀ ← Rᵀ Exp(-φ)).
+// dp = R_tᵀ(-δO + [v]× φ) (R ← Exp(φ) R, so Rᵀ ← Rᵀ Exp(-φ)). The value and ∂r/∂X are
+// refine/ray_geometry.h's, which every variant of the residual shares.
 void CrossProjectionKernel(const double* rs, const double* os, double t, const double* rt,
                            const double* ot, const double* k, const double* d, const double* u,
                            double* r, double* source, double* ray_time, double* target) {
-  double dir[3], off[3], v[3], p[3];
-  for (int a = 0; a < 3; ++a) {
-    dir[a] = rs[3 * a] * d[0] + rs[3 * a + 1] * d[1] + rs[3 * a + 2] * d[2];
-    off[a] = t * dir[a];
-    v[a] = os[a] + off[a] - ot[a];
-  }
-  for (int c = 0; c < 3; ++c) p[c] = rt[c] * v[0] + rt[3 + c] * v[1] + rt[6 + c] * v[2];
-  const double inv_z = 1.0 / p[2];
-  const double xn = p[0] * inv_z;
-  const double yn = p[1] * inv_z;
-  r[0] = k[0] * xn + k[2] - u[0];
-  r[1] = k[1] * yn + k[3] - u[1];
+  double dir[3], point[3], v[3], p[3];
+  RayPoint(rs, os, t, d, dir, point);
+  TargetResidual(rt, ot, k, point, u, v, p, r);
   if (source == nullptr) return;
-  const double du_dp[2][3] = {{k[0] * inv_z, 0.0, -k[0] * xn * inv_z},
-                              {0.0, k[1] * inv_z, -k[1] * yn * inv_z}};
+  const TargetResidualDerivative derivative = DifferentiateTargetResidual(rt, k, p);
+  const double off[3] = {t * dir[0], t * dir[1], t * dir[2]};
   for (int a = 0; a < 2; ++a) {
-    double m[3];  // du_a/dX = du_a/dp · R_tᵀ
-    for (int c = 0; c < 3; ++c) {
-      m[c] = du_dp[a][0] * rt[3 * c] + du_dp[a][1] * rt[3 * c + 1] + du_dp[a][2] * rt[3 * c + 2];
-    }
+    const double* m = derivative.du_dX[a];  // du_a/dX = du_a/dp · R_tᵀ
     ray_time[a] = m[0] * dir[0] + m[1] * dir[1] + m[2] * dir[2];
     double* js = source + 6 * a;
     double* jt = target + 6 * a;

@@ -55,10 +55,11 @@ std::vector<double> ResidualNorms(const RefineInput& input, const ProblemLayout&
     Eigen::Vector3d point;
     RayPointInWorld(cameras.Of(source.image).params.data(), poses[source.image].data(),
                     ray_times[source.ray_time], u_source.data(), point.data());
-    Eigen::Vector2d projected;
-    ProjectWorldPoint(cameras.Of(target.image).params.data(), poses[target.image].data(),
-                      point.data(), projected.data());
-    norms.push_back((projected - undistorted(target)).norm());
+    const Eigen::Vector2d u_target = undistorted(target);
+    Eigen::Vector2d r;
+    TargetResidualAtPose(cameras.Of(target.image).params.data(), poses[target.image].data(),
+                         point.data(), u_target.data(), r.data());
+    norms.push_back(r.norm());
   }
   return norms;
 }

@@ -6,10 +6,14 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
 
+#include "refine/cross_projection_cost.h"
 #include "refine/pose_prior_cost.h"
+#include "refine/ray_geometry.h"
 #include "refine/refine.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
@@ -84,6 +88,67 @@ TEST(RayTimeLmSolverTest, JacobiansMatchNumericDifferentiation) {
       EXPECT_LT((numeric.col(k) - analytic.col(k)).norm(), 1e-5 * (1.0 + numeric.col(k).norm()))
           << "trial " << trial << ", parameter " << k;
     }
+  }
+}
+
+// The residual is written once (refine/ray_geometry.h): the LM kernel, the closed-form Ceres cost
+// and the automatic-differentiation cost give the same value for the same poses, the first two bit
+// for bit (the LM is handed RotationFromQuaternion's matrices), autodiff to rounding (it
+// undistorts the pixels itself; here without distortion).
+TEST(RayTimeLmSolverTest, EveryVariantOfTheResidualHasTheSameValue) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto draw = [&] { return u(rng); };
+  for (int trial = 0; trial < 20; ++trial) {
+    double source_pose[kPoseBlockSize], target_pose[kPoseBlockSize];
+    for (double* pose : {source_pose, target_pose}) {
+      const Eigen::Quaterniond q = Eigen::Quaterniond(Eigen::AngleAxisd(
+          0.3 * draw(), Eigen::Vector3d(draw(), draw(), draw()).normalized()));
+      const Eigen::Vector3d centre = DrawVector3(draw);
+      const double block[kPoseBlockSize] = {q.x(),      q.y(),      q.z(),     q.w(),
+                                            centre.x(), centre.y(), centre.z()};
+      std::copy(block, block + kPoseBlockSize, pose);
+    }
+    target_pose[kPoseCentreOffset] += 2.0;
+    double intrinsics[kNumIntrinsics] = {1400.0 + 50 * draw(), 1380.0 + 50 * draw(),
+                                         768.0 + 20 * draw(), 512.0 + 20 * draw(), 0, 0, 0, 0};
+    const Eigen::Vector2d source_pixel(768.0 + 300 * draw(), 512.0 + 300 * draw());
+    const Eigen::Vector2d target_pixel(768.0 + 300 * draw(), 512.0 + 300 * draw());
+    double ray_time = 10.0 + 5.0 * draw();
+    Eigen::Vector3d source_ray;
+    PixelToUnitRay(intrinsics, source_pixel.data(), source_ray.data());
+
+    // The LM kernel.
+    Eigen::Matrix3d rotation[2];
+    for (int k = 0; k < 2; ++k) {
+      double R[9];
+      RotationFromQuaternion(k == 0 ? source_pose : target_pose, R);
+      rotation[k] = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(R);
+    }
+    Eigen::Vector2d lm, jd;
+    Eigen::Matrix<double, 2, 6> js, jt;
+    CrossProjectionJacobian(rotation[0], Eigen::Map<const Eigen::Vector3d>(source_pose + 4),
+                            ray_time, rotation[1], Eigen::Map<const Eigen::Vector3d>(target_pose + 4),
+                            Eigen::Vector4d(intrinsics[kFx], intrinsics[kFy], intrinsics[kCx],
+                                            intrinsics[kCy]),
+                            source_ray, target_pixel, &lm, &js, &jd, &jt);
+
+    // The closed-form Ceres cost (fixed intrinsics) and the automatic-differentiation one.
+    std::unique_ptr<ceres::CostFunction> fixed(
+        FixedIntrinsicsCrossProjectionCost::Create(source_ray, target_pixel, intrinsics));
+    const double* fixed_parameters[] = {source_pose, &ray_time, target_pose};
+    Eigen::Vector2d closed_form;
+    ASSERT_TRUE(fixed->Evaluate(fixed_parameters, closed_form.data(), nullptr));
+    std::unique_ptr<ceres::CostFunction> autodiff(
+        CrossProjectionAutoDiffCost::Create(source_pixel, target_pixel));
+    const double* autodiff_parameters[] = {intrinsics, source_pose, &ray_time, target_pose};
+    Eigen::Vector2d automatic;
+    ASSERT_TRUE(autodiff->Evaluate(autodiff_parameters, automatic.data(), nullptr));
+
+    EXPECT_EQ(lm, closed_form) << "trial " << trial;
+    EXPECT_LT((automatic - closed_form).norm(), 1e-9 * (1.0 + closed_form.norm()))
+        << "trial " << trial;
+    EXPECT_GT(closed_form.norm(), 1.0);  // away from the optimum: a value worth comparing
   }
 }
 
