@@ -63,135 +63,44 @@ int RunStageAlone(Stage& stage, const std::vector<std::string>& inputs, std::str
   return 0;
 }
 
-int Main(int argc, char** argv) {
-  CLI::App app{"raytime: triangulation-free bundle adjustment from coarse pose priors"};
-  app.set_version_flag("--version", std::string(Version()));
-  app.require_subcommand(1);
-  bool quiet = false;
-  app.add_flag("-q,--quiet", quiet, "Only print warnings and errors");
-
+// `raytime run PIPELINE.yaml`.
+struct RunCommand {
   std::string pipeline_path, workdir;
   std::vector<std::string> overrides;
   bool force = false;
-  CLI::App* run = app.add_subcommand("run",
-                                     "Run a YAML pipeline (resumes: unchanged stages are "
-                                     "skipped)");
-  run->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
-  CLI::Option* workdir_option =
-      run->add_option("--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')");
-  run->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
-  run->add_flag("--force", force, "Rerun every stage even when unchanged");
-  RunOptions run_options;
-  run->add_option("--jobs", run_options.jobs, "Concurrent sweep runs (default: number of cores)");
-  run->add_option("--cache_dir,--cache-dir", run_options.cache_dir,
-                  "Stage outputs shared between runs, by content key (sweeps default to "
-                  "WORKDIR/cache)");
-  run->add_option("--backend", run_options.backend,
-                  "Where a sweep's runs execute: processes on this machine, or job arrays on a "
-                  "Slurm cluster (work directory and cache on a path every node sees)")
-      ->check(CLI::IsMember({"local", "slurm"}))
-      ->capture_default_str();
-  run->add_option("--partition", run_options.partition,
-                  "Slurm partition of the sweep's jobs (default: the cluster's)");
-  run->add_flag("--wait", run_options.slurm_wait,
-                "Slurm backend: wait until every run has ended and the tables are collected");
   bool no_report = false;
-  run->add_flag("--no_report,--no-report", no_report,
-                "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
+  RunOptions run_options;
+  CLI::App* command = nullptr;
+  CLI::Option* workdir_option = nullptr;
 
-  std::map<std::string, std::unique_ptr<Stage>> stages;
-  std::map<std::string, CLI::App*> stage_commands;
-  std::vector<std::string> stage_inputs;
-  std::string stage_output;
-  for (const auto& type : StageTypes()) {
-    stage_commands[type] = AddStageCommand(app, type, &stage_inputs, &stage_output, &stages[type]);
+  void Add(CLI::App& app) {
+    command = app.add_subcommand("run",
+                                 "Run a YAML pipeline (resumes: unchanged stages are skipped)");
+    command->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
+    workdir_option = command->add_option("--workdir", workdir,
+                                         "Work directory (overrides the pipeline's 'workdir')");
+    command->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
+    command->add_flag("--force", force, "Rerun every stage even when unchanged");
+    command->add_option("--jobs", run_options.jobs,
+                        "Concurrent sweep runs (default: number of cores)");
+    command->add_option("--cache_dir,--cache-dir", run_options.cache_dir,
+                        "Stage outputs shared between runs, by content key (sweeps default to "
+                        "WORKDIR/cache)");
+    command
+        ->add_option("--backend", run_options.backend,
+                     "Where a sweep's runs execute: processes on this machine, or job arrays on a "
+                     "Slurm cluster (work directory and cache on a path every node sees)")
+        ->check(CLI::IsMember({"local", "slurm"}))
+        ->capture_default_str();
+    command->add_option("--partition", run_options.partition,
+                        "Slurm partition of the sweep's jobs (default: the cluster's)");
+    command->add_flag("--wait", run_options.slurm_wait,
+                      "Slurm backend: wait until every run has ended and the tables are collected");
+    command->add_flag("--no_report,--no-report", no_report,
+                      "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
   }
 
-  // `raytime evaluate` also scores any two pose files (HDF5 included) when given --est/--gt.
-  std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
-                   align = "sim3";
-  double success_deg = 1.0;
-  bool as_json = false;
-  CLI::App* evaluate = stage_commands.at("evaluate");
-  evaluate->description(
-      "Score pose sets against ground truth: the stage (--in/--out and the stage's options), or "
-      "any two pose files joined by image name (--est/--gt)");
-  CLI::Option_group* files = evaluate->add_option_group(
-      "pose files", "Score two pose files instead of running the stage (needs --est and --gt)");
-  CLI::Option* est_option = files->add_option("--est", est, "Estimated poses (file or folder)");
-  files
-      ->add_option("--est_format,--est-format", est_format,
-                   "A pose file format (prior.format) or hdf5")
-      ->capture_default_str();
-  files->add_option("--est_set,--est-set", est_set, "Pose set name in an HDF5 file");
-  CLI::Option* gt_option = files->add_option("--gt", gt, "Ground-truth poses (file or folder)");
-  files
-      ->add_option("--gt_format,--gt-format", gt_format,
-                   "A pose file format (prior.format) or hdf5")
-      ->capture_default_str();
-  files->add_option("--gt_set,--gt-set", gt_set, "Pose set name in an HDF5 file");
-  files->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
-  files
-      ->add_option("--success_deg,--success-deg", success_deg,
-                   "Success threshold on the mean rotation error, degrees")
-      ->capture_default_str();
-  files->add_flag("--json", as_json, "Print JSON instead of a table");
-
-  std::string sweep_dir, report_dir;
-  CampaignReportOptions report_options;
-  CLI::App* report = app.add_subcommand(
-      "report",
-      "Campaign report of a finished sweep: Markdown tables shaped like the paper's "
-      "Tables 5, 6 and 8 (and 4 when it trained 3DGS), CSVs of cells, plots");
-  report->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)")
-      ->required();
-  report->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
-  bool collect = false;
-  report->add_flag("--collect", collect,
-                   "First rebuild DIR/sweep.csv, sweep.json and summary.json from the runs' "
-                   "summaries (what the Slurm backend's last job does)");
-  report
-      ->add_option("--success_deg,--success-deg", report_options.success_rotation_deg,
-                   "Success threshold on the mean Sim(3) rotation error, degrees")
-      ->capture_default_str();
-  report
-      ->add_option("--scene_key,--scene-key", report_options.scene_key,
-                   "Swept column naming the scene")
-      ->capture_default_str();
-  report
-      ->add_option("--level_key,--level-key", report_options.level_key,
-                   "Swept column holding the perturbation level, degrees")
-      ->capture_default_str();
-  report
-      ->add_option("--baseline", report_options.baseline_arm,
-                   "Arm the \"halves the prior's rotation error\" count compares against")
-      ->capture_default_str();
-
-  DatasetOptions resize_input;
-  ResizeSceneOptions resize_options;
-  std::string resize_output;
-  CLI::App* resize = app.add_subcommand("resize-scene",
-                                        "Write a downsampled copy of a dataset in "
-                                        "the Strecha layout");
-  resize->add_option("--format", resize_input.format, "Input dataset format")
-      ->capture_default_str();
-  resize->add_option("--root", resize_input.root, "Input dataset root")->required();
-  resize->add_option("--out", resize_output, "Output scene folder")->required();
-  resize->add_option("--width", resize_options.width, "Output width, pixels")
-      ->capture_default_str();
-  resize
-      ->add_option("--jpeg_quality,--jpeg-quality", resize_options.jpeg_quality,
-                   "JPEG quality of the written images, 0-100 (OpenCV's IMWRITE_JPEG_QUALITY)")
-      ->check(CLI::Range(0, 100))
-      ->capture_default_str();
-
-  CLI11_PARSE(app, argc, argv);
-  // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
-  spdlog::set_default_logger(spdlog::stderr_color_mt("raytime"));
-  spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
-  if (quiet) spdlog::set_level(spdlog::level::warn);
-
-  if (run->parsed()) {
+  int Execute() {
     // An empty --workdir (an unset shell variable, say) would quietly write into the pipeline's.
     if (workdir_option->count() > 0 && workdir.empty()) {
       throw InputError(
@@ -219,29 +128,180 @@ int Main(int argc, char** argv) {
     if (report_after) return RunReportCommand(effective_workdir, "", CampaignReportOptions());
     return 0;
   }
-  if (evaluate->parsed() && (est_option->count() > 0 || gt_option->count() > 0)) {
+};
+
+// `raytime evaluate --est ... --gt ...`: any two pose files (HDF5 included), beside the stage.
+struct EvaluateFilesCommand {
+  std::string est, est_format = "colmap", est_set, gt, gt_format = "strecha", gt_set,
+                   align = "sim3";
+  double success_deg = 1.0;
+  bool as_json = false;
+  CLI::App* command = nullptr;
+  CLI::Option* est_option = nullptr;
+  CLI::Option* gt_option = nullptr;
+
+  void Add(CLI::App* evaluate) {
+    command = evaluate;
+    evaluate->description(
+        "Score pose sets against ground truth: the stage (--in/--out and the stage's options), or "
+        "any two pose files joined by image name (--est/--gt)");
+    CLI::Option_group* files = evaluate->add_option_group(
+        "pose files", "Score two pose files instead of running the stage (needs --est and --gt)");
+    est_option = files->add_option("--est", est, "Estimated poses (file or folder)");
+    files
+        ->add_option("--est_format,--est-format", est_format,
+                     "A pose file format (prior.format) or hdf5")
+        ->capture_default_str();
+    files->add_option("--est_set,--est-set", est_set, "Pose set name in an HDF5 file");
+    gt_option = files->add_option("--gt", gt, "Ground-truth poses (file or folder)");
+    files
+        ->add_option("--gt_format,--gt-format", gt_format,
+                     "A pose file format (prior.format) or hdf5")
+        ->capture_default_str();
+    files->add_option("--gt_set,--gt-set", gt_set, "Pose set name in an HDF5 file");
+    files->add_option("--align", align, "sim3, se3 or none")->capture_default_str();
+    files
+        ->add_option("--success_deg,--success-deg", success_deg,
+                     "Success threshold on the mean rotation error, degrees")
+        ->capture_default_str();
+    files->add_flag("--json", as_json, "Print JSON instead of a table");
+  }
+
+  bool Parsed() const {
+    return command->parsed() && (est_option->count() > 0 || gt_option->count() > 0);
+  }
+
+  int Execute() const {
     if (est.empty() || gt.empty()) {
       throw InputError("raytime evaluate: scoring pose files needs both --est and --gt");
     }
     return RunEvaluateCommand(est, est_format, est_set, gt, gt_format, gt_set, align, success_deg,
                               as_json);
   }
-  if (report->parsed()) {
+};
+
+// `raytime report --sweep DIR`.
+struct ReportCommand {
+  std::string sweep_dir, report_dir;
+  CampaignReportOptions report_options;
+  bool collect = false;
+  CLI::App* command = nullptr;
+
+  void Add(CLI::App& app) {
+    command = app.add_subcommand(
+        "report",
+        "Campaign report of a finished sweep: Markdown tables shaped like the paper's "
+        "Tables 5, 6 and 8 (and 4 when it trained 3DGS), CSVs of cells, plots");
+    command->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)")
+        ->required();
+    command->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
+    command->add_flag("--collect", collect,
+                      "First rebuild DIR/sweep.csv, sweep.json and summary.json from the runs' "
+                      "summaries (what the Slurm backend's last job does)");
+    command
+        ->add_option("--success_deg,--success-deg", report_options.success_rotation_deg,
+                     "Success threshold on the mean Sim(3) rotation error, degrees")
+        ->capture_default_str();
+    command
+        ->add_option("--scene_key,--scene-key", report_options.scene_key,
+                     "Swept column naming the scene")
+        ->capture_default_str();
+    command
+        ->add_option("--level_key,--level-key", report_options.level_key,
+                     "Swept column holding the perturbation level, degrees")
+        ->capture_default_str();
+    command
+        ->add_option("--baseline", report_options.baseline_arm,
+                     "Arm the \"halves the prior's rotation error\" count compares against")
+        ->capture_default_str();
+  }
+
+  int Execute() const {
     if (collect) CollectSweep(sweep_dir);
     return RunReportCommand(sweep_dir, report_dir, report_options);
   }
-  if (resize->parsed()) {
-    const int count = ResizeScene(resize_input, resize_output, resize_options);
-    spdlog::info(fmt::format("resize-scene: wrote {} images to {}", count, resize_output));
+};
+
+// `raytime resize-scene`.
+struct ResizeSceneCommand {
+  DatasetOptions input;
+  ResizeSceneOptions options;
+  std::string output;
+  CLI::App* command = nullptr;
+
+  void Add(CLI::App& app) {
+    command = app.add_subcommand(
+        "resize-scene", "Write a downsampled copy of a dataset in the Strecha layout");
+    command->add_option("--format", input.format, "Input dataset format")->capture_default_str();
+    command->add_option("--root", input.root, "Input dataset root")->required();
+    command->add_option("--out", output, "Output scene folder")->required();
+    command->add_option("--width", options.width, "Output width, pixels")->capture_default_str();
+    command
+        ->add_option("--jpeg_quality,--jpeg-quality", options.jpeg_quality,
+                     "JPEG quality of the written images, 0-100 (OpenCV's IMWRITE_JPEG_QUALITY)")
+        ->check(CLI::Range(0, 100))
+        ->capture_default_str();
+  }
+
+  int Execute() const {
+    const int count = ResizeScene(input, output, options);
+    spdlog::info(fmt::format("resize-scene: wrote {} images to {}", count, output));
     return 0;
   }
-  for (auto& [type, stage] : stages) {
-    if (app.got_subcommand(type)) {
-      stage->Configure(stage->CliOptions(), "raytime " + type);
-      return RunStageAlone(*stage, stage_inputs, stage_output);
+};
+
+// `raytime <stage>` for every stage type.
+struct StageCommands {
+  std::map<std::string, std::unique_ptr<Stage>> stages;
+  std::map<std::string, CLI::App*> commands;
+  std::vector<std::string> inputs;
+  std::string output;
+
+  void Add(CLI::App& app) {
+    for (const auto& type : StageTypes()) {
+      commands[type] = AddStageCommand(app, type, &inputs, &output, &stages[type]);
     }
   }
-  return 0;
+
+  int Execute(const CLI::App& app) {
+    for (auto& [type, stage] : stages) {
+      if (app.got_subcommand(type)) {
+        stage->Configure(stage->CliOptions(), "raytime " + type);
+        return RunStageAlone(*stage, inputs, output);
+      }
+    }
+    return 0;
+  }
+};
+
+int Main(int argc, char** argv) {
+  CLI::App app{"raytime: triangulation-free bundle adjustment from coarse pose priors"};
+  app.set_version_flag("--version", std::string(Version()));
+  app.require_subcommand(1);
+  bool quiet = false;
+  app.add_flag("-q,--quiet", quiet, "Only print warnings and errors");
+  RunCommand run;
+  run.Add(app);
+  StageCommands stages;
+  stages.Add(app);
+  EvaluateFilesCommand evaluate_files;
+  evaluate_files.Add(stages.commands.at("evaluate"));
+  ReportCommand report;
+  report.Add(app);
+  ResizeSceneCommand resize;
+  resize.Add(app);
+
+  CLI11_PARSE(app, argc, argv);
+  // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
+  spdlog::set_default_logger(spdlog::stderr_color_mt("raytime"));
+  spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
+  if (quiet) spdlog::set_level(spdlog::level::warn);
+
+  if (run.command->parsed()) return run.Execute();
+  if (evaluate_files.Parsed()) return evaluate_files.Execute();
+  if (report.command->parsed()) return report.Execute();
+  if (resize.command->parsed()) return resize.Execute();
+  return stages.Execute(app);
 }
 
 }  // namespace

@@ -247,6 +247,198 @@ void LogWarnings(const std::string& stage_id, const json& stage_summary) {
   }
 }
 
+namespace {
+
+// The stage of a pipeline file's entry, configured; an option error names the file and line.
+std::unique_ptr<Stage> ConfiguredStage(const PipelineSpec& spec,
+                                       const PipelineStageSpec& stage_spec) {
+  std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
+  try {
+    stage->Configure(stage_spec.options, spec.path);
+  } catch (const InputError& e) {
+    const std::string message = e.what();
+    if (message.rfind(spec.path + ":", 0) == 0) throw;
+    ThrowInput(spec.path, stage_spec.line, message);
+  }
+  return stage;
+}
+
+// 1. Whether this work directory already holds the stage's result for `key` (complete, undamaged,
+// readable); `produced` receives its artifacts.
+bool PreviousResultHolds(Stage& stage, const StageContext& context, const json& previous_record,
+                         const std::string& key, const std::string& record_path,
+                         const std::string& tag, bool force, std::vector<std::string>* produced) {
+  if (force || !fs::exists(record_path) || !fs::exists(context.output_path)) return false;
+  if (previous_record.is_discarded() || previous_record.value("key", "") != key) return false;
+  for (const auto& extra : stage.ExtraOutputs()) {
+    if (!fs::exists(fs::path(context.workdir) / extra)) return false;
+  }
+  if (!stage.Complete(context)) {
+    spdlog::info(fmt::format("{}: the previous result is incomplete, running again", tag));
+    return false;
+  }
+  // A file damaged since it was written (same size, other bytes) is not reused.
+  if (previous_record.contains("output_hash") &&
+      previous_record["output_hash"] != HashFileContents(context.output_path)) {
+    spdlog::warn(fmt::format(
+        "{}: {} is not the file this stage wrote (its content checksum differs: damaged or "
+        "changed since), running the stage again",
+        tag, context.output_path));
+    return false;
+  }
+  try {
+    *produced = ArtifactsIn(context.output_path);
+  } catch (const InputError& e) {
+    spdlog::warn(fmt::format("{}: previous output is unreadable, rerunning ({})", tag, e.what()));
+    return false;
+  }
+  return true;
+}
+
+// 2. The record of a result another run left in the shared cache; null when there is none or it is
+// damaged (no record or checksum, or the content differs).
+json CachedRecord(const fs::path& cached, const std::string& tag) {
+  if (!fs::exists(cached / "record.json")) return json();
+  const json record = json::parse(ReadTextFile((cached / "record.json").string()), nullptr, false);
+  if (record.is_discarded() || !record.contains("output_hash") || !fs::exists(cached / "output.h5") ||
+      record["output_hash"] != HashFileContents((cached / "output.h5").string())) {
+    spdlog::warn(fmt::format(
+        "{}: the cached result in {} is damaged (no record or checksum, or the content "
+        "differs), computing it again",
+        tag, cached.string()));
+    return json();
+  }
+  return record;
+}
+
+// 3. Runs the stage and returns its record; null when a stage that does not stop the run failed
+// (said in `entry`, summary.json's warnings and the log: the run goes on, and the stage runs again
+// next time, having no record).
+json RunStageNow(Stage& stage, const PipelineStageSpec& stage_spec, const StageContext& context,
+                 const std::string& key, const json& previous_record, const std::string& tag,
+                 RunSummary* run, json* entry) {
+  spdlog::info(fmt::format("{}: {}", tag, stage.description()));
+  const auto start = std::chrono::steady_clock::now();
+  json stage_summary;
+  try {
+    stage_summary = stage.Run(context);
+  } catch (const MissingArtifactError&) {
+    throw;  // the pipeline needs fixing, whatever stage this is
+  } catch (const std::exception& e) {
+    if (stage.FailureStopsRun() || Interrupting()) throw;
+    // A measurement that could not be made (a Sim(3) of two cameras).
+    const std::string message = fmt::format(
+        "{} failed: {}; the stages after it went on (stage type {} does not stop the run)",
+        stage_spec.id, e.what(), stage_spec.type);
+    spdlog::error(fmt::format("{}: {}", tag, message));
+    (*entry)["status"] = "failed";
+    (*entry)["error"] = e.what();
+    (*entry)["seconds"] = SecondsSince(start);
+    run->Update([&](json& summary) {
+      summary["stages"].push_back(*entry);
+      json warning = Warning{"stage_failed", message, {}, {}, {{"error", e.what()}}}.ToJson();
+      warning["stage"] = stage_spec.id;
+      summary["warnings"].push_back(warning);
+    });
+    return json();
+  }
+  const double seconds = SecondsSince(start);
+  spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
+  const json record = {{"key", key},
+                       {"summary", stage_summary},
+                       {"seconds", seconds},
+                       {"finished_utc", UtcNow()},
+                       {"output_hash", HashFileContents(context.output_path)},
+                       {"extra_outputs", stage.ExtraOutputs()}};
+  const std::vector<std::string> moved = MoveOutputsNoLongerWritten(
+      context.workdir, stage_spec.id, previous_record, stage.ExtraOutputs());
+  if (!moved.empty()) run->Update([&](json& summary) { AppendStaleOutputs(moved, &summary); });
+  (*entry)["status"] = "ran";
+  (*entry)["seconds"] = seconds;
+  return record;
+}
+
+// One stage of the run: reused from the work directory, taken from the shared cache, or run.
+void StepStage(const PipelineSpec& spec, size_t index, const std::string& workdir,
+               const RunOptions& options, RunSummary* run,
+               std::map<std::string, ArtifactSource>* artifacts) {
+  const PipelineStageSpec& stage_spec = spec.stages[index];
+  run->Update([&](json& summary) { summary["stage"] = stage_spec.id; });
+  const std::unique_ptr<Stage> stage = ConfiguredStage(spec, stage_spec);
+  const std::string tag = "[" + std::to_string(index + 1) + "/" +
+                          std::to_string(spec.stages.size()) + "] " + stage_spec.id;
+  StageContext context;
+  context.stage_id = stage_spec.id;
+  context.workdir = workdir;
+  context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
+  context.force = options.force;
+  for (const auto& [artifact, source] : *artifacts) context.artifacts[artifact] = source.file;
+  const std::string key = StageKey(stage_spec, *stage, *artifacts);
+  const std::string record_path =
+      (fs::path(workdir) / ".raytime" / (stage_spec.id + ".json")).string();
+  // What the stage's earlier run in this work directory recorded (none: {}).
+  const json previous_record = fs::exists(record_path)
+                                   ? json::parse(ReadTextFile(record_path), nullptr, false)
+                                   : json::object();
+
+  json entry = {{"id", stage_spec.id},
+                {"type", stage_spec.type},
+                {"key", key},
+                {"options", stage->OptionsJson()}};
+  json record;
+  std::vector<std::string> produced;
+  if (PreviousResultHolds(*stage, context, previous_record, key, record_path, tag, options.force,
+                          &produced)) {
+    spdlog::info(fmt::format("{}: inputs and options unchanged, skipped", tag));
+    record = previous_record;
+    entry["status"] = "skipped";
+    entry["seconds"] = 0.0;
+    entry["previous_seconds"] = record["seconds"];
+  } else {
+    // Sweeps share a cache; stages that write folders besides their HDF5 file always run. The
+    // lock makes a second run wait for the first's result instead of computing it again.
+    const bool cacheable = !options.cache_dir.empty() && stage->Cacheable();
+    std::unique_ptr<CacheLock> lock;
+    const fs::path cached = fs::path(options.cache_dir) / key;
+    if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
+    const json cached_record = cacheable && !options.force ? CachedRecord(cached, tag) : json();
+    if (!cached_record.is_null()) {
+      spdlog::info(fmt::format("{}: computed by another run, taken from the cache", tag));
+      record = cached_record;
+      LinkOrCopy(cached / "output.h5", context.output_path);
+      entry["status"] = "cached";
+      entry["seconds"] = 0.0;
+      entry["previous_seconds"] = record["seconds"];
+    } else {
+      record = RunStageNow(*stage, stage_spec, context, key, previous_record, tag, run, &entry);
+      if (record.is_null()) return;  // failed without stopping the run, recorded
+      if (cacheable) {
+        WriteDirectoryAtomically(cached.string(), [&](const std::string& dir) {
+          LinkOrCopy(context.output_path, fs::path(dir) / "output.h5");
+          WriteTextFileAtomically((fs::path(dir) / "record.json").string(), record.dump(2));
+        });
+      }
+    }
+    WriteTextFileAtomically(record_path, record.dump(2));
+    produced = ArtifactsIn(context.output_path);
+  }
+  entry["summary"] = record["summary"];
+  LogWarnings(stage_spec.id, entry["summary"]);
+  for (const auto& artifact : produced) (*artifacts)[artifact] = {context.output_path, key};
+  run->Update([&](json& summary) {
+    for (const auto& artifact : produced) {
+      // Which stage wrote each pose set, for reports that time an arm by its stage.
+      if (artifact.rfind("poses/", 0) == 0) {
+        summary["pose_sets"][artifact.substr(6)] = stage_spec.id;
+      }
+    }
+    CollectStage(stage_spec.id, entry["summary"], &summary);
+    summary["stages"].push_back(entry);
+  });
+}
+
+}  // namespace
+
 json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   const auto run_start = std::chrono::steady_clock::now();
   fs::create_directories(fs::path(workdir) / ".raytime");
@@ -291,172 +483,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   std::map<std::string, ArtifactSource> artifacts;
   try {
     for (size_t i = 0; i < spec.stages.size(); ++i) {
-      const PipelineStageSpec& stage_spec = spec.stages[i];
-      run.Update([&](json& summary) { summary["stage"] = stage_spec.id; });
-      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
-      try {
-        stage->Configure(stage_spec.options, spec.path);
-      } catch (const InputError& e) {
-        const std::string message = e.what();
-        if (message.rfind(spec.path + ":", 0) == 0) throw;
-        ThrowInput(spec.path, stage_spec.line, message);
-      }
-      const std::string tag = "[" + std::to_string(i + 1) + "/" +
-                              std::to_string(spec.stages.size()) + "] " + stage_spec.id;
-
-      StageContext context;
-      context.stage_id = stage_spec.id;
-      context.workdir = workdir;
-      context.output_path = (fs::path(workdir) / (stage_spec.id + ".h5")).string();
-      context.force = options.force;
-      for (const auto& [artifact, source] : artifacts) context.artifacts[artifact] = source.file;
-      const std::string key = StageKey(stage_spec, *stage, artifacts);
-      const std::string record_path =
-          (fs::path(workdir) / ".raytime" / (stage_spec.id + ".json")).string();
-
-      // What the stage's earlier run in this work directory recorded (none: {}).
-      const json previous_record = fs::exists(record_path)
-                                       ? json::parse(ReadTextFile(record_path), nullptr, false)
-                                       : json::object();
-      // 1. This work directory already holds the result.
-      json record;
-      bool unchanged = !options.force && fs::exists(record_path) && fs::exists(context.output_path);
-      if (unchanged) {
-        record = previous_record;
-        unchanged = !record.is_discarded() && record.value("key", "") == key;
-        for (const auto& extra : stage->ExtraOutputs()) {
-          unchanged = unchanged && fs::exists(fs::path(workdir) / extra);
-        }
-        if (unchanged && !stage->Complete(context)) {
-          spdlog::info(fmt::format("{}: the previous result is incomplete, running again", tag));
-          unchanged = false;
-        }
-        // A file damaged since it was written (same size, other bytes) is not reused.
-        if (unchanged && record.contains("output_hash") &&
-            record["output_hash"] != HashFileContents(context.output_path)) {
-          spdlog::warn(fmt::format(
-              "{}: {} is not the file this stage wrote (its content checksum differs: damaged or "
-              "changed since), running the stage again",
-              tag, context.output_path));
-          unchanged = false;
-        }
-      }
-      std::vector<std::string> produced;
-      if (unchanged) {
-        try {
-          produced = ArtifactsIn(context.output_path);
-        } catch (const InputError& e) {
-          spdlog::warn(
-              fmt::format("{}: previous output is unreadable, rerunning ({})", tag, e.what()));
-          unchanged = false;
-        }
-      }
-      json entry = {{"id", stage_spec.id},
-                    {"type", stage_spec.type},
-                    {"key", key},
-                    {"options", stage->OptionsJson()}};
-      if (unchanged) {
-        spdlog::info(fmt::format("{}: inputs and options unchanged, skipped", tag));
-        entry["status"] = "skipped";
-        entry["seconds"] = 0.0;
-        entry["previous_seconds"] = record["seconds"];
-      } else {
-        // 2. Another run computed it (sweeps share a cache); stages that write folders besides
-        // their HDF5 file always run.
-        const bool cacheable = !options.cache_dir.empty() && stage->Cacheable();
-        std::unique_ptr<CacheLock> lock;
-        const fs::path cached = fs::path(options.cache_dir) / key;
-        if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
-        json cached_record;
-        if (cacheable && !options.force && fs::exists(cached / "record.json")) {
-          cached_record =
-              json::parse(ReadTextFile((cached / "record.json").string()), nullptr, false);
-          if (cached_record.is_discarded() || !cached_record.contains("output_hash") ||
-              !fs::exists(cached / "output.h5") ||
-              cached_record["output_hash"] != HashFileContents((cached / "output.h5").string())) {
-            spdlog::warn(fmt::format(
-                "{}: the cached result in {} is damaged (no record or checksum, or the content "
-                "differs), computing it again",
-                tag, cached.string()));
-            cached_record = json();
-          }
-        }
-        if (!cached_record.is_null()) {
-          spdlog::info(fmt::format("{}: computed by another run, taken from the cache", tag));
-          record = cached_record;
-          LinkOrCopy(cached / "output.h5", context.output_path);
-          entry["status"] = "cached";
-          entry["seconds"] = 0.0;
-          entry["previous_seconds"] = record["seconds"];
-        } else {
-          // 3. Run it.
-          spdlog::info(fmt::format("{}: {}", tag, stage->description()));
-          const auto start = std::chrono::steady_clock::now();
-          json stage_summary;
-          try {
-            stage_summary = stage->Run(context);
-          } catch (const MissingArtifactError&) {
-            throw;  // the pipeline needs fixing, whatever stage this is
-          } catch (const std::exception& e) {
-            if (stage->FailureStopsRun() || Interrupting()) throw;
-            // A measurement that could not be made (a Sim(3) of two cameras): said in the summary
-            // and the log, the run goes on, and the stage runs again next time (no record).
-            const std::string message = fmt::format(
-                "{} failed: {}; the stages after it went on (stage type {} does not "
-                "stop the run)",
-                stage_spec.id, e.what(), stage_spec.type);
-            spdlog::error(fmt::format("{}: {}", tag, message));
-            entry["status"] = "failed";
-            entry["error"] = e.what();
-            entry["seconds"] = SecondsSince(start);
-            run.Update([&](json& summary) {
-              summary["stages"].push_back(entry);
-              json warning =
-                  Warning{"stage_failed", message, {}, {}, {{"error", e.what()}}}.ToJson();
-              warning["stage"] = stage_spec.id;
-              summary["warnings"].push_back(warning);
-            });
-            continue;
-          }
-          const double seconds = SecondsSince(start);
-          spdlog::info(fmt::format("{}: done in {:.2f} s", tag, seconds));
-          record = {{"key", key},
-                    {"summary", stage_summary},
-                    {"seconds", seconds},
-                    {"finished_utc", UtcNow()},
-                    {"output_hash", HashFileContents(context.output_path)},
-                    {"extra_outputs", stage->ExtraOutputs()}};
-          const std::vector<std::string> moved = MoveOutputsNoLongerWritten(
-              workdir, stage_spec.id, previous_record, stage->ExtraOutputs());
-          if (!moved.empty()) {
-            run.Update([&](json& summary) { AppendStaleOutputs(moved, &summary); });
-          }
-          entry["status"] = "ran";
-          entry["seconds"] = seconds;
-          if (cacheable) {
-            WriteDirectoryAtomically(cached.string(), [&](const std::string& dir) {
-              LinkOrCopy(context.output_path, fs::path(dir) / "output.h5");
-              WriteTextFileAtomically((fs::path(dir) / "record.json").string(), record.dump(2));
-            });
-          }
-        }
-        WriteTextFileAtomically(record_path, record.dump(2));
-        produced = ArtifactsIn(context.output_path);
-      }
-      entry["summary"] = record["summary"];
-      LogWarnings(stage_spec.id, entry["summary"]);
-      for (const auto& artifact : produced) {
-        artifacts[artifact] = {context.output_path, key};
-      }
-      run.Update([&](json& summary) {
-        for (const auto& artifact : produced) {
-          // Which stage wrote each pose set, for reports that time an arm by its stage.
-          if (artifact.rfind("poses/", 0) == 0)
-            summary["pose_sets"][artifact.substr(6)] = stage_spec.id;
-        }
-        CollectStage(stage_spec.id, entry["summary"], &summary);
-        summary["stages"].push_back(entry);
-      });
+      StepStage(spec, i, workdir, options, &run, &artifacts);
     }
   } catch (const std::exception& e) {
     try {

@@ -85,6 +85,18 @@ class RayTimeProblem {
   bool fixed_intrinsics_residuals() const { return fixed_intrinsics_residuals_; }
 
  private:
+  // The constructor's steps, in order.
+  void CopyStartingValues(const CameraBlocks& cameras,
+                          const std::vector<Rigid3>& initial_world_from_cam);
+  void CreateCache(const RefineInput& input, const ProblemLayout& layout,
+                   const CameraBlocks& cameras, int num_threads);
+  void AddParameterBlocks(const ProblemLayout& layout, const CameraBlocks& cameras);
+  void AddMatchTerm(const RefineInput& input, const ProblemLayout& layout,
+                    const CameraBlocks& cameras, double loss_scale_px2);
+  void AddPriorTerms(const std::vector<Rigid3>& prior_world_from_cam,
+                     const RayTimeProblemSettings& settings);
+  void HoldIntrinsics(const std::vector<int>& held, bool refine_focal);
+
   std::vector<CameraIntrinsics> intrinsics_info_;
   std::vector<double> intrinsics_;  // kNumIntrinsics per block
   std::vector<double> poses_;

@@ -55,42 +55,36 @@ void ValidateInput(const RefineInput& input) {
   }
 }
 
-}  // namespace
-
-RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
-                          RefineOutput* output) {
-  const auto start = std::chrono::steady_clock::now();
-  ValidateOptions(options, "refine");
-  ValidateInput(input);
-  RefineSummary summary;
-
-  std::vector<Rigid3> prior = input.prior_world_from_cam;
-  for (Rigid3& pose : prior) pose.rotation.normalize();
-  PassState state;
-  state.world_from_cam = prior;
-  // The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating
-  // one, else the images' own cameras. Every pass of the run uses the same blocks.
-  summary.cameras.sharing = options.intrinsics_sharing;
+// The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating one,
+// else the images' own cameras. Every pass of the run uses the same blocks.
+void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& options,
+                           PassState* state, CameraBlocksSummary* cameras) {
+  cameras->sharing = options.intrinsics_sharing;
   std::vector<bool> camera_in_use(input.cameras.size(), false);
   for (const int camera : input.camera_index) camera_in_use[camera] = true;
-  summary.cameras.num_cameras =
+  cameras->num_cameras =
       static_cast<int>(std::count(camera_in_use.begin(), camera_in_use.end(), true));
-  if (options.intrinsics_sharing == "shared") {  // self-calibrating (RefineOptions relations)
-    state.cameras = SharedBlock(input, &summary.cameras.max_start_disagreement_px);
-    summary.cameras.cameras_differ =
-        summary.cameras.max_start_disagreement_px > kSharedCameraTolerancePx;
-    if (summary.cameras.cameras_differ) {
-      spdlog::warn(fmt::format(
-          "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
-          "started at their median (intrinsics_sharing: shared); their per-image values are "
-          "replaced by one refined set",
-          summary.cameras.num_cameras, summary.cameras.max_start_disagreement_px));
-    }
-  } else {
-    state.cameras = PerCameraBlocks(input);
+  if (options.intrinsics_sharing != "shared") {
+    state->cameras = PerCameraBlocks(input);
+    return;
   }
+  // Self-calibrating (RefineOptions relations).
+  state->cameras = SharedBlock(input, &cameras->max_start_disagreement_px);
+  cameras->cameras_differ = cameras->max_start_disagreement_px > kSharedCameraTolerancePx;
+  if (cameras->cameras_differ) {
+    spdlog::warn(fmt::format(
+        "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
+        "started at their median (intrinsics_sharing: shared); their per-image values are "
+        "replaced by one refined set",
+        cameras->num_cameras, cameras->max_start_disagreement_px));
+  }
+}
 
-  std::optional<RefineInput> pruned;  // the input less the pairs the basin-first solve removed
+// The recipe's passes: the staged room recipe (§4.3), basin-first (basin_first.h) or one pass.
+// `pruned` receives the input less the pairs a basin-first solve removed.
+void RunRecipe(const RefineInput& input, const RefineOptions& options,
+               const std::vector<Rigid3>& prior, PassState* state, RefineSummary* summary,
+               std::optional<RefineInput>* pruned) {
   PassSettings nominal;
   nominal.name = "solve";
   nominal.max_matches_per_pair = options.max_matches_per_pair;
@@ -106,77 +100,85 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
     pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
     pass1.orientation_weight = options.stage1_orientation_weight;
     pass1.scales = options.StageScales();
-    summary.passes.push_back(RunPass(input, options, pass1, prior, &state));
+    summary->passes.push_back(RunPass(input, options, pass1, prior, state));
     // ... pass 2 one warm solve at the nominal scale, priors re-anchored at the pass-1 poses.
     PassSettings pass2 = nominal;
     pass2.name = "pass2_self_calibration";
     pass2.scales = {options.loss_scale_px2};
-    const std::vector<Rigid3> pass1_poses = state.world_from_cam;
-    summary.passes.push_back(RunPass(input, options, pass2, pass1_poses, &state));
+    const std::vector<Rigid3> pass1_poses = state->world_from_cam;
+    summary->passes.push_back(RunPass(input, options, pass2, pass1_poses, state));
   } else if (options.basin_first) {
-    RunBasinFirst(input, options, nominal, prior, &state, &summary, &pruned);
+    RunBasinFirst(input, options, nominal, prior, state, summary, pruned);
   } else {
-    summary.passes.push_back(RunPass(input, options, nominal, prior, &state));
+    summary->passes.push_back(RunPass(input, options, nominal, prior, state));
   }
+}
 
-  for (const RefinePassSummary& pass : summary.passes) {
-    summary.build_seconds += pass.build_seconds;
-    summary.solve_seconds += pass.solve_seconds;
+// Iterations, times, costs and failure over the passes.
+void AddUpPasses(RefineSummary* summary) {
+  for (const RefinePassSummary& pass : summary->passes) {
+    summary->build_seconds += pass.build_seconds;
+    summary->solve_seconds += pass.solve_seconds;
     for (const GncStageSummary& stage : pass.stages) {
-      summary.total_iterations += stage.iterations;
-      summary.jacobian_seconds += stage.jacobian_seconds;
-      summary.solver_failed = summary.solver_failed || stage.termination == "FAILURE";
+      summary->total_iterations += stage.iterations;
+      summary->jacobian_seconds += stage.jacobian_seconds;
+      summary->solver_failed = summary->solver_failed || stage.termination == "FAILURE";
     }
   }
-  CountBlocks(state, &summary.cameras);
-  spdlog::info(fmt::format(
-      "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: "
-      "{}",
-      summary.cameras.num_cameras, summary.cameras.num_blocks,
-      options.SelfCalibrates() ? "self-calibrated, " : "fixed",
-      options.SelfCalibrates() ? options.intrinsics_sharing : "",
-      summary.cameras.min_block_observations));
-  summary.initial_cost = summary.passes.front().stages.front().initial_cost;
-  const RefinePassSummary& last = summary.passes.back();
-  summary.final_cost = last.stages.back().final_cost -
-                       (last.gauge_polish.prior_cost_before - last.gauge_polish.prior_cost_after);
+  summary->initial_cost = summary->passes.front().stages.front().initial_cost;
+  const RefinePassSummary& last = summary->passes.back();
+  summary->final_cost = last.stages.back().final_cost -
+                        (last.gauge_polish.prior_cost_before - last.gauge_polish.prior_cost_after);
+}
 
-  // Posterior guardrails against the original prior.
-  if (summary.solver_failed) summary.guardrails_fired.push_back("solver_failure");
+// The posterior guardrails (§3.6, §4.3 and beyond the paper) and the decision they make.
+void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
+                     const std::vector<Rigid3>& prior, const PassState& state,
+                     const std::optional<RefineInput>& pruned, RefineSummary* summary) {
+  // Against the original prior: these return it.
+  if (summary->solver_failed) summary->guardrails_fired.push_back("solver_failure");
   if (options.trust_region) {
-    summary.trust_region =
+    summary->trust_region =
         CheckTrustRegion(prior, state.world_from_cam, options.trust_region_rotation_deg,
                          options.trust_region_translation_m * options.length_unit_m);
-    if (summary.trust_region.fired) summary.guardrails_fired.push_back("trust_region");
+    if (summary->trust_region.fired) summary->guardrails_fired.push_back("trust_region");
   }
   if (options.wander_test) {
-    summary.wander =
+    summary->wander =
         CheckWander(prior, state.world_from_cam, options.wander_expected_m * options.length_unit_m,
                     options.wander_factor);
-    if (summary.wander.fired) summary.guardrails_fired.push_back("wander");
+    if (summary->wander.fired) summary->guardrails_fired.push_back("wander");
   }
-  summary.returned_prior = !summary.guardrails_fired.empty();
+  summary->returned_prior = !summary->guardrails_fired.empty();
   // Against the solve's own matches (prior-independent), flag only.
   if (options.inconsistent_pairs_test) {
-    summary.inconsistent_pairs = CheckInconsistentPairs(
+    summary->inconsistent_pairs = CheckInconsistentPairs(
         SolvedPairResiduals(pruned ? *pruned : input, state), options.inconsistent_pair_px,
         options.inconsistent_pair_median_multiple, options.max_inconsistent_pair_fraction);
-    if (summary.inconsistent_pairs.fired) summary.guardrails_fired.push_back("inconsistent_pairs");
+    if (summary->inconsistent_pairs.fired) {
+      summary->guardrails_fired.push_back("inconsistent_pairs");
+    }
   }
   // A part resting on a pair or two nothing else checks looks consistent whether they are right or
   // not (its poses simply follow them), as does one whose disagreeing pairs the removal took.
-  summary.loose_parts =
-      CheckLooseParts(input, summary.pair_removal, state, options,
-                      options.inconsistent_pairs_test ? summary.inconsistent_pairs.pair_threshold_px
-                                                      : options.inconsistent_pair_px);
-  if (!summary.loose_parts.images.empty()) summary.guardrails_fired.push_back("loose_parts");
+  summary->loose_parts = CheckLooseParts(input, summary->pair_removal, state, options,
+                                         options.inconsistent_pairs_test
+                                             ? summary->inconsistent_pairs.pair_threshold_px
+                                             : options.inconsistent_pair_px);
+  if (!summary->loose_parts.images.empty()) summary->guardrails_fired.push_back("loose_parts");
 
-  output->solved_world_from_cam = state.world_from_cam;
-  output->solved_cameras = InputCameras(input, state.cameras);
-  output->solved_observations = SolvedObservationsOf(state);
-  output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
-  output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
-  summary.total_seconds = SecondsSince(start);
+  if (summary->returned_prior) {
+    summary->decision = "returned_prior";
+  } else if (!summary->guardrails_fired.empty()) {
+    summary->decision = "flagged";
+  } else if (!summary->pair_removal.removed.empty()) {
+    summary->decision = "re_solved";
+  } else {
+    summary->decision = "accepted";
+  }
+}
+
+void LogGuardrailMeasures(const RefineSummary& summary) {
   if (summary.trust_region.enabled) {
     spdlog::info(fmt::format(
         "refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
@@ -200,20 +202,11 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
         pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : ""));
   }
-  const PairRemovalSummary& removal = summary.pair_removal;
-  if (summary.returned_prior) {
-    summary.decision = "returned_prior";
-  } else if (!summary.guardrails_fired.empty()) {
-    summary.decision = "flagged";
-  } else if (!removal.removed.empty()) {
-    summary.decision = "re_solved";
-  } else {
-    summary.decision = "accepted";
-  }
   if (summary.returned_prior) {
     spdlog::warn(fmt::format("refine: guardrail fired ({}): returning the prior",
                              summary.guardrails_fired.front()));
   }
+  const PairRemovalSummary& removal = summary.pair_removal;
   if (removal.enabled) {
     spdlog::info(
         fmt::format("refine: pair removal: {} pair(s) removed in {} round(s), stopped: {}{}",
@@ -223,14 +216,18 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
                         : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
                                       removal.kept.size())));
   }
-  for (const LooseCut& cut : summary.loose_parts.cuts) {
-    // A part inside a larger loose one is in the summary, not in the log.
+}
+
+// The loose parts (the outermost of nested ones: the others are in the summary), the decision and
+// the inconsistent pairs, by image name.
+void LogVerdicts(const RefineInput& input, const RefineSummary& summary) {
+  const auto& cuts = summary.loose_parts.cuts;
+  for (const LooseCut& cut : cuts) {
     const auto holds = [&](const LooseCut& other) {
       return other.images.size() > cut.images.size() &&
              std::includes(other.images.begin(), other.images.end(), cut.images.begin(),
                            cut.images.end());
     };
-    const auto& cuts = summary.loose_parts.cuts;
     if (std::any_of(cuts.begin(), cuts.end(), holds)) continue;
     spdlog::warn(fmt::format(
         "refine: guardrail fired (loose_parts): {} image(s) held to the rest by {} pair(s) of "
@@ -243,26 +240,61 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         fmt::join(Labels(input, cut.images), ", ")));
   }
   spdlog::info(fmt::format("refine: decision: {}", summary.decision));
-  if (pairs.fired) {
-    // The first few in the log; all of them in the summary.
-    constexpr size_t kLogged = 8;
-    std::string listed;
-    for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
-      listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ",
-                            input.Label(pairs.pairs[p].image1), input.Label(pairs.pairs[p].image2),
-                            pairs.pairs[p].median_px);
-    }
-    if (pairs.pairs.size() > kLogged) listed += ", ...";
-    spdlog::warn(fmt::format(
-        "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
-        "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}{}",
-        pairs.num_inconsistent, pairs.num_pairs, listed,
-        pairs.images_mostly_inconsistent.empty()
-            ? std::string()
-            : fmt::format(
-                  "; most pairs of image(s) {} are among them: their poses are likely wrong",
-                  fmt::join(Labels(input, pairs.images_mostly_inconsistent), ", "))));
+  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  if (!pairs.fired) return;
+  // The first few in the log; all of them in the summary.
+  constexpr size_t kLogged = 8;
+  std::string listed;
+  for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
+    listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ",
+                          input.Label(pairs.pairs[p].image1), input.Label(pairs.pairs[p].image2),
+                          pairs.pairs[p].median_px);
   }
+  if (pairs.pairs.size() > kLogged) listed += ", ...";
+  spdlog::warn(fmt::format(
+      "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
+      "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}{}",
+      pairs.num_inconsistent, pairs.num_pairs, listed,
+      pairs.images_mostly_inconsistent.empty()
+          ? std::string()
+          : fmt::format("; most pairs of image(s) {} are among them: their poses are likely wrong",
+                        fmt::join(Labels(input, pairs.images_mostly_inconsistent), ", "))));
+}
+
+}  // namespace
+
+RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options,
+                          RefineOutput* output) {
+  const auto start = std::chrono::steady_clock::now();
+  ValidateOptions(options, "refine");
+  ValidateInput(input);
+  RefineSummary summary;
+
+  std::vector<Rigid3> prior = input.prior_world_from_cam;
+  for (Rigid3& pose : prior) pose.rotation.normalize();
+  PassState state;
+  state.world_from_cam = prior;
+  SetUpIntrinsicsBlocks(input, options, &state, &summary.cameras);
+  std::optional<RefineInput> pruned;
+  RunRecipe(input, options, prior, &state, &summary, &pruned);
+  AddUpPasses(&summary);
+  CountBlocks(state, &summary.cameras);
+  spdlog::info(fmt::format(
+      "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: {}",
+      summary.cameras.num_cameras, summary.cameras.num_blocks,
+      options.SelfCalibrates() ? "self-calibrated, " : "fixed",
+      options.SelfCalibrates() ? options.intrinsics_sharing : "",
+      summary.cameras.min_block_observations));
+  ApplyGuardrails(input, options, prior, state, pruned, &summary);
+
+  output->solved_world_from_cam = state.world_from_cam;
+  output->solved_cameras = InputCameras(input, state.cameras);
+  output->solved_observations = SolvedObservationsOf(state);
+  output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
+  output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
+  summary.total_seconds = SecondsSince(start);
+  LogGuardrailMeasures(summary);
+  LogVerdicts(input, summary);
   return summary;
 }
 
