@@ -298,6 +298,290 @@ ExportedObservations ObservationsInExport(const RayTimeSource& source,
   return out;
 }
 
+// What every pose set's folder shares: the images in name order (ids and the split follow it),
+// their pinhole cameras, the split, the solve's observations and the tracks merged from them in
+// the solve's frame, with each image's 2D points of those tracks.
+struct SharedExport {
+  std::vector<const ImageInfo*> ordered;
+  std::map<std::string, int> index_of;
+  ImageSet pinhole;
+  TrainTestSplit split;
+  ExportedObservations exported;
+  std::vector<MergedTrack> tracks;
+  std::vector<std::vector<Eigen::Vector2d>> points2D;
+  std::vector<std::vector<uint64_t>> point3D_ids;
+  std::vector<std::vector<ColmapTrackElement>> elements;
+
+  int num_images() const { return static_cast<int>(ordered.size()); }
+  const CameraIntrinsics& PinholeCamera(int i) const {
+    return pinhole.cameras[pinhole.images[i].camera_index];
+  }
+};
+
+// The images in name order; every pose set must have a pose for each.
+std::vector<const ImageInfo*> ImagesInNameOrder(const ImageSet& images,
+                                                const std::map<std::string, PoseSet>& poses) {
+  std::vector<const ImageInfo*> ordered;
+  for (const ImageInfo& info : images.images) ordered.push_back(&info);
+  std::sort(ordered.begin(), ordered.end(),
+            [](const ImageInfo* a, const ImageInfo* b) { return a->name < b->name; });
+  for (const auto& [name, set] : poses) {
+    for (const ImageInfo* info : ordered) {
+      if (!set.Has(info->name)) {
+        throw InputError("export (3dgs): pose set '" + name + "' has no pose for " + info->name);
+      }
+    }
+  }
+  return ordered;
+}
+
+// The images, once, into `folder` (every pose set's images/ links to it): undistorted to their
+// pinhole camera, or copied when they have no distortion; the colours of the solve's observations
+// read on the way.
+void WriteImagesOnce(const ImageSet& images, const std::optional<RayTimeSource>& source,
+                     const TrainerExportOptions& options, const fs::path& folder,
+                     SharedExport* shared, TrainerExportSummary* summary) {
+  TrackObservations& track_obs = shared->exported.tracks;
+  const int num_images = shared->num_images();
+  auto last_progress = std::chrono::steady_clock::now();
+  for (int i = 0; i < num_images; ++i) {
+    const ImageInfo& info = *shared->ordered[i];
+    const CameraIntrinsics& distorted = images.cameras[info.camera_index];
+    const fs::path path = fs::path(images.image_root) / info.name;
+    const fs::path target = folder / info.name;
+    fs::create_directories(target.parent_path());
+    const bool copy = IsUndistorted(distorted);
+    const std::vector<int>& observations = shared->exported.of_image[i];
+    cv::Mat bgr;
+    if (!copy || !observations.empty()) {
+      bgr = cv::imread(path.string(), cv::IMREAD_COLOR);
+      if (bgr.empty()) ThrowInput(path.string(), 0, "cannot read or decode the image");
+      if (bgr.cols != distorted.width || bgr.rows != distorted.height) {
+        ThrowInput(path.string(), 0,
+                   "image is " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows) +
+                       " but its camera is " + std::to_string(distorted.width) + "x" +
+                       std::to_string(distorted.height));
+      }
+      for (const int k : observations) {
+        const int row = shared->exported.source_rows[k];
+        track_obs.colours.row(k) =
+            ColourAt(bgr, source->rays.pixels.row(row).transpose()).transpose();
+      }
+    }
+    if (copy) {
+      if (!fs::is_regular_file(path)) ThrowInput(path.string(), 0, "image file not found");
+      fs::copy_file(path, target);
+      ++summary->num_images_copied;
+    } else {
+      const cv::Mat undistorted = UndistortImage(bgr, distorted, shared->PinholeCamera(i));
+      bool written = false;
+      try {
+        written = cv::imwrite(target.string(), undistorted,
+                              {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality});
+      } catch (const cv::Exception& e) {
+        ThrowInput(target.string(), 0, std::string("cannot encode the image: ") + e.what());
+      }
+      if (!written) {
+        ThrowInput(target.string(), 0, "cannot write the undistorted image (format of its name?)");
+      }
+      ++summary->num_images_undistorted;
+    }
+    if (SecondsSince(last_progress) > kProgressSeconds || i + 1 == num_images) {
+      last_progress = std::chrono::steady_clock::now();
+      spdlog::info(fmt::format("export (3dgs): images {}/{} ({} undistorted, {} copied)", i + 1,
+                               num_images, summary->num_images_undistorted,
+                               summary->num_images_copied));
+    }
+  }
+}
+
+// The tracks, merged once in the source's frame, and per image its tracks' observations (the same
+// 2D points for every pose set).
+void MergeSourceTracks(const RayTimeSource& source, const TrainerExportOptions& options,
+                       SharedExport* shared, TrainerExportSummary* summary) {
+  const int num_images = shared->num_images();
+  const TrackObservations& track_obs = shared->exported.tracks;
+  std::vector<Eigen::Matrix<double, 3, 4>> projections(num_images,
+                                                       Eigen::Matrix<double, 3, 4>::Zero());
+  for (int i = 0; i < num_images; ++i) {
+    const auto pose = source.poses.world_from_cam.find(shared->ordered[i]->name);
+    if (pose == source.poses.world_from_cam.end()) continue;
+    projections[i] = ProjectionOf(shared->PinholeCamera(i), pose->second);
+  }
+  shared->tracks =
+      MergeTracks(track_obs, projections, options.max_track_error_px, &summary->tracks);
+  summary->points_from = source.pose_set;
+  spdlog::info(fmt::format(
+      "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
+      "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
+      summary->tracks.num_tracks, source.pose_set, track_obs.image.size(),
+      summary->tracks.num_kept, summary->tracks.num_disagreeing, options.max_track_error_px,
+      summary->tracks.num_behind_camera, summary->tracks.num_without_ray_time));
+
+  shared->points2D.assign(num_images, {});
+  shared->point3D_ids.assign(num_images, {});
+  shared->elements.assign(shared->tracks.size(), {});
+  for (size_t t = 0; t < shared->tracks.size(); ++t) {
+    for (const int o : shared->tracks[t].observations) {
+      const int image = track_obs.image(o);
+      shared->elements[t].push_back({static_cast<uint32_t>(image + 1),
+                                     static_cast<uint32_t>(shared->points2D[image].size())});
+      shared->points2D[image].push_back(track_obs.pixels.row(o).transpose() +
+                                        Eigen::Vector2d(0.5, 0.5));  // COLMAP convention
+      shared->point3D_ids[image].push_back(t + 1);
+    }
+  }
+}
+
+// transforms.json's split lists and point cloud.
+nlohmann::json TransformsExtras(const TrainTestSplit& split, bool with_points) {
+  nlohmann::json extras = {{"train_filenames", nlohmann::json::array()},
+                           {"test_filenames", nlohmann::json::array()}};
+  for (const std::string& name : split.train) extras["train_filenames"].push_back("images/" + name);
+  for (const std::string& name : split.test) extras["test_filenames"].push_back("images/" + name);
+  // nerfstudio's parser refuses a transforms.json that lists some splits but not the one asked
+  // for, and ns-train asks for "val": the held-out images serve as both.
+  extras["val_filenames"] = extras["test_filenames"];
+  if (with_points) extras["ply_file_path"] = "sparse_pc.ply";
+  return extras;
+}
+
+// The frame the points take in pose set `name`: "solve" (the source's own), "sim3" (mapped onto
+// its centres by `to_set`), or "none" (no points: none merged, or no Sim(3), which is warned).
+std::string PointsFrame(const std::string& name, const PoseSet& set,
+                        const std::optional<RayTimeSource>& source, const SharedExport& shared,
+                        Warnings* warnings, Sim3* to_set) {
+  if (!source || shared.tracks.empty()) return "none";
+  if (name == source->pose_set) return "solve";
+  std::vector<Eigen::Vector3d> from, to;
+  for (const ImageInfo* info : shared.ordered) {
+    const auto pose = source->poses.world_from_cam.find(info->name);
+    if (pose == source->poses.world_from_cam.end()) continue;
+    from.push_back(pose->second.translation);
+    to.push_back(set.world_from_cam.at(info->name).translation);
+  }
+  try {
+    *to_set = FitAlignment(from, to, AlignmentKind::kSim3);
+    return "sim3";
+  } catch (const std::invalid_argument&) {
+    warnings->push_back(
+        {"no_initial_points",
+         "the 3dgs export of '" + name + "' has no initial points: no Sim(3) maps the " +
+             std::to_string(from.size()) + " camera centres of '" + source->pose_set +
+             "' onto its own (fewer than three, or collinear)",
+         {},
+         {},
+         {{"pose_set", name}, {"points_from", source->pose_set}}});
+    spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
+    return "none";
+  }
+}
+
+// A pose set's points: the merged tracks in its frame (`to_set`), into its COLMAP model and PLY,
+// with every observation's reprojection error in it.
+struct PoseSetPoints {
+  std::vector<Eigen::Vector3d> xyz;
+  std::vector<std::array<uint8_t, 3>> rgb;
+  std::vector<double> errors;
+};
+
+PoseSetPoints AddPoints(const SharedExport& shared, const PoseSet& set, const Sim3& to_set,
+                        ColmapModel* model) {
+  std::vector<Eigen::Matrix<double, 3, 4>> projections;
+  for (int i = 0; i < shared.num_images(); ++i) {
+    projections.push_back(
+        ProjectionOf(shared.PinholeCamera(i), set.world_from_cam.at(shared.ordered[i]->name)));
+  }
+  for (int i = 0; i < shared.num_images(); ++i) {
+    ColmapImage& image = model->images.at(static_cast<uint32_t>(i + 1));
+    image.points2D = shared.points2D[i];
+    image.point3D_ids = shared.point3D_ids[i];
+  }
+  const TrackObservations& track_obs = shared.exported.tracks;
+  PoseSetPoints out;
+  for (size_t t = 0; t < shared.tracks.size(); ++t) {
+    ColmapPoint3D point;
+    point.point3D_id = t + 1;
+    point.xyz = to_set * shared.tracks[t].xyz;
+    std::array<uint8_t, 3> rgb;
+    for (int k = 0; k < 3; ++k) {
+      rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(shared.tracks[t].rgb[k]), 0L, 255L));
+      point.rgb[k] = rgb[k];
+    }
+    double sum = 0.0;
+    for (const int o : shared.tracks[t].observations) {
+      double depth = 0.0;
+      const double error = (Project(projections[track_obs.image(o)], point.xyz, &depth) -
+                            track_obs.pixels.row(o).transpose())
+                               .norm();
+      out.errors.push_back(error);
+      sum += error;
+    }
+    point.error = sum / static_cast<double>(shared.tracks[t].observations.size());
+    point.track = shared.elements[t];
+    model->points3D[point.point3D_id] = point;
+    out.xyz.push_back(point.xyz);
+    out.rgb.push_back(rgb);
+  }
+  return out;
+}
+
+// One pose set's folder, written whole or not at all: images/ (links into `images`), sparse/0
+// (text and binary), transforms.json, sparse_pc.ply (with points), train.txt and test.txt.
+std::string WritePoseSetFolder(const std::string& root, const std::string& name,
+                               const PoseSet& set, const SharedExport& shared,
+                               const std::optional<RayTimeSource>& source,
+                               const fs::path& images, Warnings* warnings,
+                               TrainerExportSummary* summary) {
+  Sim3 to_set;
+  const std::string frame = PointsFrame(name, set, source, shared, warnings, &to_set);
+  ColmapModel model = ToColmapModel(shared.pinhole, set);
+  const PoseSetPoints points =
+      frame == "none" ? PoseSetPoints() : AddPoints(shared, set, to_set, &model);
+  summary->points_frame[name] = frame;
+  summary->reprojection_median_px[name] = Median(points.errors, 0.0);
+  const nlohmann::json extras = TransformsExtras(shared.split, frame != "none");
+
+  const std::string dir = (fs::path(root) / name).string();
+  WriteDirectoryAtomically(dir, [&](const std::string& tmp) {
+    for (const ImageInfo* info : shared.ordered) {
+      CreateHardLinkOrCopy(images / info->name, fs::path(tmp) / "images" / info->name);
+    }
+    const fs::path sparse = fs::path(tmp) / "sparse";
+    WriteColmapModelText(model, (sparse / "text").string());
+    WriteColmapModelBinary(model, (sparse / "binary").string());
+    MoveFilesInto(sparse / "text", sparse / "0");
+    MoveFilesInto(sparse / "binary", sparse / "0");
+    WriteTransformsJson((fs::path(tmp) / "transforms.json").string(), shared.pinhole, set,
+                        "images/", extras);
+    if (frame != "none") {
+      WritePointsPly((fs::path(tmp) / "sparse_pc.ply").string(), points.xyz, points.rgb);
+    }
+    WriteLines((fs::path(tmp) / "test.txt").string(), shared.split.test);
+    WriteLines((fs::path(tmp) / "train.txt").string(), shared.split.train);
+  });
+  spdlog::info(fmt::format(
+      "export (3dgs): {} -> {}: {} images ({} train, {} test), {} points ({}), median "
+      "reprojection {:.3g} px",
+      name, dir, shared.num_images(), shared.split.train.size(), shared.split.test.size(),
+      model.points3D.size(), frame, summary->reprojection_median_px[name]));
+  return dir;
+}
+
+// A temporary folder next to `path`, removed however the export ends.
+struct TemporaryFolder {
+  explicit TemporaryFolder(const std::string& path) : path(TemporarySibling(path)) {
+    RegisterTemporary(this->path.string());
+    fs::create_directories(this->path);
+  }
+  ~TemporaryFolder() {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+    ForgetTemporary(path.string());
+  }
+  fs::path path;
+};
+
 }  // namespace
 
 TrainerExportSummary ExportForTrainers(const ImageSet& images,
@@ -310,245 +594,33 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
   if (images.images.empty()) throw InputError("export (3dgs): no image to export");
   TrainerExportSummary summary;
 
-  // The exported images in name order; ids and the split follow this order.
-  std::vector<const ImageInfo*> ordered;
-  for (const ImageInfo& info : images.images) ordered.push_back(&info);
-  std::sort(ordered.begin(), ordered.end(),
-            [](const ImageInfo* a, const ImageInfo* b) { return a->name < b->name; });
-  const int num_images = static_cast<int>(ordered.size());
-  std::map<std::string, int> index_of;
-  for (int i = 0; i < num_images; ++i) index_of[ordered[i]->name] = i;
-  for (const auto& [name, set] : poses) {
-    for (const ImageInfo* info : ordered) {
-      if (!set.Has(info->name)) {
-        throw std::invalid_argument("export (3dgs): pose set '" + name + "' has no pose for " +
-                                    info->name);
-      }
-    }
-  }
+  SharedExport shared;
+  shared.ordered = ImagesInNameOrder(images, poses);
   std::vector<std::string> names;
-  for (const ImageInfo* info : ordered) names.push_back(info->name);
-  const TrainTestSplit split = SplitEveryNth(names, options.test_every);
-
-  const ImageSet pinhole = PinholeImagesOf(ordered, images, options.undistortion, &summary);
-  ExportedObservations exported;
-  exported.of_image.resize(num_images);
-  if (source) exported = ObservationsInExport(*source, ordered, index_of, images, pinhole);
-  TrackObservations& track_obs = exported.tracks;
-  const std::vector<int>& observation_rows = exported.source_rows;
-  const std::vector<std::vector<int>>& observations_of_image = exported.of_image;
-
-  // The images, once, into a folder every pose set's images/ links to.
-  fs::create_directories(root);
-  const fs::path shared = TemporarySibling((fs::path(root) / "images").string());
-  RegisterTemporary(shared.string());
-  struct SharedFolder {  // removed however this function ends
-    fs::path path;
-    ~SharedFolder() {
-      std::error_code ignored;
-      fs::remove_all(path, ignored);
-      ForgetTemporary(path.string());
-    }
-  } shared_folder{shared};
-  fs::create_directories(shared);
-  auto last_progress = std::chrono::steady_clock::now();
-  for (int i = 0; i < num_images; ++i) {
-    const ImageInfo& info = *ordered[i];
-    const CameraIntrinsics& distorted = images.cameras[info.camera_index];
-    const CameraIntrinsics& camera = pinhole.cameras[pinhole.images[i].camera_index];
-    const fs::path path = fs::path(images.image_root) / info.name;
-    const fs::path target = shared / info.name;
-    fs::create_directories(target.parent_path());
-    const bool copy = IsUndistorted(distorted);
-    cv::Mat bgr;
-    if (!copy || !observations_of_image[i].empty()) {
-      bgr = cv::imread(path.string(), cv::IMREAD_COLOR);
-      if (bgr.empty()) ThrowInput(path.string(), 0, "cannot read or decode the image");
-      if (bgr.cols != distorted.width || bgr.rows != distorted.height) {
-        ThrowInput(path.string(), 0,
-                   "image is " + std::to_string(bgr.cols) + "x" + std::to_string(bgr.rows) +
-                       " but its camera is " + std::to_string(distorted.width) + "x" +
-                       std::to_string(distorted.height));
-      }
-      for (const int k : observations_of_image[i]) {
-        track_obs.colours.row(k) =
-            ColourAt(bgr, source->rays.pixels.row(observation_rows[k]).transpose()).transpose();
-      }
-    }
-    if (copy) {
-      if (!fs::is_regular_file(path)) ThrowInput(path.string(), 0, "image file not found");
-      fs::copy_file(path, target);
-      ++summary.num_images_copied;
-    } else {
-      const cv::Mat undistorted = UndistortImage(bgr, distorted, camera);
-      bool written = false;
-      try {
-        written = cv::imwrite(target.string(), undistorted,
-                              {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality});
-      } catch (const cv::Exception& e) {
-        ThrowInput(target.string(), 0, std::string("cannot encode the image: ") + e.what());
-      }
-      if (!written) {
-        ThrowInput(target.string(), 0, "cannot write the undistorted image (format of its name?)");
-      }
-      ++summary.num_images_undistorted;
-    }
-    if (SecondsSince(last_progress) > kProgressSeconds || i + 1 == num_images) {
-      last_progress = std::chrono::steady_clock::now();
-      spdlog::info(fmt::format("export (3dgs): images {}/{} ({} undistorted, {} copied)", i + 1,
-                               num_images, summary.num_images_undistorted,
-                               summary.num_images_copied));
-    }
+  for (int i = 0; i < shared.num_images(); ++i) {
+    shared.index_of[shared.ordered[i]->name] = i;
+    names.push_back(shared.ordered[i]->name);
   }
-
-  // Tracks, merged once in the source's frame.
-  std::vector<MergedTrack> tracks;
+  shared.split = SplitEveryNth(names, options.test_every);
+  shared.pinhole = PinholeImagesOf(shared.ordered, images, options.undistortion, &summary);
+  shared.exported.of_image.resize(shared.num_images());
   if (source) {
-    std::vector<Eigen::Matrix<double, 3, 4>> projections(num_images,
-                                                         Eigen::Matrix<double, 3, 4>::Zero());
-    for (int i = 0; i < num_images; ++i) {
-      const auto pose = source->poses.world_from_cam.find(ordered[i]->name);
-      if (pose == source->poses.world_from_cam.end()) continue;
-      projections[i] = ProjectionOf(pinhole.cameras[pinhole.images[i].camera_index], pose->second);
-    }
-    tracks = MergeTracks(track_obs, projections, options.max_track_error_px, &summary.tracks);
-    summary.points_from = source->pose_set;
-    spdlog::info(fmt::format(
-        "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
-        "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
-        summary.tracks.num_tracks, source->pose_set, track_obs.image.size(),
-        summary.tracks.num_kept, summary.tracks.num_disagreeing, options.max_track_error_px,
-        summary.tracks.num_behind_camera, summary.tracks.num_without_ray_time));
+    shared.exported =
+        ObservationsInExport(*source, shared.ordered, shared.index_of, images, shared.pinhole);
   }
 
-  // The 2D points, the same for every pose set: per image its tracks' observations.
-  std::vector<std::vector<Eigen::Vector2d>> points2D(num_images);
-  std::vector<std::vector<uint64_t>> point3D_ids(num_images);
-  std::vector<std::vector<ColmapTrackElement>> elements(tracks.size());
-  for (size_t t = 0; t < tracks.size(); ++t) {
-    for (const int o : tracks[t].observations) {
-      const int image = track_obs.image(o);
-      elements[t].push_back(
-          {static_cast<uint32_t>(image + 1), static_cast<uint32_t>(points2D[image].size())});
-      points2D[image].push_back(track_obs.pixels.row(o).transpose() +
-                                Eigen::Vector2d(0.5, 0.5));  // COLMAP convention
-      point3D_ids[image].push_back(t + 1);
-    }
-  }
-
-  nlohmann::json extras = {{"train_filenames", nlohmann::json::array()},
-                           {"test_filenames", nlohmann::json::array()}};
-  for (const std::string& name : split.train) extras["train_filenames"].push_back("images/" + name);
-  for (const std::string& name : split.test) extras["test_filenames"].push_back("images/" + name);
-  // nerfstudio's parser refuses a transforms.json that lists some splits but not the one asked
-  // for, and ns-train asks for "val": the held-out images serve as both.
-  extras["val_filenames"] = extras["test_filenames"];
-  if (!tracks.empty()) extras["ply_file_path"] = "sparse_pc.ply";
-
+  fs::create_directories(root);
+  const TemporaryFolder image_folder((fs::path(root) / "images").string());
+  WriteImagesOnce(images, source, options, image_folder.path, &shared, &summary);
+  if (source) MergeSourceTracks(*source, options, &shared, &summary);
   for (const auto& [name, all_poses] : poses) {
     PoseSet set;  // the exported images' poses only
-    for (const ImageInfo* info : ordered) {
+    for (const ImageInfo* info : shared.ordered) {
       set.world_from_cam[info->name] = all_poses.world_from_cam.at(info->name);
     }
-    // The points in this pose set's frame.
-    Sim3 to_set;
-    std::string frame = "none";
-    if (source && !tracks.empty()) {
-      if (name == source->pose_set) {
-        frame = "solve";
-      } else {
-        std::vector<Eigen::Vector3d> from, to;
-        for (const ImageInfo* info : ordered) {
-          const auto pose = source->poses.world_from_cam.find(info->name);
-          if (pose == source->poses.world_from_cam.end()) continue;
-          from.push_back(pose->second.translation);
-          to.push_back(set.world_from_cam.at(info->name).translation);
-        }
-        try {
-          to_set = FitAlignment(from, to, AlignmentKind::kSim3);
-          frame = "sim3";
-        } catch (const std::invalid_argument&) {
-          warnings->push_back(
-              {"no_initial_points",
-               "the 3dgs export of '" + name + "' has no initial points: no Sim(3) maps the " +
-                   std::to_string(from.size()) + " camera centres of '" + source->pose_set +
-                   "' onto its own (fewer than three, or collinear)",
-               {},
-               {},
-               {{"pose_set", name}, {"points_from", source->pose_set}}});
-          spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
-        }
-      }
-    }
-    ColmapModel model = ToColmapModel(pinhole, set);
-    std::vector<Eigen::Matrix<double, 3, 4>> projections;
-    for (int i = 0; i < num_images; ++i) {
-      projections.push_back(ProjectionOf(pinhole.cameras[pinhole.images[i].camera_index],
-                                         set.world_from_cam.at(ordered[i]->name)));
-    }
-    std::vector<Eigen::Vector3d> ply_xyz;
-    std::vector<std::array<uint8_t, 3>> ply_rgb;
-    std::vector<double> errors;
-    if (frame != "none") {
-      for (int i = 0; i < num_images; ++i) {
-        ColmapImage& image = model.images.at(static_cast<uint32_t>(i + 1));
-        image.points2D = points2D[i];
-        image.point3D_ids = point3D_ids[i];
-      }
-      for (size_t t = 0; t < tracks.size(); ++t) {
-        ColmapPoint3D point;
-        point.point3D_id = t + 1;
-        point.xyz = to_set * tracks[t].xyz;
-        std::array<uint8_t, 3> rgb;
-        for (int k = 0; k < 3; ++k) {
-          rgb[k] = static_cast<uint8_t>(std::clamp(std::lround(tracks[t].rgb[k]), 0L, 255L));
-          point.rgb[k] = rgb[k];
-        }
-        double sum = 0.0;
-        for (const int o : tracks[t].observations) {
-          double depth = 0.0;
-          const double error = (Project(projections[track_obs.image(o)], point.xyz, &depth) -
-                                track_obs.pixels.row(o).transpose())
-                                   .norm();
-          errors.push_back(error);
-          sum += error;
-        }
-        point.error = sum / static_cast<double>(tracks[t].observations.size());
-        point.track = elements[t];
-        model.points3D[point.point3D_id] = point;
-        ply_xyz.push_back(point.xyz);
-        ply_rgb.push_back(rgb);
-      }
-    }
-    summary.points_frame[name] = frame;
-    summary.reprojection_median_px[name] = Median(errors, 0.0);
-    nlohmann::json set_extras = extras;
-    if (frame == "none") set_extras.erase("ply_file_path");
-
-    const std::string dir = (fs::path(root) / name).string();
-    WriteDirectoryAtomically(dir, [&](const std::string& tmp) {
-      for (const ImageInfo* info : ordered) {
-        CreateHardLinkOrCopy(shared / info->name, fs::path(tmp) / "images" / info->name);
-      }
-      const fs::path sparse = fs::path(tmp) / "sparse";
-      WriteColmapModelText(model, (sparse / "text").string());
-      WriteColmapModelBinary(model, (sparse / "binary").string());
-      MoveFilesInto(sparse / "text", sparse / "0");
-      MoveFilesInto(sparse / "binary", sparse / "0");
-      WriteTransformsJson((fs::path(tmp) / "transforms.json").string(), pinhole, set, "images/",
-                          set_extras);
-      if (frame != "none")
-        WritePointsPly((fs::path(tmp) / "sparse_pc.ply").string(), ply_xyz, ply_rgb);
-      WriteLines((fs::path(tmp) / "test.txt").string(), split.test);
-      WriteLines((fs::path(tmp) / "train.txt").string(), split.train);
-    });
-    spdlog::info(fmt::format(
-        "export (3dgs): {} -> {}: {} images ({} train, {} test), {} points ({}), median "
-        "reprojection {:.3g} px",
-        name, dir, num_images, split.train.size(), split.test.size(), model.points3D.size(), frame,
-        summary.reprojection_median_px[name]));
+    summary.directories.push_back(WritePoseSetFolder(root, name, set, shared, source,
+                                                     image_folder.path, warnings, &summary));
     summary.pose_sets.push_back(name);
-    summary.directories.push_back(dir);
   }
   if (!source) {
     warnings->push_back({"no_initial_points",
@@ -559,10 +631,10 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
                          {}});
     spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
   }
-  summary.num_images = num_images;
-  summary.num_points = static_cast<int>(tracks.size());
-  summary.num_train = static_cast<int>(split.train.size());
-  summary.num_test = static_cast<int>(split.test.size());
+  summary.num_images = shared.num_images();
+  summary.num_points = static_cast<int>(shared.tracks.size());
+  summary.num_train = static_cast<int>(shared.split.train.size());
+  summary.num_test = static_cast<int>(shared.split.test.size());
   summary.seconds = SecondsSince(start);
   return summary;
 }
