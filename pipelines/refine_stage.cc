@@ -473,40 +473,19 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     }
     // A prior in another convention is refused before any solve (issue 30); a prior made from
     // the match graph (the bootstrap's) cannot be in one.
-    PriorConventionVerdict convention;
-    if (options_.check_prior_convention && !prior_rotations_from_matches) {
-      std::vector<Rigid3> world_from_cam(images.images.size());
-      for (size_t i = 0; i < images.images.size(); ++i) {
-        const auto pose = prior.world_from_cam.find(images.images[i].name);
-        if (pose != prior.world_from_cam.end()) world_from_cam[i] = pose->second;
-      }
-      convention = CheckPriorConvention(world_from_cam,
-                                        MeasuredRelativePoses(images, features, matches, prior));
-      if (convention.checked) {
-        const ConventionScore& native = convention.scores.front();
-        spdlog::info(fmt::format(
-            "refine: the prior as given is {:.2f}° (rotation) / {:.2f}° (baseline direction) "
-            "from the matches' relative poses (median over {} pairs, {} with parallax)",
-            native.median_rotation_error_deg, native.median_direction_error_deg,
-            convention.num_pairs, convention.num_pairs_with_parallax));
-      }
-      if (convention.refused) {
-        throw InputError("refine: pose set '" + options_.prior + "' of " +
-                         context.Require(PoseArtifact(options_.prior)) + ": " +
-                         DescribeConventionRefusal(convention, "prior.convention") +
-                         " (or refine.check_prior_convention=false to refine it as given)");
-      }
-    }
+    const PriorConventionVerdict convention =
+        options_.check_prior_convention && !prior_rotations_from_matches
+            ? CheckConvention(images, features, matches, prior, context)
+            : PriorConventionVerdict();
 
-    // The images with a prior pose take part; the others are reported and left out.
-    Warnings warnings;
-    std::vector<std::string> without_prior;
-    for (const ImageInfo& image : images.images) {
-      if (!prior.Has(image.name)) without_prior.push_back(image.name);
-    }
-    // Reported by the stage that made the prior (missing_prior); counted here.
+    // The images with a prior pose take part; the others are reported (by the stage that made
+    // the prior: missing_prior) and counted here.
+    size_t num_without_prior = 0;
+    for (const ImageInfo& image : images.images) num_without_prior += !prior.Has(image.name);
+    Solves solves;
+    solves.cameras = images.cameras;
     const std::vector<std::vector<int>> components =
-        MatchedComponents(images, matches, prior, &warnings);
+        MatchedComponents(images, matches, prior, &solves.warnings);
     if (components.empty()) {
       throw InputError("refine: no verified image pair joins two images with a prior pose (" +
                        std::to_string(matches.size()) + " pairs in " + context.Require("matches") +
@@ -515,48 +494,39 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     }
     // A self-calibrated camera must come from one solve: only the largest component then.
     const size_t num_solved = options_.refine.SelfCalibrates() ? 1 : components.size();
-    // Images of parts the matches do not hold to the rest (loose_parts; and, after a prior the
-    // bootstrap repaired, the smaller components), left out of the export.
-    std::vector<std::string> loose;
     if (components.size() > 1) {
-      Warning warning;
-      warning.code = "disconnected_graph";
-      std::string sizes;
-      for (size_t c = 0; c < components.size(); ++c) {
-        sizes += (c ? ", " : "") + std::to_string(components[c].size());
-        for (int i : components[c]) {
-          if (c > 0) warning.images.push_back(images.images[i].name);
-        }
-      }
-      warning.message =
-          "the match graph has " + std::to_string(components.size()) + " connected components (" +
-          sizes + " images); " +
-          (num_solved == 1 ? "only the largest is refined (self-calibration needs one solve); "
-                             "the images of the others are not in the refined poses"
-                           : "each is refined in its own gauge, anchored to the prior only: "
-                             "their relative placement is the prior's");
-      // A prior the prior stage found coarse and repaired from the match graph (or the
-      // bootstrap's own) places the smaller components by the coarse poses it kept for them
-      // (the bootstrap reaches the largest only): nothing holds them to the largest one.
-      if (num_solved > 1 && prior_rotations_from_matches) {
-        warning.message +=
-            ", and that prior was repaired from the matches as coarse: the smaller components' "
-            "images are left out of the refined export";
-        loose.insert(loose.end(), warning.images.begin(), warning.images.end());
-      }
-      warning.details = {{"component_sizes", nlohmann::json::array()},
-                         {"refined_components", num_solved}};
-      for (const auto& component : components) {
-        warning.details["component_sizes"].push_back(component.size());
-      }
-      warnings.push_back(warning);
+      solves.warnings.push_back(DisconnectedGraphWarning(images, components, num_solved,
+                                                         prior_rotations_from_matches,
+                                                         &solves.loose));
     }
+    for (size_t c = 0; c < num_solved; ++c) {
+      SolveComponent(images, features, matches, prior, components[c], c == 0,
+                     prior_rotations_from_matches, &solves);
+    }
+    // One verdict over the components: a check that fired anywhere is reported.
+    nlohmann::json& result = solves.result;
+    result["guardrails"]["fired"] =
+        std::vector<std::string>(solves.fired.begin(), solves.fired.end());
+    result["guardrails"]["returned_prior"] = solves.returned_prior;
+    if (components.size() > 1) result["components"] = solves.component_summaries;
+    result["preset"] = options_.preset;
+    result["prior_convention"] = convention;
+    if (options_.check_frame_doubts) result["frame_doubts"] = solves.frame_doubts;
+    result["num_images_without_prior"] = num_without_prior;
+    Write(context, images, &solves);
+    return result;
+  }
 
+ private:
+  // What the component solves gather: the refined poses, the first (largest) component's summary
+  // and cameras, the verdicts over all, and the images the export leaves out.
+  struct Solves {
     PoseSet refined;
-    nlohmann::json result;
+    nlohmann::json result;  // the largest component's summary, then the stage's
     nlohmann::json component_summaries = nlohmann::json::array();
     std::set<std::string> fired;
     bool returned_prior = false;
+    Warnings warnings;
     // Images whose "refined" pose is the prior's (a guardrail returned it): the export leaves
     // them out of a refined model rather than hand them to a trainer as refined.
     std::vector<std::string> unrefined;
@@ -565,98 +535,170 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     std::vector<std::string> unexplained;
     // Frames that moved far more than the others and fit worse (FrameDoubtsOf), left out too.
     std::vector<std::string> doubted;
+    // Images of parts the matches do not hold to the rest (loose_parts; and, after a prior the
+    // bootstrap repaired, the smaller components), left out of the export.
+    std::vector<std::string> loose;
     FrameDoubtVerdict frame_doubts;  // of the largest component
-    std::vector<CameraIntrinsics> cameras = images.cameras;
+    std::vector<CameraIntrinsics> cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
-    for (size_t c = 0; c < num_solved; ++c) {
-      std::vector<std::string> names;
-      RefineInput input = ComponentInput(images, features, matches, prior, components[c], &names);
-      input.prior_rotations_from_matches = prior_rotations_from_matches;
-      input.names = names;
-      RefineOutput output;
-      const RefineSummary summary = RefinePoses(input, options_.refine, &output);
-      for (size_t k = 0; k < names.size(); ++k) {
-        refined.world_from_cam[names[k]] = output.world_from_cam[k];
-      }
-      AddGuardrailWarnings(summary, names, &warnings);
-      if (summary.cameras.cameras_differ) {
-        warnings.push_back(
-            {"cameras_shared",
-             "intrinsics_sharing 'shared' refined one set of intrinsics for images whose given "
-             "cameras differ from it by up to " +
-                 fmt::format("{:.3g}", summary.cameras.max_start_disagreement_px) +
-                 " px on the image; their per-image intrinsics were replaced",
-             names,
-             {},
-             {{"num_cameras", summary.cameras.num_cameras},
-              {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
-              {"tolerance_px", kSharedCameraTolerancePx}}});
-      }
-      fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
-      returned_prior = returned_prior || summary.returned_prior;
-      if (summary.returned_prior) {
-        unrefined.insert(unrefined.end(), names.begin(), names.end());
-      } else {
-        for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
-          unexplained.push_back(names.at(image));
-        }
-        for (const int image : summary.loose_parts.images) loose.push_back(names.at(image));
-        // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
-        // independent measurement to stand out from: its own errors (a translation-averaging
-        // drift at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
-        if (options_.check_frame_doubts && !prior_rotations_from_matches) {
-          const FrameDoubtVerdict verdict = FrameDoubtsOf(input, output, options_.frame_doubt);
-          AddFrameDoubtWarning(verdict, names, &warnings);
-          for (const int image : verdict.images) doubted.push_back(names.at(image));
-          if (c == 0) frame_doubts = verdict;
-        }
-        AppendRayTimes(input, output.solved_observations, names, &rays);
-      }
-      if (c == 0) {
-        result = summary.ToJson();
-        cameras = output.cameras;
-      }
-      component_summaries.push_back({{"num_images", names.size()},
-                                     {"first_image", names.front()},
-                                     {"total_iterations", summary.total_iterations},
-                                     {"final_cost", summary.final_cost},
-                                     {"guardrails_fired", summary.guardrails_fired},
-                                     {"returned_prior", summary.returned_prior}});
-      spdlog::info(fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
-                               summary.total_iterations, summary.total_seconds,
-                               summary.returned_prior ? " (guardrail fired: prior returned)" : ""));
-    }
-    // One verdict over the components: a check that fired anywhere is reported.
-    result["guardrails"]["fired"] = std::vector<std::string>(fired.begin(), fired.end());
-    result["guardrails"]["returned_prior"] = returned_prior;
-    if (components.size() > 1) result["components"] = component_summaries;
+  };
 
+  // The prior against the matches' relative poses (prior_convention.h); refused with the reason.
+  PriorConventionVerdict CheckConvention(const ImageSet& images,
+                                         const std::vector<ImageFeatures>& features,
+                                         const std::vector<PairMatches>& matches,
+                                         const PoseSet& prior, const StageContext& context) const {
+    std::vector<Rigid3> world_from_cam(images.images.size());
+    for (size_t i = 0; i < images.images.size(); ++i) {
+      const auto pose = prior.world_from_cam.find(images.images[i].name);
+      if (pose != prior.world_from_cam.end()) world_from_cam[i] = pose->second;
+    }
+    const PriorConventionVerdict convention = CheckPriorConvention(
+        world_from_cam, MeasuredRelativePoses(images, features, matches, prior));
+    if (convention.checked) {
+      const ConventionScore& native = convention.scores.front();
+      spdlog::info(fmt::format(
+          "refine: the prior as given is {:.2f}° (rotation) / {:.2f}° (baseline direction) "
+          "from the matches' relative poses (median over {} pairs, {} with parallax)",
+          native.median_rotation_error_deg, native.median_direction_error_deg,
+          convention.num_pairs, convention.num_pairs_with_parallax));
+    }
+    if (convention.refused) {
+      throw InputError("refine: pose set '" + options_.prior + "' of " +
+                       context.Require(PoseArtifact(options_.prior)) + ": " +
+                       DescribeConventionRefusal(convention, "prior.convention") +
+                       " (or refine.check_prior_convention=false to refine it as given)");
+    }
+    return convention;
+  }
+
+  // disconnected_graph; after a prior repaired from the matches as coarse, the smaller
+  // components' images are added to `loose`.
+  static Warning DisconnectedGraphWarning(const ImageSet& images,
+                                          const std::vector<std::vector<int>>& components,
+                                          size_t num_solved, bool prior_rotations_from_matches,
+                                          std::vector<std::string>* loose) {
+    Warning warning;
+    warning.code = "disconnected_graph";
+    std::string sizes;
+    for (size_t c = 0; c < components.size(); ++c) {
+      sizes += (c ? ", " : "") + std::to_string(components[c].size());
+      for (int i : components[c]) {
+        if (c > 0) warning.images.push_back(images.images[i].name);
+      }
+    }
+    warning.message =
+        "the match graph has " + std::to_string(components.size()) + " connected components (" +
+        sizes + " images); " +
+        (num_solved == 1 ? "only the largest is refined (self-calibration needs one solve); "
+                           "the images of the others are not in the refined poses"
+                         : "each is refined in its own gauge, anchored to the prior only: "
+                           "their relative placement is the prior's");
+    // A prior the prior stage found coarse and repaired from the match graph (or the bootstrap's
+    // own) places the smaller components by the coarse poses it kept for them (the bootstrap
+    // reaches the largest only): nothing holds them to the largest one.
+    if (num_solved > 1 && prior_rotations_from_matches) {
+      warning.message +=
+          ", and that prior was repaired from the matches as coarse: the smaller components' "
+          "images are left out of the refined export";
+      loose->insert(loose->end(), warning.images.begin(), warning.images.end());
+    }
+    warning.details = {{"component_sizes", nlohmann::json::array()},
+                       {"refined_components", num_solved}};
+    for (const auto& component : components) {
+      warning.details["component_sizes"].push_back(component.size());
+    }
+    return warning;
+  }
+
+  // One component's solve, its warnings and verdicts into `solves`.
+  void SolveComponent(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                      const std::vector<PairMatches>& matches, const PoseSet& prior,
+                      const std::vector<int>& component, bool largest,
+                      bool prior_rotations_from_matches, Solves* solves) const {
+    std::vector<std::string> names;
+    RefineInput input = ComponentInput(images, features, matches, prior, component, &names);
+    input.prior_rotations_from_matches = prior_rotations_from_matches;
+    input.names = names;
+    RefineOutput output;
+    const RefineSummary summary = RefinePoses(input, options_.refine, &output);
+    for (size_t k = 0; k < names.size(); ++k) {
+      solves->refined.world_from_cam[names[k]] = output.world_from_cam[k];
+    }
+    AddGuardrailWarnings(summary, names, &solves->warnings);
+    if (summary.cameras.cameras_differ) {
+      solves->warnings.push_back(
+          {"cameras_shared",
+           "intrinsics_sharing 'shared' refined one set of intrinsics for images whose given "
+           "cameras differ from it by up to " +
+               fmt::format("{:.3g}", summary.cameras.max_start_disagreement_px) +
+               " px on the image; their per-image intrinsics were replaced",
+           names,
+           {},
+           {{"num_cameras", summary.cameras.num_cameras},
+            {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
+            {"tolerance_px", kSharedCameraTolerancePx}}});
+    }
+    solves->fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
+    solves->returned_prior = solves->returned_prior || summary.returned_prior;
+    if (summary.returned_prior) {
+      solves->unrefined.insert(solves->unrefined.end(), names.begin(), names.end());
+    } else {
+      for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
+        solves->unexplained.push_back(names.at(image));
+      }
+      for (const int image : summary.loose_parts.images) solves->loose.push_back(names.at(image));
+      // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
+      // independent measurement to stand out from: its own errors (a translation-averaging drift
+      // at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
+      if (options_.check_frame_doubts && !prior_rotations_from_matches) {
+        const FrameDoubtVerdict verdict = FrameDoubtsOf(input, output, options_.frame_doubt);
+        AddFrameDoubtWarning(verdict, names, &solves->warnings);
+        for (const int image : verdict.images) solves->doubted.push_back(names.at(image));
+        if (largest) solves->frame_doubts = verdict;
+      }
+      AppendRayTimes(input, output.solved_observations, names, &solves->rays);
+    }
+    if (largest) {
+      solves->result = summary.ToJson();
+      solves->cameras = output.cameras;
+    }
+    solves->component_summaries.push_back({{"num_images", names.size()},
+                                           {"first_image", names.front()},
+                                           {"total_iterations", summary.total_iterations},
+                                           {"final_cost", summary.final_cost},
+                                           {"guardrails_fired", summary.guardrails_fired},
+                                           {"returned_prior", summary.returned_prior}});
+    spdlog::info(fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
+                             summary.total_iterations, summary.total_seconds,
+                             summary.returned_prior ? " (guardrail fired: prior returned)" : ""));
+  }
+
+  // The refined pose set, its ray times, (self-calibrating) the refined cameras, the summary and
+  // the lists of images the export leaves out, in one HDF5 commit.
+  void Write(const StageContext& context, const ImageSet& images, Solves* solves) {
+    nlohmann::json& result = solves->result;
     const std::string pose_set = context.OutputPoseSetName("refined");
     Hdf5Writer writer(context.output_path);
-    writer.WritePoseSet(pose_set, refined, PoseRole::kRefined, MakeProvenance(*this));
-    writer.WriteRayTimes(pose_set, rays);
-    result["preset"] = options_.preset;
-    result["prior_convention"] = convention;
-    if (options_.check_frame_doubts) result["frame_doubts"] = frame_doubts;
+    writer.WritePoseSet(pose_set, solves->refined, PoseRole::kRefined, MakeProvenance(*this));
+    writer.WriteRayTimes(pose_set, solves->rays);
     result["pose_set"] = pose_set;
-    result["num_refined"] = refined.size();
-    result["num_images_without_prior"] = without_prior.size();
+    result["num_refined"] = solves->refined.size();
     if (options_.refine.SelfCalibrates()) {
       // One solve when self-calibrating: its cameras are refined, the others' as given.
-      const ImageSet refined_images = WithRefinedCameras(images, cameras);
+      const ImageSet refined_images = WithRefinedCameras(images, solves->cameras);
       writer.WriteImages(refined_images);
-      result["refined_intrinsics"] = RefinedIntrinsicsJson(refined_images, refined);
+      result["refined_intrinsics"] = RefinedIntrinsicsJson(refined_images, solves->refined);
       writer.WriteJson("refined_intrinsics", result["refined_intrinsics"]);
     }
-    result["warnings"] = WarningsToJson(warnings);
+    result["warnings"] = WarningsToJson(solves->warnings);
     writer.WriteJson("refine_summary", result);
-    writer.WriteJson(kUnrefinedImagesJson, unrefined);
-    writer.WriteJson(kUnexplainedImagesJson, unexplained);
-    writer.WriteJson(kDoubtedImagesJson, doubted);
-    writer.WriteJson(kLooseImagesJson, loose);
+    writer.WriteJson(kUnrefinedImagesJson, solves->unrefined);
+    writer.WriteJson(kUnexplainedImagesJson, solves->unexplained);
+    writer.WriteJson(kDoubtedImagesJson, solves->doubted);
+    writer.WriteJson(kLooseImagesJson, solves->loose);
     writer.Commit();
-    return result;
   }
 };
 
