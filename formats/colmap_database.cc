@@ -598,10 +598,14 @@ ColmapDatabase ReadColmapDatabase(const std::string& path) {
   return out;
 }
 
-void WriteColmapDatabase(const std::string& path, const ImageSet& images,
-                         const std::vector<ImageFeatures>& features,
-                         const std::vector<PairMatches>& pairs, const std::string& camera_model) {
-  const std::string context = "cannot export the COLMAP database " + path + ": ";
+namespace {
+
+// What COLMAP would CHECK-fail (abort) on or misread, refused with the image or pair named:
+// features per image, names sorted and unique, camera indices, descriptors per keypoint,
+// non-negative scales, pair indices ascending and in range, matches within the keypoints.
+void CheckDatabaseInput(const std::string& context, const ImageSet& images,
+                        const std::vector<ImageFeatures>& features,
+                        const std::vector<PairMatches>& pairs) {
   const size_t n = images.images.size();
   if (features.size() != n) {
     throw InputError(context + std::to_string(features.size()) + " feature sets for " +
@@ -649,12 +653,115 @@ void WriteColmapDatabase(const std::string& path, const ImageSet& images,
       }
     }
   }
+}
+
+void InsertCameras(const Sqlite& db, const std::vector<ColmapCamera>& cameras) {
+  Statement stmt(db,
+                 "INSERT INTO cameras (camera_id, model, width, height, params, "
+                 "prior_focal_length) VALUES (?, ?, ?, ?, ?, ?)");
+  for (const ColmapCamera& camera : cameras) {
+    stmt.BindInt(1, camera.camera_id);
+    stmt.BindInt(2, ColmapModelId(camera.model));
+    stmt.BindInt(3, static_cast<int64_t>(camera.width));
+    stmt.BindInt(4, static_cast<int64_t>(camera.height));
+    stmt.BindBlob(5, camera.params.data(), camera.params.size() * sizeof(double));
+    // The focal length is calibrated, not guessed from EXIF: the mapper may trust it.
+    stmt.BindInt(6, 1);
+    stmt.Step("cannot write table cameras");
+    stmt.Reset();
+  }
+}
+
+// Images, keypoints (COLMAP's pixel convention: +0.5) and descriptors; image ids are 1 + index.
+void InsertImagesAndFeatures(const Sqlite& db, const ImageSet& images,
+                             const std::vector<ImageFeatures>& features) {
+  Statement image_stmt(db, "INSERT INTO images (image_id, name, camera_id) VALUES (?, ?, ?)");
+  Statement keypoint_stmt(db,
+                          "INSERT INTO keypoints (image_id, rows, cols, data) VALUES (?, ?, ?, ?)");
+  Statement descriptor_stmt(
+      db, "INSERT INTO descriptors (image_id, rows, cols, data) VALUES (?, ?, ?, ?)");
+  for (size_t i = 0; i < images.images.size(); ++i) {
+    const int64_t image_id = static_cast<int64_t>(i + 1);
+    image_stmt.BindInt(1, image_id);
+    image_stmt.BindText(2, images.images[i].name);
+    image_stmt.BindInt(3, images.images[i].camera_index + 1);
+    image_stmt.Step("cannot write table images");
+    image_stmt.Reset();
+
+    const ImageFeatures& f = features[i];
+    Eigen::Matrix<float, Eigen::Dynamic, 4, Eigen::RowMajor> keypoints = f.keypoints;
+    for (Eigen::Index r = 0; r < keypoints.rows(); ++r) {
+      keypoints(r, 0) = static_cast<float>(double(f.keypoints(r, 0)) + 0.5);
+      keypoints(r, 1) = static_cast<float>(double(f.keypoints(r, 1)) + 0.5);
+    }
+    keypoint_stmt.BindInt(1, image_id);
+    keypoint_stmt.BindInt(2, keypoints.rows());
+    keypoint_stmt.BindInt(3, 4);
+    keypoint_stmt.BindBlob(4, keypoints.data(), keypoints.size() * sizeof(float));
+    keypoint_stmt.Step("cannot write table keypoints");
+    keypoint_stmt.Reset();
+
+    descriptor_stmt.BindInt(1, image_id);
+    descriptor_stmt.BindInt(2, f.descriptors.rows());
+    descriptor_stmt.BindInt(3, f.descriptors.cols());
+    descriptor_stmt.BindBlob(4, f.descriptors.data(), f.descriptors.size());
+    descriptor_stmt.Step("cannot write table descriptors");
+    descriptor_stmt.Reset();
+  }
+}
+
+// Raw matches and two-view geometries (F and H in COLMAP's pixel convention).
+void InsertPairs(const Sqlite& db, const std::vector<PairMatches>& pairs) {
+  Statement match_stmt(db, "INSERT INTO matches (pair_id, rows, cols, data) VALUES (?, ?, ?, ?)");
+  Statement geometry_stmt(db,
+                          "INSERT INTO two_view_geometries (pair_id, rows, cols, data, "
+                          "config, F, E, H, qvec, tvec) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, "
+                          "?)");
+  for (const PairMatches& pair : pairs) {
+    // Image ids ascend with the indices, so COLMAP's (id1 < id2) orientation is ours.
+    const auto pair_id = static_cast<int64_t>(ColmapPairId(
+        static_cast<uint32_t>(pair.image1 + 1), static_cast<uint32_t>(pair.image2 + 1)));
+    match_stmt.BindInt(1, pair_id);
+    match_stmt.BindInt(2, pair.matches.rows());
+    match_stmt.BindInt(3, 2);
+    match_stmt.BindBlob(4, pair.matches.data(), pair.matches.size() * sizeof(uint32_t));
+    match_stmt.Step("cannot write table matches");
+    match_stmt.Reset();
+
+    const TwoViewGeometry& g = pair.geometry;
+    using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+    const RowMajor3 f = ConvertF(g.F, OpenCvFromColmapPixel());
+    const RowMajor3 e = g.E;
+    const RowMajor3 h = ConvertH(g.H, ColmapFromOpenCvPixel(), OpenCvFromColmapPixel());
+    const Eigen::Quaterniond& q = g.cam2_from_cam1.rotation;
+    const double qvec[4] = {q.w(), q.x(), q.y(), q.z()};
+    const Eigen::Vector3d& tvec = g.cam2_from_cam1.translation;
+    geometry_stmt.BindInt(1, pair_id);
+    geometry_stmt.BindInt(2, g.inlier_matches.rows());
+    geometry_stmt.BindInt(3, 2);
+    geometry_stmt.BindBlob(4, g.inlier_matches.data(), g.inlier_matches.size() * sizeof(uint32_t));
+    geometry_stmt.BindInt(5, static_cast<int>(g.config));
+    geometry_stmt.BindBlob(6, f.data(), sizeof(double) * 9);
+    geometry_stmt.BindBlob(7, e.data(), sizeof(double) * 9);
+    geometry_stmt.BindBlob(8, h.data(), sizeof(double) * 9);
+    geometry_stmt.BindBlob(9, qvec, sizeof(qvec));
+    geometry_stmt.BindBlob(10, tvec.data(), sizeof(double) * 3);
+    geometry_stmt.Step("cannot write table two_view_geometries");
+    geometry_stmt.Reset();
+  }
+}
+
+}  // namespace
+
+void WriteColmapDatabase(const std::string& path, const ImageSet& images,
+                         const std::vector<ImageFeatures>& features,
+                         const std::vector<PairMatches>& pairs, const std::string& camera_model) {
+  CheckDatabaseInput("cannot export the COLMAP database " + path + ": ", images, features, pairs);
   std::vector<ColmapCamera> cameras;
   for (size_t c = 0; c < images.cameras.size(); ++c) {
     cameras.push_back(
         ColmapCameraWithModel(images.cameras[c], static_cast<uint32_t>(c + 1), camera_model));
   }
-
   WriteAtomically(path, [&](const std::string& tmp) {
     // A leftover temporary database from a crashed run would be opened and appended to.
     std::error_code ignored;
@@ -663,98 +770,9 @@ void WriteColmapDatabase(const std::string& path, const ImageSet& images,
     const Sqlite db(tmp, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE);
     for (const char* sql : kSchema) db.Exec(sql, "cannot create COLMAP's tables");
     db.Exec("BEGIN TRANSACTION;", "cannot begin a transaction");
-    {
-      Statement stmt(db,
-                     "INSERT INTO cameras (camera_id, model, width, height, params, "
-                     "prior_focal_length) VALUES (?, ?, ?, ?, ?, ?)");
-      for (const ColmapCamera& camera : cameras) {
-        stmt.BindInt(1, camera.camera_id);
-        stmt.BindInt(2, ColmapModelId(camera.model));
-        stmt.BindInt(3, static_cast<int64_t>(camera.width));
-        stmt.BindInt(4, static_cast<int64_t>(camera.height));
-        stmt.BindBlob(5, camera.params.data(), camera.params.size() * sizeof(double));
-        // The focal length is calibrated, not guessed from EXIF: the mapper may trust it.
-        stmt.BindInt(6, 1);
-        stmt.Step("cannot write table cameras");
-        stmt.Reset();
-      }
-    }
-    {
-      Statement image_stmt(db, "INSERT INTO images (image_id, name, camera_id) VALUES (?, ?, ?)");
-      Statement keypoint_stmt(
-          db, "INSERT INTO keypoints (image_id, rows, cols, data) VALUES (?, ?, ?, ?)");
-      Statement descriptor_stmt(
-          db, "INSERT INTO descriptors (image_id, rows, cols, data) VALUES (?, ?, ?, ?)");
-      for (size_t i = 0; i < n; ++i) {
-        const int64_t image_id = static_cast<int64_t>(i + 1);
-        image_stmt.BindInt(1, image_id);
-        image_stmt.BindText(2, images.images[i].name);
-        image_stmt.BindInt(3, images.images[i].camera_index + 1);
-        image_stmt.Step("cannot write table images");
-        image_stmt.Reset();
-
-        const ImageFeatures& f = features[i];
-        Eigen::Matrix<float, Eigen::Dynamic, 4, Eigen::RowMajor> keypoints = f.keypoints;
-        for (Eigen::Index r = 0; r < keypoints.rows(); ++r) {
-          keypoints(r, 0) = static_cast<float>(double(f.keypoints(r, 0)) + 0.5);
-          keypoints(r, 1) = static_cast<float>(double(f.keypoints(r, 1)) + 0.5);
-        }
-        keypoint_stmt.BindInt(1, image_id);
-        keypoint_stmt.BindInt(2, keypoints.rows());
-        keypoint_stmt.BindInt(3, 4);
-        keypoint_stmt.BindBlob(4, keypoints.data(), keypoints.size() * sizeof(float));
-        keypoint_stmt.Step("cannot write table keypoints");
-        keypoint_stmt.Reset();
-
-        descriptor_stmt.BindInt(1, image_id);
-        descriptor_stmt.BindInt(2, f.descriptors.rows());
-        descriptor_stmt.BindInt(3, f.descriptors.cols());
-        descriptor_stmt.BindBlob(4, f.descriptors.data(), f.descriptors.size());
-        descriptor_stmt.Step("cannot write table descriptors");
-        descriptor_stmt.Reset();
-      }
-    }
-    {
-      Statement match_stmt(db,
-                           "INSERT INTO matches (pair_id, rows, cols, data) VALUES (?, ?, ?, ?)");
-      Statement geometry_stmt(db,
-                              "INSERT INTO two_view_geometries (pair_id, rows, cols, data, "
-                              "config, F, E, H, qvec, tvec) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, "
-                              "?)");
-      for (const PairMatches& pair : pairs) {
-        // Image ids ascend with the indices, so COLMAP's (id1 < id2) orientation is ours.
-        const auto pair_id = static_cast<int64_t>(ColmapPairId(
-            static_cast<uint32_t>(pair.image1 + 1), static_cast<uint32_t>(pair.image2 + 1)));
-        match_stmt.BindInt(1, pair_id);
-        match_stmt.BindInt(2, pair.matches.rows());
-        match_stmt.BindInt(3, 2);
-        match_stmt.BindBlob(4, pair.matches.data(), pair.matches.size() * sizeof(uint32_t));
-        match_stmt.Step("cannot write table matches");
-        match_stmt.Reset();
-
-        const TwoViewGeometry& g = pair.geometry;
-        using RowMajor3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
-        const RowMajor3 f = ConvertF(g.F, OpenCvFromColmapPixel());
-        const RowMajor3 e = g.E;
-        const RowMajor3 h = ConvertH(g.H, ColmapFromOpenCvPixel(), OpenCvFromColmapPixel());
-        const Eigen::Quaterniond& q = g.cam2_from_cam1.rotation;
-        const double qvec[4] = {q.w(), q.x(), q.y(), q.z()};
-        const Eigen::Vector3d& tvec = g.cam2_from_cam1.translation;
-        geometry_stmt.BindInt(1, pair_id);
-        geometry_stmt.BindInt(2, g.inlier_matches.rows());
-        geometry_stmt.BindInt(3, 2);
-        geometry_stmt.BindBlob(4, g.inlier_matches.data(),
-                               g.inlier_matches.size() * sizeof(uint32_t));
-        geometry_stmt.BindInt(5, static_cast<int>(g.config));
-        geometry_stmt.BindBlob(6, f.data(), sizeof(double) * 9);
-        geometry_stmt.BindBlob(7, e.data(), sizeof(double) * 9);
-        geometry_stmt.BindBlob(8, h.data(), sizeof(double) * 9);
-        geometry_stmt.BindBlob(9, qvec, sizeof(qvec));
-        geometry_stmt.BindBlob(10, tvec.data(), sizeof(double) * 3);
-        geometry_stmt.Step("cannot write table two_view_geometries");
-        geometry_stmt.Reset();
-      }
-    }
+    InsertCameras(db, cameras);
+    InsertImagesAndFeatures(db, images, features);
+    InsertPairs(db, pairs);
     db.Exec("COMMIT;", "cannot commit the database");
   });
 }
