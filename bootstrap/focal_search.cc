@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/error.h"
+
 namespace raytime {
 namespace {
 
@@ -65,7 +67,7 @@ FocalSearchResult SearchFocal(const std::vector<PixelCorrespondences>& pairs, in
     if (pairs[k].pixels1.cols() >= relative_pose.min_inliers) order.push_back(static_cast<int>(k));
   }
   if (order.empty()) {
-    throw std::invalid_argument("focal search: no pair has " +
+    throw InputError("focal search: no pair has " +
                                 std::to_string(relative_pose.min_inliers) +
                                 " correspondences or more");
   }

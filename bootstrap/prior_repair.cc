@@ -5,6 +5,7 @@
 #include <string>
 
 #include "core/statistics.h"
+#include "core/error.h"
 
 namespace raytime {
 namespace {
@@ -49,7 +50,7 @@ PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
     offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
   }
   if (offsets.empty()) {
-    throw std::invalid_argument(
+    throw InputError(
         "rotations-only repair: the bootstrap registered none of the prior's images");
   }
   const Eigen::Matrix3d prior_from_bootstrap = MedianRotation(offsets);
@@ -107,7 +108,7 @@ PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
     offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
   }
   if (source.size() < 3) {
-    throw std::invalid_argument("full replacement: the bootstrap registered " +
+    throw InputError("full replacement: the bootstrap registered " +
                                 std::to_string(source.size()) +
                                 " of the prior's images, the Sim(3) gauge fit needs 3");
   }

@@ -13,6 +13,7 @@
 
 #include "core/geometry.h"
 #include "core/statistics.h"
+#include "core/error.h"
 
 namespace raytime {
 namespace {
@@ -23,7 +24,7 @@ using RotationSacProblem = opengv::sac_problems::relative_pose::RotationOnlySacP
 SacProblem::algorithm_t AlgorithmFromName(const std::string& name) {
   if (name == "stewenius") return SacProblem::STEWENIUS;
   if (name == "nister") return SacProblem::NISTER;
-  throw std::invalid_argument("relative_pose.algorithm must be 'stewenius' or 'nister', got '" +
+  throw InputError("relative_pose.algorithm must be 'stewenius' or 'nister', got '" +
                               name + "'");
 }
 

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/error.h"
 #include "core/camera.h"
 
 namespace raytime {
@@ -28,19 +29,19 @@ void CheckInput(const ImageSet& images, const std::vector<ImageFeatures>& featur
                 const std::vector<PairMatches>& matches) {
   const int n = static_cast<int>(images.images.size());
   if (static_cast<int>(features.size()) != n) {
-    throw std::invalid_argument("features cover " + std::to_string(features.size()) +
+    throw InputError("features cover " + std::to_string(features.size()) +
                                 " images, the image list has " + std::to_string(n));
   }
   for (const auto& image : images.images) {
     if (image.camera_index < 0 || image.camera_index >= static_cast<int>(images.cameras.size())) {
-      throw std::invalid_argument("image " + image.name + " has no camera " +
+      throw InputError("image " + image.name + " has no camera " +
                                   std::to_string(image.camera_index));
     }
   }
   for (const auto& pair : matches) {
     if (pair.image1 < 0 || pair.image2 < 0 || pair.image1 >= n || pair.image2 >= n ||
         pair.image1 >= pair.image2) {
-      throw std::invalid_argument(PairName(pair) +
+      throw InputError(PairName(pair) +
                                   ": image indices must satisfy 0 <= image1 < "
                                   "image2 < " +
                                   std::to_string(n));
@@ -50,7 +51,7 @@ void CheckInput(const ImageSet& images, const std::vector<ImageFeatures>& featur
     const Eigen::Index rows2 = features[pair.image2].keypoints.rows();
     for (Eigen::Index k = 0; k < m.rows(); ++k) {
       if (m(k, 0) >= rows1 || m(k, 1) >= rows2) {
-        throw std::invalid_argument(
+        throw InputError(
             PairName(pair) + ": inlier match " + std::to_string(k) + " refers to keypoint (" +
             std::to_string(m(k, 0)) + ", " + std::to_string(m(k, 1)) + ") but the images have " +
             std::to_string(rows1) + " and " + std::to_string(rows2) + " keypoints");
@@ -97,7 +98,7 @@ ViewGraphBuildResult BuildViewGraph(const ImageSet& images,
       }
       CameraIntrinsics& camera = result.cameras[c];
       if (camera.width <= 0 || camera.height <= 0) {
-        throw std::invalid_argument("focal search: camera " + std::to_string(c) +
+        throw InputError("focal search: camera " + std::to_string(c) +
                                     " has no image size");
       }
       const FocalSearchResult search =
@@ -115,7 +116,7 @@ ViewGraphBuildResult BuildViewGraph(const ImageSet& images,
   }
   for (const auto& camera : result.cameras) {
     if (!(camera.fx() > 0) || !(camera.fy() > 0)) {
-      throw std::invalid_argument(
+      throw InputError(
           "a camera has no focal length; enable the focal search (bootstrap.focal_search)");
     }
   }

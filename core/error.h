@@ -20,8 +20,15 @@ std::string DescribeInvalidUtf8(const std::string& text);
 // JSON on stdout hold only UTF-8, and a message must survive into them.
 std::string EscapeInvalidUtf8(const std::string& text);
 
-// Bad user input: a file that does not parse, a missing image, an unknown option key. The message
-// is escaped (EscapeInvalidUtf8) so that reporting it never fails.
+// Bad user input: a file that does not parse, a missing image, an unknown option key, data a
+// stage cannot use (an image without a camera, a pair naming a keypoint that does not exist). The
+// message is escaped (EscapeInvalidUtf8) so that reporting it never fails. The one exception type
+// for what a user can fix: the CLI prints it without a trace and exits 2, and a stage adapter
+// (pipelines/) that catches it adds the file names and rethrows it.
+//
+// std::invalid_argument stays for a broken precondition of a function (a numeric kernel handed
+// arrays of different lengths, FitAlignment on collinear points): a bug, or a condition the caller
+// checks for and catches itself (PointsFrame falls back to no points when no Sim(3) fits).
 class InputError : public std::runtime_error {
  public:
   explicit InputError(const std::string& message)

@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/error.h"
+
 namespace raytime {
 
 Eigen::Matrix<double, 3, 4> Rigid3::Matrix3x4() const {
@@ -152,7 +154,7 @@ std::string PoseConventionName(PoseConvention convention) {
 PoseConvention ParsePoseConvention(const std::string& name) {
   const auto& names = PoseConventionNames();
   const auto it = std::find(names.begin(), names.end(), name);
-  if (it == names.end()) throw std::invalid_argument("unknown pose convention '" + name + "'");
+  if (it == names.end()) throw InputError("unknown pose convention '" + name + "'");
   return static_cast<PoseConvention>(it - names.begin());
 }
 

@@ -115,7 +115,7 @@ Id CreateFile(const Context& c, const std::string& path) {
 
 void CheckLinkName(const std::string& kind, const std::string& name) {
   if (name.empty() || name == "." || name.find('/') != std::string::npos) {
-    throw std::invalid_argument("invalid " + kind + " name '" + name +
+    throw InputError("invalid " + kind + " name '" + name +
                                 "' (must be non-empty, without '/')");
   }
 }

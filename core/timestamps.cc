@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/error.h"
+
 namespace raytime {
 
 Rigid3 InterpolatePose(const Rigid3& a, const Rigid3& b, double fraction) {
@@ -21,10 +23,10 @@ TimestampJoin JoinByTimestamp(const std::map<std::string, double>& frame_times,
                    [](const StampedPose& a, const StampedPose& b) { return a.time_s < b.time_s; });
   for (size_t i = 0; i < trajectory.size(); ++i) {
     if (!std::isfinite(trajectory[i].time_s)) {
-      throw std::invalid_argument("trajectory time is not finite");
+      throw InputError("trajectory time is not finite");
     }
     if (i > 0 && trajectory[i].time_s == trajectory[i - 1].time_s) {
-      throw std::invalid_argument("two trajectory poses at time " +
+      throw InputError("two trajectory poses at time " +
                                   std::to_string(trajectory[i].time_s));
     }
   }

@@ -56,7 +56,7 @@ std::string KnownModelNames() {
 int CheckedModelId(const ColmapCamera& camera) {
   const int id = CameraModelId(camera.model);
   if (id < 0 || camera.params.size() != kCameraModels[id].num_params) {
-    throw std::invalid_argument("COLMAP camera " + std::to_string(camera.camera_id) + ": model '" +
+    throw InputError("COLMAP camera " + std::to_string(camera.camera_id) + ": model '" +
                                 camera.model + "' with " + std::to_string(camera.params.size()) +
                                 " parameters is invalid");
   }
@@ -241,7 +241,7 @@ std::string ImagesText(const ColmapModel& model) {
     // COLMAP's text reader splits on spaces, so such a name would not survive; binary keeps it.
     if (image.name.empty() || text::SplitWhitespace(image.name).size() != 1 ||
         image.name != text::Trim(image.name)) {
-      throw std::invalid_argument("image name '" + image.name +
+      throw InputError("image name '" + image.name +
                                   "' is empty or has whitespace; COLMAP text cannot hold it");
     }
     if (image.points2D.size() != image.point3D_ids.size()) {
@@ -477,7 +477,7 @@ std::string ImagesBinary(const ColmapModel& model) {
   out.Put<uint64_t>(model.images.size());
   for (const auto& [id, image] : model.images) {
     if (image.name.empty() || image.name.find('\0') != std::string::npos) {
-      throw std::invalid_argument("image " + std::to_string(id) + " has an empty or invalid name");
+      throw InputError("image " + std::to_string(id) + " has an empty or invalid name");
     }
     if (image.points2D.size() != image.point3D_ids.size()) {
       throw std::invalid_argument("image " + image.name + ": points2D and point3D_ids differ");

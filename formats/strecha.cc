@@ -67,7 +67,7 @@ StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
 void WriteStrechaCamera(const std::string& path, const StrechaCamera& camera) {
   const CameraIntrinsics& k = camera.intrinsics;
   if (k.HasDistortion()) {
-    throw std::invalid_argument("Strecha cameras are undistorted; cannot write " + path);
+    throw InputError("Strecha cameras are undistorted; cannot write " + path);
   }
   const Eigen::Matrix3d r = camera.world_from_cam.rotation.normalized().toRotationMatrix();
   const Eigen::Vector3d& c = camera.world_from_cam.translation;

@@ -65,7 +65,7 @@ void WriteTumTrajectory(const std::string& path, const PoseSet& poses,
     // The first column is one whitespace-free token; anything else would shift the columns.
     if (text::SplitWhitespace(first).size() != 1 || first != text::Trim(first) ||
         first.front() == '#') {
-      throw std::invalid_argument("TUM first column '" + first +
+      throw InputError("TUM first column '" + first +
                                   "' must be a single token not starting with '#'");
     }
     const Eigen::Quaterniond q = world_from_cam.rotation.normalized();

@@ -81,7 +81,7 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     BootstrapResult result;
     try {
       result = RunBootstrap(images, features, matches, options_.bootstrap);
-    } catch (const std::invalid_argument& e) {
+    } catch (const InputError& e) {
       throw InputError("bootstrap input (features " + features_path + ", matches " + matches_path +
                        "): " + e.what());
     }

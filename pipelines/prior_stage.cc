@@ -255,7 +255,7 @@ class PriorStage : public StageWithOptions<PriorOptions> {
           prior = RepairIfCoarse(prior, bootstrap, options_.repair_min_rotation_change_deg,
                                  !BootstrapIsWeak(bootstrap_reader), &repair);
         }
-      } catch (const std::invalid_argument& e) {
+      } catch (const std::exception& e) {  // InputError, or a repair's precondition
         throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());
       }
       summary["repair"] = {{"mode", repair.mode},

@@ -639,7 +639,7 @@ TEST(Bootstrap, RejectsInconsistentMatches) {
   SyntheticCapture capture = MakeCapture(4, 60, TestCamera(), rng);
   capture.matches[0].geometry.inlier_matches(0, 1) = 100000;
   EXPECT_THROW(RunBootstrap(capture.images, capture.features, capture.matches, BootstrapOptions()),
-               std::invalid_argument);
+               InputError);
   BootstrapOptions bad;
   bad.positions = "centroid";
   EXPECT_THROW(ValidateOptions(bad, "bootstrap"), InputError);

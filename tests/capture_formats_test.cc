@@ -420,7 +420,7 @@ TEST(CaptureFormatsBadInput, ArkitScenesPoseThatOverflowsNamesTheLine) {
 }
 
 // Two microsecond timestamps beyond 2^53 that are the same double in seconds reached the join by
-// time, whose std::invalid_argument ("two trajectory poses at time ...") escaped.
+// time, whose error ("two trajectory poses at time ...") escaped without the file and line.
 TEST(CaptureFormatsBadInput, LamarTimestampsBeyond2To52MicrosecondsNameTheLine) {
   fixtures::Capture capture = fixtures::SampleCapture();
   TempDir dir("lamar_timestamps");

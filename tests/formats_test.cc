@@ -565,7 +565,7 @@ TEST(FormatsBadInput, WritersLeaveNoPartialFiles) {
   // A name COLMAP text cannot hold: the existing model stays as it was.
   ColmapModel bad = model;
   bad.images.begin()->second.name = "has space.jpg";
-  EXPECT_THROW(WriteColmapModelText(bad, dir), std::invalid_argument);
+  EXPECT_THROW(WriteColmapModelText(bad, dir), InputError);
   EXPECT_EQ(ReadTextFile(dir + "/images.txt"), before);
 
   // The parent "directory" is a regular file: nothing can be created.

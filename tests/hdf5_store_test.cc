@@ -440,7 +440,7 @@ TEST_F(Hdf5StoreTest, WriterRejectsDuplicatesAndBadNames) {
   EXPECT_THROW(
       writer.WritePoseSet("prior", SamplePoses(1, 2), PoseRole::kPrior, StageOnly("prior")),
       std::runtime_error);
-  EXPECT_THROW(writer.WriteJson("a/b", 1), std::invalid_argument);
+  EXPECT_THROW(writer.WriteJson("a/b", 1), InputError);
   PairMatches backwards;
   backwards.image1 = 2;
   backwards.image2 = 1;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
 #include "core/geometry.h"
 #include "core/timestamps.h"
 #include "tests/expect_pose.h"
@@ -104,7 +105,7 @@ TEST(TimestampJoin, TrajectoryOrderDoesNotMatterButRepeatedTimesAreRefused) {
                  Geodesic(kTrajectory[1].world_from_cam, kTrajectory[2].world_from_cam, 0.3),
                  1e-12);
   shuffled.push_back(kTrajectory[2]);
-  EXPECT_THROW(JoinByTimestamp(frames, shuffled, TimestampJoinOptions()), std::invalid_argument);
+  EXPECT_THROW(JoinByTimestamp(frames, shuffled, TimestampJoinOptions()), InputError);
 }
 
 }  // namespace
