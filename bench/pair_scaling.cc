@@ -1,7 +1,7 @@
 // Cost of matching against the number of frames of a long sequence (issue 10, "Prior-guided
 // pairs"; a benchmark, not a test): for the first N frames of a sequence, prior-guided pairs
-// (pipelines/pair_selection.h, the matches stage's choice) against exhaustive pairs, both matched and
-// verified by the front end in this one process, so every time is measured in the same run.
+// (pipelines/pair_selection.h, the matches stage's choice) against exhaustive pairs, both matched
+// and verified by the front end in this one process, so every time is measured in the same run.
 // Exhaustive matching is run only while it has at most --max-exhaustive-pairs pairs; beyond, its
 // row gives the pair count alone.
 //
@@ -20,9 +20,9 @@
 
 #include "core/error.h"
 #include "core/hdf5_store.h"
-#include "pipelines/pair_selection.h"
 #include "core/timing.h"
 #include "frontend/matching.h"
+#include "pipelines/pair_selection.h"
 
 namespace raytime {
 namespace {

@@ -67,9 +67,8 @@ FocalSearchResult SearchFocal(const std::vector<PixelCorrespondences>& pairs, in
     if (pairs[k].pixels1.cols() >= relative_pose.min_inliers) order.push_back(static_cast<int>(k));
   }
   if (order.empty()) {
-    throw InputError("focal search: no pair has " +
-                                std::to_string(relative_pose.min_inliers) +
-                                " correspondences or more");
+    throw InputError("focal search: no pair has " + std::to_string(relative_pose.min_inliers) +
+                     " correspondences or more");
   }
   std::stable_sort(order.begin(), order.end(),
                    [&](int a, int b) { return pairs[a].pixels1.cols() > pairs[b].pixels1.cols(); });

@@ -4,8 +4,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "core/statistics.h"
 #include "core/error.h"
+#include "core/statistics.h"
 
 namespace raytime {
 namespace {
@@ -50,8 +50,7 @@ PoseSet RepairRotations(const PoseSet& prior, const PoseSet& bootstrap,
     offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
   }
   if (offsets.empty()) {
-    throw InputError(
-        "rotations-only repair: the bootstrap registered none of the prior's images");
+    throw InputError("rotations-only repair: the bootstrap registered none of the prior's images");
   }
   const Eigen::Matrix3d prior_from_bootstrap = MedianRotation(offsets);
   PoseSet repaired = prior;
@@ -108,9 +107,8 @@ PoseSet ReplaceWithBootstrap(const PoseSet& prior, const PoseSet& bootstrap,
     offsets.push_back(it->second.RotationMatrix() * pose.RotationMatrix().transpose());
   }
   if (source.size() < 3) {
-    throw InputError("full replacement: the bootstrap registered " +
-                                std::to_string(source.size()) +
-                                " of the prior's images, the Sim(3) gauge fit needs 3");
+    throw InputError("full replacement: the bootstrap registered " + std::to_string(source.size()) +
+                     " of the prior's images, the Sim(3) gauge fit needs 3");
   }
   // The gauge rotation is the median of the per-image rotation offsets, as in the rotations-only
   // repair: a coarse prior's rotations (L° each about random axes) average down to about

@@ -11,9 +11,9 @@
 #include <memory>
 #include <stdexcept>
 
+#include "core/error.h"
 #include "core/geometry.h"
 #include "core/statistics.h"
-#include "core/error.h"
 
 namespace raytime {
 namespace {
@@ -24,8 +24,7 @@ using RotationSacProblem = opengv::sac_problems::relative_pose::RotationOnlySacP
 SacProblem::algorithm_t AlgorithmFromName(const std::string& name) {
   if (name == "stewenius") return SacProblem::STEWENIUS;
   if (name == "nister") return SacProblem::NISTER;
-  throw InputError("relative_pose.algorithm must be 'stewenius' or 'nister', got '" +
-                              name + "'");
+  throw InputError("relative_pose.algorithm must be 'stewenius' or 'nister', got '" + name + "'");
 }
 
 }  // namespace

@@ -5,8 +5,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "core/error.h"
 #include "core/camera.h"
+#include "core/error.h"
 
 namespace raytime {
 namespace {
@@ -30,31 +30,31 @@ void CheckInput(const ImageSet& images, const std::vector<ImageFeatures>& featur
   const int n = static_cast<int>(images.images.size());
   if (static_cast<int>(features.size()) != n) {
     throw InputError("features cover " + std::to_string(features.size()) +
-                                " images, the image list has " + std::to_string(n));
+                     " images, the image list has " + std::to_string(n));
   }
   for (const auto& image : images.images) {
     if (image.camera_index < 0 || image.camera_index >= static_cast<int>(images.cameras.size())) {
       throw InputError("image " + image.name + " has no camera " +
-                                  std::to_string(image.camera_index));
+                       std::to_string(image.camera_index));
     }
   }
   for (const auto& pair : matches) {
     if (pair.image1 < 0 || pair.image2 < 0 || pair.image1 >= n || pair.image2 >= n ||
         pair.image1 >= pair.image2) {
       throw InputError(PairName(pair) +
-                                  ": image indices must satisfy 0 <= image1 < "
-                                  "image2 < " +
-                                  std::to_string(n));
+                       ": image indices must satisfy 0 <= image1 < "
+                       "image2 < " +
+                       std::to_string(n));
     }
     const auto& m = pair.geometry.inlier_matches;
     const Eigen::Index rows1 = features[pair.image1].keypoints.rows();
     const Eigen::Index rows2 = features[pair.image2].keypoints.rows();
     for (Eigen::Index k = 0; k < m.rows(); ++k) {
       if (m(k, 0) >= rows1 || m(k, 1) >= rows2) {
-        throw InputError(
-            PairName(pair) + ": inlier match " + std::to_string(k) + " refers to keypoint (" +
-            std::to_string(m(k, 0)) + ", " + std::to_string(m(k, 1)) + ") but the images have " +
-            std::to_string(rows1) + " and " + std::to_string(rows2) + " keypoints");
+        throw InputError(PairName(pair) + ": inlier match " + std::to_string(k) +
+                         " refers to keypoint (" + std::to_string(m(k, 0)) + ", " +
+                         std::to_string(m(k, 1)) + ") but the images have " +
+                         std::to_string(rows1) + " and " + std::to_string(rows2) + " keypoints");
       }
     }
   }
@@ -98,8 +98,7 @@ ViewGraphBuildResult BuildViewGraph(const ImageSet& images,
       }
       CameraIntrinsics& camera = result.cameras[c];
       if (camera.width <= 0 || camera.height <= 0) {
-        throw InputError("focal search: camera " + std::to_string(c) +
-                                    " has no image size");
+        throw InputError("focal search: camera " + std::to_string(c) + " has no image size");
       }
       const FocalSearchResult search =
           SearchFocal(correspondences, camera.width, camera.height, focal_options, relative_pose);

@@ -11,10 +11,10 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
 #include "core/version.h"
+#include "formats/dataset.h"
 #include "pipelines/commands.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
@@ -74,8 +74,8 @@ struct RunCommand {
   CLI::Option* workdir_option = nullptr;
 
   void Add(CLI::App& app) {
-    command = app.add_subcommand("run",
-                                 "Run a YAML pipeline (resumes: unchanged stages are skipped)");
+    command =
+        app.add_subcommand("run", "Run a YAML pipeline (resumes: unchanged stages are skipped)");
     command->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
     workdir_option = command->add_option("--workdir", workdir,
                                          "Work directory (overrides the pipeline's 'workdir')");
@@ -230,8 +230,8 @@ struct ResizeSceneCommand {
   CLI::App* command = nullptr;
 
   void Add(CLI::App& app) {
-    command = app.add_subcommand(
-        "resize-scene", "Write a downsampled copy of a dataset in the Strecha layout");
+    command = app.add_subcommand("resize-scene",
+                                 "Write a downsampled copy of a dataset in the Strecha layout");
     command->add_option("--format", input.format, "Input dataset format")->capture_default_str();
     command->add_option("--root", input.root, "Input dataset root")->required();
     command->add_option("--out", output, "Output scene folder")->required();

@@ -115,8 +115,7 @@ Id CreateFile(const Context& c, const std::string& path) {
 
 void CheckLinkName(const std::string& kind, const std::string& name) {
   if (name.empty() || name == "." || name.find('/') != std::string::npos) {
-    throw InputError("invalid " + kind + " name '" + name +
-                                "' (must be non-empty, without '/')");
+    throw InputError("invalid " + kind + " name '" + name + "' (must be non-empty, without '/')");
   }
 }
 

@@ -26,8 +26,7 @@ TimestampJoin JoinByTimestamp(const std::map<std::string, double>& frame_times,
       throw InputError("trajectory time is not finite");
     }
     if (i > 0 && trajectory[i].time_s == trajectory[i - 1].time_s) {
-      throw InputError("two trajectory poses at time " +
-                                  std::to_string(trajectory[i].time_s));
+      throw InputError("two trajectory poses at time " + std::to_string(trajectory[i].time_s));
     }
   }
   TimestampJoin join;

@@ -10,11 +10,11 @@
 
 #include "core/camera.h"
 #include "core/error.h"
-#include "formats/colmap_database.h"
-#include "formats/colmap_model.h"
 #include "core/options.h"
 #include "core/process.h"
 #include "core/timing.h"
+#include "formats/colmap_database.h"
+#include "formats/colmap_model.h"
 
 namespace fs = std::filesystem;
 

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
-#include <type_traits>
 #include <stdexcept>
+#include <type_traits>
 
 #include "core/error.h"
 #include "core/statistics.h"

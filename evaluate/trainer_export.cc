@@ -16,11 +16,11 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/colmap_model.h"
-#include "formats/nerfstudio.h"
 #include "core/graph.h"
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "formats/colmap_model.h"
+#include "formats/nerfstudio.h"
 
 namespace fs = std::filesystem;
 
@@ -414,8 +414,8 @@ void MergeSourceTracks(const RayTimeSource& source, const TrainerExportOptions& 
   spdlog::info(fmt::format(
       "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
       "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
-      summary->tracks.num_tracks, source.pose_set, track_obs.image.size(),
-      summary->tracks.num_kept, summary->tracks.num_disagreeing, options.max_track_error_px,
+      summary->tracks.num_tracks, source.pose_set, track_obs.image.size(), summary->tracks.num_kept,
+      summary->tracks.num_disagreeing, options.max_track_error_px,
       summary->tracks.num_behind_camera, summary->tracks.num_without_ray_time));
 
   shared->points2D.assign(num_images, {});
@@ -464,14 +464,14 @@ std::string PointsFrame(const std::string& name, const PoseSet& set,
     *to_set = FitAlignment(from, to, AlignmentKind::kSim3);
     return "sim3";
   } catch (const std::invalid_argument&) {
-    warnings->push_back(
-        {"no_initial_points",
-         "the 3dgs export of '" + name + "' has no initial points: no Sim(3) maps the " +
-             std::to_string(from.size()) + " camera centres of '" + source->pose_set +
-             "' onto its own (fewer than three, or collinear)",
-         {},
-         {},
-         {{"pose_set", name}, {"points_from", source->pose_set}}});
+    warnings->push_back({"no_initial_points",
+                         "the 3dgs export of '" + name +
+                             "' has no initial points: no Sim(3) maps the " +
+                             std::to_string(from.size()) + " camera centres of '" +
+                             source->pose_set + "' onto its own (fewer than three, or collinear)",
+                         {},
+                         {},
+                         {{"pose_set", name}, {"points_from", source->pose_set}}});
     spdlog::warn(fmt::format("export (3dgs): {}", warnings->back().message));
     return "none";
   }
@@ -528,11 +528,10 @@ PoseSetPoints AddPoints(const SharedExport& shared, const PoseSet& set, const Si
 
 // One pose set's folder, written whole or not at all: images/ (links into `images`), sparse/0
 // (text and binary), transforms.json, sparse_pc.ply (with points), train.txt and test.txt.
-std::string WritePoseSetFolder(const std::string& root, const std::string& name,
-                               const PoseSet& set, const SharedExport& shared,
-                               const std::optional<RayTimeSource>& source,
-                               const fs::path& images, Warnings* warnings,
-                               TrainerExportSummary* summary) {
+std::string WritePoseSetFolder(const std::string& root, const std::string& name, const PoseSet& set,
+                               const SharedExport& shared,
+                               const std::optional<RayTimeSource>& source, const fs::path& images,
+                               Warnings* warnings, TrainerExportSummary* summary) {
   Sim3 to_set;
   const std::string frame = PointsFrame(name, set, source, shared, warnings, &to_set);
   ColmapModel model = ToColmapModel(shared.pinhole, set);
@@ -618,8 +617,8 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
     for (const ImageInfo* info : shared.ordered) {
       set.world_from_cam[info->name] = all_poses.world_from_cam.at(info->name);
     }
-    summary.directories.push_back(WritePoseSetFolder(root, name, set, shared, source,
-                                                     image_folder.path, warnings, &summary));
+    summary.directories.push_back(
+        WritePoseSetFolder(root, name, set, shared, source, image_folder.path, warnings, &summary));
     summary.pose_sets.push_back(name);
   }
   if (!source) {

@@ -11,10 +11,10 @@
 #include <string>
 #include <vector>
 
-#include "formats/dataset.h"
 #include "core/geometry.h"
 #include "core/types.h"
 #include "core/warnings.h"
+#include "formats/dataset.h"
 
 namespace raytime {
 

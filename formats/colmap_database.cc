@@ -719,8 +719,8 @@ void InsertPairs(const Sqlite& db, const std::vector<PairMatches>& pairs) {
                           "?)");
   for (const PairMatches& pair : pairs) {
     // Image ids ascend with the indices, so COLMAP's (id1 < id2) orientation is ours.
-    const auto pair_id = static_cast<int64_t>(ColmapPairId(
-        static_cast<uint32_t>(pair.image1 + 1), static_cast<uint32_t>(pair.image2 + 1)));
+    const auto pair_id = static_cast<int64_t>(ColmapPairId(static_cast<uint32_t>(pair.image1 + 1),
+                                                           static_cast<uint32_t>(pair.image2 + 1)));
     match_stmt.BindInt(1, pair_id);
     match_stmt.BindInt(2, pair.matches.rows());
     match_stmt.BindInt(3, 2);

@@ -26,8 +26,8 @@
 #include <vector>
 
 #include "core/features.h"
-#include "formats/colmap_model.h"
 #include "core/types.h"
+#include "formats/colmap_model.h"
 
 namespace raytime {
 

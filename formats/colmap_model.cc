@@ -57,8 +57,8 @@ int CheckedModelId(const ColmapCamera& camera) {
   const int id = CameraModelId(camera.model);
   if (id < 0 || camera.params.size() != kCameraModels[id].num_params) {
     throw InputError("COLMAP camera " + std::to_string(camera.camera_id) + ": model '" +
-                                camera.model + "' with " + std::to_string(camera.params.size()) +
-                                " parameters is invalid");
+                     camera.model + "' with " + std::to_string(camera.params.size()) +
+                     " parameters is invalid");
   }
   return id;
 }
@@ -242,7 +242,7 @@ std::string ImagesText(const ColmapModel& model) {
     if (image.name.empty() || text::SplitWhitespace(image.name).size() != 1 ||
         image.name != text::Trim(image.name)) {
       throw InputError("image name '" + image.name +
-                                  "' is empty or has whitespace; COLMAP text cannot hold it");
+                       "' is empty or has whitespace; COLMAP text cannot hold it");
     }
     if (image.points2D.size() != image.point3D_ids.size()) {
       throw std::invalid_argument("image " + image.name + ": points2D and point3D_ids differ");

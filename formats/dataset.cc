@@ -5,6 +5,8 @@
 #include <filesystem>
 
 #include "core/error.h"
+#include "core/intrinsics.h"
+#include "core/options.h"
 #include "formats/arkitscenes.h"
 #include "formats/capture.h"
 #include "formats/colmap_model.h"
@@ -19,8 +21,6 @@
 #include "formats/stray.h"
 #include "formats/strecha.h"
 #include "formats/tum.h"
-#include "core/intrinsics.h"
-#include "core/options.h"
 
 namespace fs = std::filesystem;
 

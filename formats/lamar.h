@@ -17,8 +17,8 @@
 
 #include <string>
 
-#include "formats/capture.h"
 #include "core/timestamps.h"
+#include "formats/capture.h"
 
 namespace raytime {
 

@@ -8,10 +8,10 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/capture.h"
-#include "formats/text_util.h"
 #include "core/intrinsics.h"
 #include "core/statistics.h"
+#include "formats/capture.h"
+#include "formats/text_util.h"
 
 namespace fs = std::filesystem;
 

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
-#include "formats/dataset.h"
 #include "core/timestamps.h"
+#include "formats/dataset.h"
 
 namespace raytime {
 

@@ -7,8 +7,8 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/text_util.h"
 #include "core/intrinsics.h"
+#include "formats/text_util.h"
 
 namespace fs = std::filesystem;
 

@@ -66,7 +66,7 @@ void WriteTumTrajectory(const std::string& path, const PoseSet& poses,
     if (text::SplitWhitespace(first).size() != 1 || first != text::Trim(first) ||
         first.front() == '#') {
       throw InputError("TUM first column '" + first +
-                                  "' must be a single token not starting with '#'");
+                       "' must be a single token not starting with '#'");
     }
     const Eigen::Quaterniond q = world_from_cam.rotation.normalized();
     const Eigen::Vector3d& t = world_from_cam.translation;

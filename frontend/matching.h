@@ -7,7 +7,8 @@
 // with fewer than min_num_inliers verified inliers are dropped. No pose prior enters: the pairs
 // come from the image list alone (all pairs, or a window along the name order plus a keyframe
 // grid for loop closures), or are handed over as a list (`pairs: prior`: the matches stage chooses
-// them from the prior's poses, pipelines/pair_selection.h); matching and verification never see a pose.
+// them from the prior's poses, pipelines/pair_selection.h); matching and verification never see a
+// pose.
 #pragma once
 
 #include <nlohmann/json.hpp>

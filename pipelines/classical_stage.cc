@@ -9,10 +9,10 @@
 #include <filesystem>
 
 #include "core/error.h"
-#include "formats/colmap_database.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
 #include "evaluate/classical_control.h"
+#include "formats/colmap_database.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;

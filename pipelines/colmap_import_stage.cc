@@ -8,8 +8,8 @@
 #include <cmath>
 
 #include "core/error.h"
-#include "formats/colmap_database.h"
 #include "core/hdf5_store.h"
+#include "formats/colmap_database.h"
 #include "pipelines/stages.h"
 
 namespace raytime {

@@ -9,11 +9,11 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/dataset.h"
 #include "core/hdf5_store.h"
 #include "core/process.h"
-#include "pipelines/sweep_row.h"
 #include "evaluate/pose_errors.h"
+#include "formats/dataset.h"
+#include "pipelines/sweep_row.h"
 
 namespace fs = std::filesystem;
 

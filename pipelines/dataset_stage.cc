@@ -7,9 +7,9 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "core/hdf5_store.h"
 #include "formats/dataset.h"
 #include "formats/stray.h"
-#include "core/hdf5_store.h"
 #include "frontend/video_frames.h"
 #include "pipelines/stages.h"
 

@@ -10,12 +10,12 @@
 #include <optional>
 
 #include "core/error.h"
-#include "formats/colmap_model.h"
-#include "formats/nerfstudio.h"
-#include "formats/tum.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "evaluate/trainer_export.h"
+#include "formats/colmap_model.h"
+#include "formats/nerfstudio.h"
+#include "formats/tum.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;

@@ -1,15 +1,15 @@
 // The `matches` stage: pairwise descriptor matching, geometric verification and guided matching
 // (SPEC §5, paper §4.1). Reads the image list and the features, writes the verified pairs. With
 // `pairs: prior` it also reads a pose set (the prior stage's) and matches only the pairs that pose
-// set says overlap (pipelines/pair_selection.h): the poses choose the pairs here, in pipelines/, and
-// the front end matches and verifies them without ever seeing a pose.
+// set says overlap (pipelines/pair_selection.h): the poses choose the pairs here, in pipelines/,
+// and the front end matches and verifies them without ever seeing a pose.
 #include <spdlog/spdlog.h>
 
 #include "core/error.h"
 #include "core/hdf5_store.h"
-#include "pipelines/pair_selection.h"
 #include "core/warnings.h"
 #include "frontend/matching.h"
+#include "pipelines/pair_selection.h"
 #include "pipelines/stages.h"
 
 namespace raytime {

@@ -8,11 +8,11 @@
 #include <filesystem>
 
 #include "bootstrap/prior_repair.h"
-#include "formats/dataset.h"
 #include "core/geometry.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "evaluate/perturbation.h"
+#include "formats/dataset.h"
 #include "pipelines/stages.h"
 
 namespace raytime {

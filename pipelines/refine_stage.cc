@@ -495,9 +495,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // A self-calibrated camera must come from one solve: only the largest component then.
     const size_t num_solved = options_.refine.SelfCalibrates() ? 1 : components.size();
     if (components.size() > 1) {
-      solves.warnings.push_back(DisconnectedGraphWarning(images, components, num_solved,
-                                                         prior_rotations_from_matches,
-                                                         &solves.loose));
+      solves.warnings.push_back(DisconnectedGraphWarning(
+          images, components, num_solved, prior_rotations_from_matches, &solves.loose));
     }
     for (size_t c = 0; c < num_solved; ++c) {
       SolveComponent(images, features, matches, prior, components[c], c == 0,
@@ -561,8 +560,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       spdlog::info(fmt::format(
           "refine: the prior as given is {:.2f}° (rotation) / {:.2f}° (baseline direction) "
           "from the matches' relative poses (median over {} pairs, {} with parallax)",
-          native.median_rotation_error_deg, native.median_direction_error_deg,
-          convention.num_pairs, convention.num_pairs_with_parallax));
+          native.median_rotation_error_deg, native.median_direction_error_deg, convention.num_pairs,
+          convention.num_pairs_with_parallax));
     }
     if (convention.refused) {
       throw InputError("refine: pose set '" + options_.prior + "' of " +

@@ -300,12 +300,13 @@ bool PreviousResultHolds(Stage& stage, const StageContext& context, const json& 
 json CachedRecord(const fs::path& cached, const std::string& tag) {
   if (!fs::exists(cached / "record.json")) return json();
   const json record = json::parse(ReadTextFile((cached / "record.json").string()), nullptr, false);
-  if (record.is_discarded() || !record.contains("output_hash") || !fs::exists(cached / "output.h5") ||
+  if (record.is_discarded() || !record.contains("output_hash") ||
+      !fs::exists(cached / "output.h5") ||
       record["output_hash"] != HashFileContents((cached / "output.h5").string())) {
-    spdlog::warn(fmt::format(
-        "{}: the cached result in {} is damaged (no record or checksum, or the content "
-        "differs), computing it again",
-        tag, cached.string()));
+    spdlog::warn(
+        fmt::format("{}: the cached result in {} is damaged (no record or checksum, or the content "
+                    "differs), computing it again",
+                    tag, cached.string()));
     return json();
   }
   return record;

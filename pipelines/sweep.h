@@ -11,8 +11,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "pipelines/sweep_row.h"
 #include "pipelines/stage_cache.h"
+#include "pipelines/sweep_row.h"
 
 namespace raytime {
 

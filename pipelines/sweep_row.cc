@@ -118,7 +118,8 @@ SweepRow SweepRow::FromJson(const json& in, const std::string& where) {
     }
     if (in.contains("stage_seconds")) {
       for (const auto& [id, value] : in.at("stage_seconds").items()) {
-        row.stage_seconds[id] = value.is_number() ? value.get<double>() : std::numeric_limits<double>::quiet_NaN();
+        row.stage_seconds[id] =
+            value.is_number() ? value.get<double>() : std::numeric_limits<double>::quiet_NaN();
       }
     }
     if (in.contains("errors")) {

@@ -39,10 +39,11 @@ void RotationFromQuaternion(const T* q, T* R) {
 
 // The cross-projection residual of paper eqs. (rij)/(rji), r = π_j(O_i + t·R_i·d) − û_jl, written
 // once: every variant computes its value with RayPoint and TargetResidual below (the Ceres costs of
-// refine/cross_projection_cost.h, automatic or closed-form, cached or not; the ray-time LM's kernel;
-// the statistics of a pass), so they agree bit for bit, and those with closed-form Jacobians carry
-// ∂r/∂X from TargetResidualDerivative back to their own pose parametrization (quaternion blocks for
-// Ceres, (φ, δO) for the LM). Rotations here are row-major 3×3 arrays, camera to world.
+// refine/cross_projection_cost.h, automatic or closed-form, cached or not; the ray-time LM's
+// kernel; the statistics of a pass), so they agree bit for bit, and those with closed-form
+// Jacobians carry ∂r/∂X from TargetResidualDerivative back to their own pose parametrization
+// (quaternion blocks for Ceres, (φ, δO) for the LM). Rotations here are row-major 3×3 arrays,
+// camera to world.
 
 // X = O + t·w with w = R·d (paper eq. raypoint): the point an observation's unit ray d implies at
 // ray time t. `direction` receives w (the derivative of X in t).

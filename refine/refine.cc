@@ -57,8 +57,8 @@ void ValidateInput(const RefineInput& input) {
 
 // The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating one,
 // else the images' own cameras. Every pass of the run uses the same blocks.
-void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& options,
-                           PassState* state, CameraBlocksSummary* cameras) {
+void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& options, PassState* state,
+                           CameraBlocksSummary* cameras) {
   cameras->sharing = options.intrinsics_sharing;
   std::vector<bool> camera_in_use(input.cameras.size(), false);
   for (const int camera : input.camera_index) camera_in_use[camera] = true;
@@ -246,9 +246,9 @@ void LogVerdicts(const RefineInput& input, const RefineSummary& summary) {
   constexpr size_t kLogged = 8;
   std::string listed;
   for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
-    listed += fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ",
-                          input.Label(pairs.pairs[p].image1), input.Label(pairs.pairs[p].image2),
-                          pairs.pairs[p].median_px);
+    listed +=
+        fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ", input.Label(pairs.pairs[p].image1),
+                    input.Label(pairs.pairs[p].image2), pairs.pairs[p].median_px);
   }
   if (pairs.pairs.size() > kLogged) listed += ", ...";
   spdlog::warn(fmt::format(

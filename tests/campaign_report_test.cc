@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "core/error.h"
-#include "pipelines/sweep_row.h"
 #include "pipelines/campaign_report.h"
+#include "pipelines/sweep_row.h"
 
 namespace raytime {
 namespace {

@@ -29,9 +29,9 @@
 #include <string>
 #include <vector>
 
+#include "evaluate/perturbation.h"
 #include "formats/colmap_model.h"
 #include "formats/strecha.h"
-#include "evaluate/perturbation.h"
 #include "tests/capture_fixtures.h"
 
 namespace fs = std::filesystem;

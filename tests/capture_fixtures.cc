@@ -12,8 +12,8 @@
 #include <utility>
 #include <vector>
 
-#include "formats/strecha.h"
 #include "core/types.h"
+#include "formats/strecha.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;

@@ -11,10 +11,10 @@
 #include <set>
 
 #include "core/error.h"
-#include "formats/dataset.h"
-#include "formats/stray.h"
 #include "core/hdf5_store.h"
 #include "core/provenance.h"
+#include "formats/dataset.h"
+#include "formats/stray.h"
 #include "frontend/video_frames.h"
 #include "pipelines/stage.h"
 #include "tests/capture_fixtures.h"

@@ -24,10 +24,10 @@
 #include <string>
 #include <vector>
 
-#include "formats/colmap_model.h"
 #include "core/hdf5_store.h"
 #include "core/provenance.h"
 #include "evaluate/pose_errors.h"
+#include "formats/colmap_model.h"
 #include "pipelines/stage.h"
 #include "tests/capture_fixtures.h"
 #include "tests/temp_dir.h"

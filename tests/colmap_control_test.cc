@@ -22,12 +22,12 @@
 #include <string>
 
 #include "core/atomic_file.h"
-#include "formats/colmap_database.h"
-#include "formats/colmap_model.h"
-#include "formats/strecha.h"
 #include "core/statistics.h"
 #include "evaluate/classical_control.h"
 #include "evaluate/pose_errors.h"
+#include "formats/colmap_database.h"
+#include "formats/colmap_model.h"
+#include "formats/strecha.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

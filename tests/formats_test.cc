@@ -15,13 +15,13 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/geometry.h"
+#include "core/warnings.h"
 #include "formats/colmap_model.h"
 #include "formats/dataset.h"
 #include "formats/nerfstudio.h"
 #include "formats/strecha.h"
 #include "formats/tum.h"
-#include "core/geometry.h"
-#include "core/warnings.h"
 #include "testing/random_draws.h"
 #include "tests/temp_dir.h"
 

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "formats/strecha.h"
 #include "core/geometry.h"
+#include "formats/strecha.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"
 #include "frontend/matching.h"

@@ -22,8 +22,8 @@
 
 #include "core/camera.h"
 #include "core/error.h"
-#include "formats/strecha.h"
 #include "core/geometry.h"
+#include "formats/strecha.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"
 #include "frontend/image_reading.h"

@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/intrinsics.h"
 #include "formats/dataset.h"
 #include "formats/strecha.h"
-#include "core/intrinsics.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

@@ -1,6 +1,7 @@
-// Prior-guided pair selection (pipelines/pair_selection.h, SPEC §5, issue 10) on synthetic camera rings
-// with known answers: the nearest cameras on the ring are chosen, k is respected, the window is
-// joined, opposite and far cameras are never paired, images without a pose get window pairs only.
+// Prior-guided pair selection (pipelines/pair_selection.h, SPEC §5, issue 10) on synthetic camera
+// rings with known answers: the nearest cameras on the ring are chosen, k is respected, the window
+// is joined, opposite and far cameras are never paired, images without a pose get window pairs
+// only.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>

@@ -102,16 +102,22 @@ TEST(RayTimeLmSolverTest, EveryVariantOfTheResidualHasTheSameValue) {
   for (int trial = 0; trial < 20; ++trial) {
     double source_pose[kPoseBlockSize], target_pose[kPoseBlockSize];
     for (double* pose : {source_pose, target_pose}) {
-      const Eigen::Quaterniond q = Eigen::Quaterniond(Eigen::AngleAxisd(
-          0.3 * draw(), Eigen::Vector3d(draw(), draw(), draw()).normalized()));
+      const Eigen::Quaterniond q = Eigen::Quaterniond(
+          Eigen::AngleAxisd(0.3 * draw(), Eigen::Vector3d(draw(), draw(), draw()).normalized()));
       const Eigen::Vector3d centre = DrawVector3(draw);
       const double block[kPoseBlockSize] = {q.x(),      q.y(),      q.z(),     q.w(),
                                             centre.x(), centre.y(), centre.z()};
       std::copy(block, block + kPoseBlockSize, pose);
     }
     target_pose[kPoseCentreOffset] += 2.0;
-    double intrinsics[kNumIntrinsics] = {1400.0 + 50 * draw(), 1380.0 + 50 * draw(),
-                                         768.0 + 20 * draw(), 512.0 + 20 * draw(), 0, 0, 0, 0};
+    double intrinsics[kNumIntrinsics] = {1400.0 + 50 * draw(),
+                                         1380.0 + 50 * draw(),
+                                         768.0 + 20 * draw(),
+                                         512.0 + 20 * draw(),
+                                         0,
+                                         0,
+                                         0,
+                                         0};
     const Eigen::Vector2d source_pixel(768.0 + 300 * draw(), 512.0 + 300 * draw());
     const Eigen::Vector2d target_pixel(768.0 + 300 * draw(), 512.0 + 300 * draw());
     double ray_time = 10.0 + 5.0 * draw();
@@ -127,11 +133,11 @@ TEST(RayTimeLmSolverTest, EveryVariantOfTheResidualHasTheSameValue) {
     }
     Eigen::Vector2d lm, jd;
     Eigen::Matrix<double, 2, 6> js, jt;
-    CrossProjectionJacobian(rotation[0], Eigen::Map<const Eigen::Vector3d>(source_pose + 4),
-                            ray_time, rotation[1], Eigen::Map<const Eigen::Vector3d>(target_pose + 4),
-                            Eigen::Vector4d(intrinsics[kFx], intrinsics[kFy], intrinsics[kCx],
-                                            intrinsics[kCy]),
-                            source_ray, target_pixel, &lm, &js, &jd, &jt);
+    CrossProjectionJacobian(
+        rotation[0], Eigen::Map<const Eigen::Vector3d>(source_pose + 4), ray_time, rotation[1],
+        Eigen::Map<const Eigen::Vector3d>(target_pose + 4),
+        Eigen::Vector4d(intrinsics[kFx], intrinsics[kFy], intrinsics[kCx], intrinsics[kCy]),
+        source_ray, target_pixel, &lm, &js, &jd, &jt);
 
     // The closed-form Ceres cost (fixed intrinsics) and the automatic-differentiation one.
     std::unique_ptr<ceres::CostFunction> fixed(

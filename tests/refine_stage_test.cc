@@ -13,9 +13,9 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/colmap_model.h"
 #include "core/hdf5_store.h"
 #include "evaluate/pose_errors.h"
+#include "formats/colmap_model.h"
 #include "pipelines/stage.h"
 #include "temp_dir.h"
 #include "testing/synthetic_scene.h"

@@ -17,8 +17,8 @@
 #include <sstream>
 #include <string>
 
-#include "formats/colmap_model.h"
 #include "core/types.h"
+#include "formats/colmap_model.h"
 #include "tests/raytime_command.h"
 #include "tests/temp_dir.h"
 

@@ -23,9 +23,9 @@
 #include <vector>
 
 #include "core/atomic_file.h"
+#include "core/statistics.h"
 #include "formats/colmap_model.h"
 #include "formats/dataset.h"
-#include "core/statistics.h"
 #include "tests/colmap_command.h"
 #include "tests/raytime_command.h"
 #include "tests/temp_dir.h"

@@ -16,9 +16,9 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "formats/colmap_model.h"
 #include "evaluate/trainer_export.h"
 #include "evaluate/undistortion.h"
+#include "formats/colmap_model.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

@@ -38,10 +38,10 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/warnings.h"
 #include "formats/dataset.h"
 #include "formats/stray.h"
 #include "formats/text_util.h"
-#include "core/warnings.h"
 #include "tests/fuzz/capture_fuzz.h"
 #include "tests/fuzz/fuzz_util.h"
 
