@@ -14,7 +14,6 @@
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
 #include "core/version.h"
-#include "formats/dataset.h"
 #include "pipelines/commands.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"

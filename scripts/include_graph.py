@@ -1,0 +1,90 @@
+#!/usr/bin/python3
+"""The folder-level include graph of raytime, and a check that its layers hold.
+
+Layers (README "How we write code"): core <- formats <- stages (frontend, bootstrap, refine,
+evaluate) <- pipelines <- cli. Stages never include one another (evaluate may read formats);
+cli reaches everything through pipelines/; inside refine/ only refine.cc includes the entry
+header refine/refine.h (the others include refine/refine_types.h), so no arrow runs up.
+
+  scripts/include_graph.py --check      exit 1 and name every include that breaks a layer
+  scripts/include_graph.py --markdown   the graph as a Mermaid diagram with include counts
+"""
+import argparse
+import collections
+import os
+import re
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# Which folders each library folder may include (itself implied). tests/ and bench/ may use all.
+ALLOWED = {
+    "core": set(),
+    "formats": {"core"},
+    "frontend": {"core"},
+    "bootstrap": {"core"},
+    "refine": {"core"},
+    "evaluate": {"core", "formats"},
+    "pipelines": {"core", "formats", "frontend", "bootstrap", "refine", "evaluate"},
+    "cli": {"core", "pipelines"},
+    "testing": {"core", "refine", "evaluate"},
+}
+INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([^"]+)"')
+
+
+def includes():
+    """(folder, file, included folder, included path) for every project include."""
+    for folder in sorted(ALLOWED):
+        for dirpath, _, names in os.walk(os.path.join(ROOT, folder)):
+            for name in sorted(names):
+                if not name.endswith((".h", ".cc")):
+                    continue
+                path = os.path.join(dirpath, name)
+                with open(path, encoding="utf-8") as f:
+                    for line in f:
+                        m = INCLUDE.match(line)
+                        if m and m.group(1) in ALLOWED:
+                            yield folder, os.path.relpath(path, ROOT), m.group(1), \
+                                m.group(1) + "/" + m.group(2)
+
+
+def violations():
+    found = []
+    for folder, path, target, included in includes():
+        if target != folder and target not in ALLOWED[folder]:
+            found.append(f"{path}: includes {included} ({folder}/ may include "
+                         f"{', '.join(sorted(ALLOWED[folder] | {folder}))})")
+        if (included == "refine/refine.h" and path.startswith("refine/")
+                and path != "refine/refine.cc"):
+            found.append(f"{path}: includes the entry header refine/refine.h "
+                         "(inside refine/ include refine/refine_types.h)")
+    return found
+
+
+def markdown():
+    counts = collections.Counter((f, t) for f, _, t, _ in includes() if f != t)
+    lines = ["```mermaid", "graph BT"]
+    for (source, target), n in sorted(counts.items()):
+        lines.append(f"  {source} -->|{n}| {target}")
+    lines.append("```")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="fail on an include across layers")
+    parser.add_argument("--markdown", action="store_true", help="print the graph (Mermaid)")
+    args = parser.parse_args()
+    if args.markdown:
+        print(markdown())
+    if args.check:
+        found = violations()
+        for v in found:
+            print(v, file=sys.stderr)
+        if found:
+            return 1
+        print(f"include layers hold ({sum(1 for _ in includes())} project includes)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
