@@ -13,7 +13,7 @@
 # perturb, level_deg: LEVEL, seed: SEED}`), written by tests/capture_fixture_tool. Each arm runs
 #   raytime run configs/capture.yaml --workdir W --set dataset.format=F --set dataset.root=FOLDER
 # unchanged (refine preset gnc), plus SETS (e.g. SETS="refine.preset=basin", VARIANT=basin), and is
-# scored afterwards against the scene's ground truth with `raytime evaluate --gt-format strecha`
+# scored afterwards against the scene's ground truth with `raytime evaluate --gt_format strecha`
 # (Sim(3) and none; the capture arms against a Strecha layout of links to the scene's files under
 # the capture's image names, kept outside the capture folder).
 #
@@ -68,8 +68,8 @@ score() {
   fi
   for align in sim3 none; do
     local json
-    json=$("$raytime" evaluate --est "$est" --est-format "$est_format" ${est_set:+--est-set "$est_set"} \
-             --gt "$gt" --gt-format strecha --align "$align" --json 2>/dev/null) || json=null
+    json=$("$raytime" evaluate --est "$est" --est_format "$est_format" ${est_set:+--est_set "$est_set"} \
+             --gt "$gt" --gt_format strecha --align "$align" --json 2>/dev/null) || json=null
     /usr/bin/python3 - "$run" "$scene" "$arm" "$what" "$align" "$est" "$json" >> "$results" <<'PY'
 import json, os, sys
 run, scene, arm, what, align, est, errors = sys.argv[1:8]

@@ -1,14 +1,14 @@
 #!/usr/bin/python3
 """False alarms and catches of raytime's checks over a sweep (issue 30 item 10).
 
-Usage: scripts/false_alarms.py SWEEP_DIR [RAYTIME] [--success-deg 1.0]
+Usage: scripts/false_alarms.py SWEEP_DIR [RAYTIME] [--success_deg 1.0]
 
 For every run of SWEEP_DIR/runs/* and every refined pose set in it (refine stages), scores the
 pose set per frame against the dataset's ground truth with `raytime evaluate --json` (Sim(3)), and
 reads the warnings its refine stage and the export raised. A run succeeds for a pose set when its
-mean rotation error after Sim(3) is below --success-deg; a frame is wrong above it. Prints, per
+mean rotation error after Sim(3) is below --success_deg; a frame is wrong above it. Prints, per
 warning code: pose sets that succeeded and were flagged (false alarms), that failed and were
-flagged (caught), successes flagged although every frame is within --success-deg (the alarms that
+flagged (caught), successes flagged although every frame is within --success_deg (the alarms that
 are false whatever the mean), and, for codes that name frames, named frames that were right / wrong; then the
 failed pose sets no check flagged (missed). Needs only the Python standard library.
 """
@@ -22,9 +22,9 @@ from collections import defaultdict
 
 
 def evaluate(raytime, est_file, est_set, gt_file):
-    out = subprocess.run([raytime, "evaluate", "--est", est_file, "--est-format", "hdf5",
-                          "--est-set", est_set, "--gt", gt_file, "--gt-format", "hdf5",
-                          "--gt-set", "ground_truth", "--json"],
+    out = subprocess.run([raytime, "evaluate", "--est", est_file, "--est_format", "hdf5",
+                          "--est_set", est_set, "--gt", gt_file, "--gt_format", "hdf5",
+                          "--gt_set", "ground_truth", "--json"],
                          capture_output=True, text=True)
     if out.returncode != 0:
         return None
@@ -35,7 +35,7 @@ def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("sweep")
     parser.add_argument("raytime", nargs="?", default="build/cli/raytime")
-    parser.add_argument("--success-deg", type=float, default=1.0)
+    parser.add_argument("--success_deg", type=float, default=1.0)
     args = parser.parse_args()
     runs = sorted(glob.glob(os.path.join(args.sweep, "runs", "*")))
     flagged_ok = defaultdict(int)

@@ -146,18 +146,23 @@ SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
       for (auto& row : rows) {
         if (random.Uniform() < options.outlier_fraction) row.second = random.Below(num_keypoints_j);
       }
-      PairMatchIndices pair;
-      pair.image1 = i;
-      pair.image2 = j;
-      pair.matches.resize(static_cast<Eigen::Index>(rows.size()), 2);
-      for (size_t m = 0; m < rows.size(); ++m) {
-        pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
-        pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
-      }
-      input.pairs.push_back(std::move(pair));
+      input.pairs.push_back(MakePairMatches(i, j, rows));
     }
   }
   return scene;
+}
+
+PairMatchIndices MakePairMatches(int image1, int image2,
+                                 const std::vector<std::pair<uint32_t, uint32_t>>& rows) {
+  PairMatchIndices pair;
+  pair.image1 = image1;
+  pair.image2 = image2;
+  pair.matches.resize(static_cast<Eigen::Index>(rows.size()), 2);
+  for (size_t m = 0; m < rows.size(); ++m) {
+    pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
+    pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
+  }
+  return pair;
 }
 
 void ReprojectCamera(SyntheticScene* scene, int camera, const Rigid3& world_from_cam) {

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "core/types.h"
@@ -49,6 +50,10 @@ struct SyntheticScene {
 CameraIntrinsics SyntheticIntrinsics(bool distortion);
 
 SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options);
+
+// A pair's matches from (keypoint in image1, keypoint in image2) rows.
+PairMatchIndices MakePairMatches(int image1, int image2,
+                                 const std::vector<std::pair<uint32_t, uint32_t>>& rows);
 
 // Regenerates camera `camera`'s keypoints as if it stood at `world_from_cam` (the matches keep
 // their indices): matches that pull the solve to a wrong pose, for the guardrail tests.

@@ -16,7 +16,7 @@
 //                      reference arm: the scene as dataset, prior.source file)
 //   --gt DIR           the scene's ground truth under the capture's image names, as a Strecha
 //                      layout of symbolic links to the scene's files (for `raytime evaluate
-//                      --gt DIR --gt-format strecha`), outside FOLDER
+//                      --gt DIR --gt_format strecha`), outside FOLDER
 //   stray: rgb.mp4 at --fps (--codec: 'mp4v' MPEG-4 Part 2, 'avc1' H.264), odometry.csv at
 //          --odometry-hz from the first frame's time to the last's, camera_matrix.csv at the
 //          video's size.

@@ -367,7 +367,8 @@ TEST_F(PipelineTest, TruncatedImageFailsTheFeaturesStageNamingTheFile) {
 TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
   const std::string run_dir = (workdir_ / "demo").string();
   ASSERT_EQ(RunRaytime("run configs/demo.yaml --workdir " + run_dir).exit_code, 0);
-  // The exported COLMAP model scores as the pipeline's own evaluation scored the pose set.
+  // The exported COLMAP model scores as the pipeline's own evaluation scored the pose set (here
+  // with the flags' old kebab-case spellings, kept as aliases).
   CommandResult result = RunRaytime("evaluate --est " + run_dir +
                                     "/refined --est-format colmap --gt data/sample/fountain-P11 "
                                     "--gt-format strecha --align none --json");
@@ -378,7 +379,7 @@ TEST_F(PipelineTest, EvaluateCommandScoresTwoPoseFiles) {
               summary["metrics"]["refined"]["none"]["mean_rotation_deg"].get<double>(), 1e-6);
   EXPECT_NEAR(errors["mean_centre_m"].get<double>(),
               summary["metrics"]["refined"]["none"]["mean_centre_m"].get<double>(), 1e-6);
-  // The flags are snake_case like the stages' (issue 31); the kebab-case spellings stay aliases.
+  // The flags are snake_case like the stages' (issue 31).
   result = RunRaytime("evaluate --est " + run_dir +
                       "/refined --est_format colmap --gt data/sample/fountain-P11 "
                       "--gt_format strecha --align none --success_deg 2 --json");

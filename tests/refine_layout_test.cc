@@ -16,18 +16,6 @@
 namespace raytime {
 namespace {
 
-PairMatchIndices Pair(int i, int j, std::vector<std::pair<uint32_t, uint32_t>> rows) {
-  PairMatchIndices pair;
-  pair.image1 = i;
-  pair.image2 = j;
-  pair.matches.resize(static_cast<Eigen::Index>(rows.size()), 2);
-  for (size_t m = 0; m < rows.size(); ++m) {
-    pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
-    pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
-  }
-  return pair;
-}
-
 // Three images with 4 keypoints each; a track 0:0 ~ 1:1 ~ 2:2, a two-view match 0:1 ~ 2:0, a
 // match inside one image (skipped).
 RefineInput TinyInput() {
@@ -36,8 +24,8 @@ RefineInput TinyInput() {
   input.camera_index = {0, 0, 0};
   input.prior_world_from_cam.resize(3);
   input.keypoints.assign(3, Keypoints::Zero(4, 2));
-  input.pairs = {Pair(0, 1, {{0, 1}}), Pair(1, 2, {{1, 2}}), Pair(0, 2, {{1, 0}}),
-                 Pair(1, 1, {{0, 3}})};
+  input.pairs = {MakePairMatches(0, 1, {{0, 1}}), MakePairMatches(1, 2, {{1, 2}}), MakePairMatches(0, 2, {{1, 0}}),
+                 MakePairMatches(1, 1, {{0, 3}})};
   return input;
 }
 
@@ -85,10 +73,10 @@ TEST(RefineLayoutTest, AnchoredProjectsEachTrackAnchorIntoItsOtherObservations) 
 
 TEST(RefineLayoutTest, RejectsOutOfRangeIndices) {
   RefineInput input = TinyInput();
-  input.pairs.push_back(Pair(0, 2, {{9, 0}}));
+  input.pairs.push_back(MakePairMatches(0, 2, {{9, 0}}));
   EXPECT_THROW(BuildPerObservationLayout(input, 0, 0), InputError);
   input = TinyInput();
-  input.pairs.push_back(Pair(0, 5, {{0, 0}}));
+  input.pairs.push_back(MakePairMatches(0, 5, {{0, 0}}));
   EXPECT_THROW(BuildAnchoredLayout(input, 0, 0), InputError);
 }
 

@@ -57,7 +57,7 @@ sweep:
 )";
     const std::string sweep_dir = (dir_ / "sweep").string();
     const CommandResult run = RunRaytime("run " + pipeline.string() + " --workdir " + sweep_dir +
-                                         " --jobs 1 --no-report");
+                                         " --jobs 1 --no_report");
     // The missing scene's runs fail, so the sweep reports failure, but it writes every row.
     EXPECT_EQ(run.exit_code, 2) << run.output;
     EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "sweep.json")) << run.output;

@@ -88,7 +88,7 @@ sweep:
   const fs::path local = dir / "local";
   const fs::path slurm = dir / "slurm";
   const CommandResult local_run = RunRaytime("run " + pipeline.string() + " --workdir " +
-                                             local.string() + " --jobs 1 --no-report");
+                                             local.string() + " --jobs 1 --no_report");
   ASSERT_EQ(local_run.exit_code, 0) << local_run.output;
   const CommandResult slurm_run = RunRaytime("run " + pipeline.string() + " --workdir " +
                                              slurm.string() + " --backend slurm --wait");
