@@ -165,20 +165,7 @@ int PixelSize(double value, const std::string& path, int line, const std::string
 
 std::vector<double> ReadNumbersFile(const std::string& path) {
   if (!fs::is_regular_file(path)) ThrowInput(path, 0, "file not found");
-  const std::string contents = ReadTextFile(path);
-  const auto lines = text::SplitLines(contents);
-  std::vector<double> numbers;
-  for (size_t k = 0; k < lines.size(); ++k) {
-    for (const std::string_view token : text::SplitWhitespace(lines[k])) {
-      double value;
-      if (!text::ParseDouble(token, &value)) {
-        ThrowInput(path, static_cast<int>(k + 1),
-                   "'" + std::string(token) + "' is not a finite number");
-      }
-      numbers.push_back(value);
-    }
-  }
-  return numbers;
+  return text::ParseNumbers(path, ReadTextFile(path)).values;
 }
 
 Rigid3 PoseFromCameraToWorld(const Eigen::Matrix3d& world_from_cam, const Eigen::Vector3d& centre,

@@ -20,21 +20,9 @@ constexpr char kLayout[] = "K (3x3), distortion (3), R (3x3), centre (3), width 
 }  // namespace
 
 StrechaCamera ReadStrechaCamera(const std::string& path, Warnings* warnings) {
-  const std::string contents = ReadTextFile(path);
-  const auto lines = text::SplitLines(contents);
-  std::vector<double> v;
-  std::vector<int> line_of;  // line of each number, for messages
-  for (size_t k = 0; k < lines.size(); ++k) {
-    for (const std::string_view token : text::SplitWhitespace(lines[k])) {
-      double value;
-      if (!text::ParseDouble(token, &value)) {
-        ThrowInput(path, static_cast<int>(k + 1),
-                   "'" + std::string(token) + "' is not a finite number");
-      }
-      v.push_back(value);
-      line_of.push_back(static_cast<int>(k + 1));
-    }
-  }
+  const text::NumbersWithLines numbers = text::ParseNumbers(path, ReadTextFile(path));
+  const std::vector<double>& v = numbers.values;
+  const std::vector<int>& line_of = numbers.lines;  // line of each number, for messages
   if (v.size() != kNumbersPerCamera) {
     ThrowInput(path, 0,
                "found " + std::to_string(v.size()) + " numbers, expected " +

@@ -11,6 +11,8 @@
 #include <system_error>
 #include <vector>
 
+#include "core/error.h"
+
 namespace raytime::text {
 
 inline std::vector<std::string_view> SplitWhitespace(std::string_view line) {
@@ -67,6 +69,29 @@ inline std::vector<std::string_view> SplitLines(const std::string& contents) {
     start = end + 1;
   }
   return lines;
+}
+
+// Every whitespace-separated number of a file's `contents`, with the line each stands on; an
+// InputError naming `path` and the line at a token that is not a finite number.
+struct NumbersWithLines {
+  std::vector<double> values;
+  std::vector<int> lines;  // 1-based, one per value
+};
+inline NumbersWithLines ParseNumbers(const std::string& path, const std::string& contents) {
+  NumbersWithLines numbers;
+  const auto lines = SplitLines(contents);
+  for (size_t k = 0; k < lines.size(); ++k) {
+    for (const std::string_view token : SplitWhitespace(lines[k])) {
+      double value;
+      if (!ParseDouble(token, &value)) {
+        ThrowInput(path, static_cast<int>(k + 1),
+                   "'" + std::string(token) + "' is not a finite number");
+      }
+      numbers.values.push_back(value);
+      numbers.lines.push_back(static_cast<int>(k + 1));
+    }
+  }
+  return numbers;
 }
 
 }  // namespace raytime::text
