@@ -170,6 +170,39 @@ const char* FragilityVerdict(const BootstrapResult& result) {
   return result.support.weak ? "weak" : "not fragile";
 }
 
+BootstrapSummary SummarizeBootstrap(int num_images, const BootstrapOptions& options,
+                                    const BootstrapResult& result) {
+  BootstrapSummary s;
+  s.num_images = num_images;
+  s.num_pairs = static_cast<int>(result.edges.size());
+  s.num_usable_pairs = result.support.num_usable_pairs;
+  s.num_pure_rotation_pairs = result.support.num_pure_rotation_pairs;
+  s.num_rotations_registered = result.num_rotations_registered;
+  s.num_positions_estimated = result.num_positions_estimated;
+  s.num_positions_filled = result.num_positions_filled;
+  s.positions = options.positions;
+  const FragilityReport& f = result.fragility;
+  s.fragility = {f.mean_residual_deg, f.median_residual_deg, f.num_pairs,       f.threshold_deg,
+                 f.fragile,           FragilityVerdict(result), result.support.reasons};
+  s.graph_support = GraphSupportJson(result.support);
+  s.pairs = {s.num_usable_pairs - result.pairs.num_wrong, result.pairs.num_wrong,
+             result.pairs.num_unusable, result.pairs.rounds};
+  const RotationAveragingResult& ra = result.rotations;
+  s.rotation_averaging = {ra.num_edges_used,  ra.l1_iterations,     ra.irls_iterations,
+                          ra.converged,       ra.mean_residual_deg, ra.median_residual_deg};
+  const TranslationAveragingResult& ta = result.translations;
+  s.translation_averaging = {ta.num_edges_used, ta.num_registered,    ta.iterations,
+                             ta.converged,      ta.mean_residual_deg, ta.median_residual_deg};
+  for (size_t c = 0; c < result.focal_searches.size(); ++c) {
+    const FocalSearchResult& search = result.focal_searches[c];
+    s.focal_search.push_back({static_cast<int>(c), search.focal_px, search.num_pairs,
+                              search.candidates_px, search.inliers});
+  }
+  s.seconds = {result.relative_pose_seconds, result.global_seconds};
+  s.guardrails = {f.fragile, f.mean_residual_deg, result.support.weak};
+  return s;
+}
+
 Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result) {
   if (!result.support.weak) return {};
   Warning warning;

@@ -7,6 +7,7 @@
 // prior_repair.h and take the prior as an explicit argument.
 #pragma once
 
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 #include "core/options.h"
@@ -121,8 +122,8 @@ struct BootstrapResult {
 // Global poses from an estimated view graph (fills every field from `fragility` on).
 void SolveGlobalPoses(int num_images, const BootstrapOptions& options, BootstrapResult* result);
 
-// The whole bootstrap from features and verified matches. Throws std::invalid_argument on
-// inconsistent input or options.
+// The whole bootstrap from features and verified matches. Throws InputError on inconsistent input
+// or options.
 BootstrapResult RunBootstrap(const ImageSet& images, const std::vector<ImageFeatures>& features,
                              const std::vector<PairMatches>& matches,
                              const BootstrapOptions& options);
@@ -135,6 +136,98 @@ const char* FragilityVerdict(const BootstrapResult& result);
 // the images whose pose is not estimated from the graph (no rotation, or a centre filled by the
 // look-at fallback) and GraphSupportJson as details. Empty otherwise.
 Warnings BootstrapWarnings(const ImageSet& images, const BootstrapResult& result);
+
+// What the bootstrap stage reports (its summary.json entry; field names are the keys).
+struct BootstrapSummary {
+  struct Fragility {  // the pre-solve flag (paper §4.8) and the graph's support of the estimate
+    double mean_residual_deg = 0.0;
+    double median_residual_deg = 0.0;
+    int num_pairs = 0;
+    double threshold_deg = 0.0;
+    bool fragile = false;
+    std::string verdict;                    // FragilityVerdict
+    std::vector<std::string> weak_reasons;  // GraphSupport::reasons
+  };
+  struct Pairs {  // the wrong-pair detector's verdicts over the usable pairs
+    int kept = 0;
+    int wrong = 0;
+    int unusable = 0;
+    int rounds = 0;
+  };
+  struct RotationAveraging {
+    int num_edges = 0;
+    int l1_iterations = 0;
+    int irls_iterations = 0;
+    bool converged = false;
+    double mean_residual_deg = 0.0;
+    double median_residual_deg = 0.0;
+  };
+  struct TranslationAveraging {
+    int num_edges = 0;
+    int num_registered = 0;
+    int iterations = 0;
+    bool converged = false;
+    double mean_residual_deg = 0.0;
+    double median_residual_deg = 0.0;
+  };
+  struct FocalSearch {  // one per camera searched
+    int camera = 0;
+    double focal_px = 0.0;
+    int num_pairs = 0;
+    std::vector<double> candidates_px;
+    std::vector<int> inliers;
+  };
+  struct Seconds {
+    double relative_poses = 0.0;
+    double global = 0.0;
+  };
+  // The pre-solve flag that decides the configuration (paper §5, SPEC §3 "Deployment").
+  struct Guardrails {
+    bool fragile = false;
+    double fragility_deg = 0.0;
+    bool weak_bootstrap = false;
+  };
+
+  int num_images = 0;
+  int num_pairs = 0;
+  int num_usable_pairs = 0;
+  int num_pure_rotation_pairs = 0;
+  int num_rotations_registered = 0;
+  int num_positions_estimated = 0;
+  int num_positions_filled = 0;
+  std::string positions;  // BootstrapOptions::positions
+  Fragility fragility;
+  nlohmann::json graph_support;  // GraphSupportJson
+  Pairs pairs;
+  RotationAveraging rotation_averaging;
+  TranslationAveraging translation_averaging;
+  std::vector<FocalSearch> focal_search;
+  Seconds seconds;
+  Guardrails guardrails;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::Fragility, mean_residual_deg,
+                                   median_residual_deg, num_pairs, threshold_deg, fragile, verdict,
+                                   weak_reasons)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::Pairs, kept, wrong, unusable, rounds)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::RotationAveraging, num_edges, l1_iterations,
+                                   irls_iterations, converged, mean_residual_deg,
+                                   median_residual_deg)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::TranslationAveraging, num_edges,
+                                   num_registered, iterations, converged, mean_residual_deg,
+                                   median_residual_deg)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::FocalSearch, camera, focal_px, num_pairs,
+                                   candidates_px, inliers)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::Seconds, relative_poses, global)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary::Guardrails, fragile, fragility_deg,
+                                   weak_bootstrap)
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(BootstrapSummary, num_images, num_pairs, num_usable_pairs,
+                                   num_pure_rotation_pairs, num_rotations_registered,
+                                   num_positions_estimated, num_positions_filled, positions,
+                                   fragility, graph_support, pairs, rotation_averaging,
+                                   translation_averaging, focal_search, seconds, guardrails)
+
+BootstrapSummary SummarizeBootstrap(int num_images, const BootstrapOptions& options,
+                                    const BootstrapResult& result);
 
 // The poses of the images with a rotation, keyed by image name.
 PoseSet BootstrapPoses(const ImageSet& images, const BootstrapResult& result);

@@ -54,7 +54,7 @@ struct FocalSearchResult {
 
 // Scores every candidate by the summed five-point RANSAC inlier counts of the scored pairs, with
 // rays from an ideal pinhole (fx = fy = f, principal point at the image centre, no distortion).
-// Throws std::invalid_argument without any pair of >= relative_pose.min_inliers correspondences.
+// Throws InputError without any pair of >= relative_pose.min_inliers correspondences.
 FocalSearchResult SearchFocal(const std::vector<PixelCorrespondences>& pairs, int width, int height,
                               const FocalSearchOptions& options,
                               const RelativePoseOptions& relative_pose);

@@ -141,62 +141,9 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     }
     writer.Commit();
 
-    nlohmann::json focal = nlohmann::json::array();
-    for (size_t c = 0; c < result.focal_searches.size(); ++c) {
-      focal.push_back({{"camera", c},
-                       {"focal_px", result.focal_searches[c].focal_px},
-                       {"num_pairs", result.focal_searches[c].num_pairs},
-                       {"candidates_px", result.focal_searches[c].candidates_px},
-                       {"inliers", result.focal_searches[c].inliers}});
-    }
-    const auto& ra = result.rotations;
-    const auto& ta = result.translations;
-    nlohmann::json summary = {
-        {"num_images", images.images.size()},
-        {"num_pairs", result.edges.size()},
-        {"num_usable_pairs", usable},
-        {"num_pure_rotation_pairs", pure_rotation},
-        {"num_rotations_registered", result.num_rotations_registered},
-        {"num_positions_estimated", result.num_positions_estimated},
-        {"num_positions_filled", result.num_positions_filled},
-        {"positions", options_.bootstrap.positions},
-        {"fragility",
-         {{"mean_residual_deg", result.fragility.mean_residual_deg},
-          {"median_residual_deg", result.fragility.median_residual_deg},
-          {"num_pairs", result.fragility.num_pairs},
-          {"threshold_deg", result.fragility.threshold_deg},
-          {"fragile", result.fragility.fragile},
-          {"verdict", verdict},
-          {"weak_reasons", result.support.reasons}}},
-        {"graph_support", GraphSupportJson(result.support)},
-        {"pairs",
-         {{"kept", usable - result.pairs.num_wrong},
-          {"wrong", result.pairs.num_wrong},
-          {"unusable", result.pairs.num_unusable},
-          {"rounds", result.pairs.rounds}}},
-        {"rotation_averaging",
-         {{"num_edges", ra.num_edges_used},
-          {"l1_iterations", ra.l1_iterations},
-          {"irls_iterations", ra.irls_iterations},
-          {"converged", ra.converged},
-          {"mean_residual_deg", ra.mean_residual_deg},
-          {"median_residual_deg", ra.median_residual_deg}}},
-        {"translation_averaging",
-         {{"num_edges", ta.num_edges_used},
-          {"num_registered", ta.num_registered},
-          {"iterations", ta.iterations},
-          {"converged", ta.converged},
-          {"mean_residual_deg", ta.mean_residual_deg},
-          {"median_residual_deg", ta.median_residual_deg}}},
-        {"focal_search", focal},
-        {"seconds",
-         {{"relative_poses", result.relative_pose_seconds}, {"global", result.global_seconds}}},
-        // The pre-solve flag that decides the configuration (paper §5, SPEC §3 "Deployment").
-        {"guardrails",
-         {{"fragile", result.fragility.fragile},
-          {"fragility_deg", result.fragility.mean_residual_deg},
-          {"weak_bootstrap", result.support.weak}}},
-        {"warnings", WarningsToJson(BootstrapWarnings(images, result))}};
+    nlohmann::json summary = SummarizeBootstrap(static_cast<int>(images.images.size()),
+                                                options_.bootstrap, result);
+    summary["warnings"] = WarningsToJson(BootstrapWarnings(images, result));
     if (options_.filter_matches) summary["num_matches_pairs_written"] = written_pairs;
     return summary;
   }
