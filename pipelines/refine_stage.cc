@@ -342,13 +342,13 @@ void AddFrameDoubtWarning(const FrameDoubtVerdict& verdict, const std::vector<st
 // written (the campaign reports score them), but never as if the solve had succeeded quietly.
 void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
                           Warnings* warnings) {
-  if (summary.returned_prior) {
+  if (summary.guardrails.returned_prior) {
     // The trust region fires when the matches pull the solution far from the prior: most often a
     // prior several degrees off, which the basin configuration is for (§4.8).
-    const bool trust_region = summary.guardrails_fired.front() == "trust_region";
+    const bool trust_region = summary.guardrails.fired.front() == "trust_region";
     warnings->push_back(
         {"returned_prior",
-         "guardrail " + summary.guardrails_fired.front() +
+         "guardrail " + summary.guardrails.fired.front() +
              " fired: the refined poses of these images are the prior's, "
              "unrefined" +
              (trust_region ? std::string("; for a prior more than ~2° off, refine with "
@@ -356,9 +356,9 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
                            : std::string()),
          names,
          {},
-         {{"fired", summary.guardrails_fired}}});
+         {{"fired", summary.guardrails.fired}}});
   }
-  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
   if (pairs.fired) {
     Warning warning{"inconsistent_pairs",
                     std::to_string(pairs.num_inconsistent) + " of " +
@@ -409,7 +409,7 @@ void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::s
         warning.images.size(), pairs.pair_threshold_px, fmt::join(warning.images, ", "));
     warnings->push_back(warning);
   }
-  const LoosePartsVerdict& loose = summary.loose_parts;
+  const LoosePartsVerdict& loose = summary.guardrails.loose_parts;
   if (!loose.images.empty()) {
     Warning warning{"loose_parts", "", {}, {}, {{"cuts", nlohmann::json::array()}}};
     for (const int image : loose.images) warning.images.push_back(names.at(image));
@@ -639,15 +639,16 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
             {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
             {"tolerance_px", kSharedCameraTolerancePx}}});
     }
-    solves->fired.insert(summary.guardrails_fired.begin(), summary.guardrails_fired.end());
-    solves->returned_prior = solves->returned_prior || summary.returned_prior;
-    if (summary.returned_prior) {
+    solves->fired.insert(summary.guardrails.fired.begin(), summary.guardrails.fired.end());
+    solves->returned_prior = solves->returned_prior || summary.guardrails.returned_prior;
+    if (summary.guardrails.returned_prior) {
       solves->unrefined.insert(solves->unrefined.end(), names.begin(), names.end());
     } else {
-      for (const int image : summary.inconsistent_pairs.images_mostly_inconsistent) {
+      for (const int image : summary.guardrails.inconsistent_pairs.images_mostly_inconsistent) {
         solves->unexplained.push_back(names.at(image));
       }
-      for (const int image : summary.loose_parts.images) solves->loose.push_back(names.at(image));
+      for (const int image : summary.guardrails.loose_parts.images)
+        solves->loose.push_back(names.at(image));
       // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
       // independent measurement to stand out from: its own errors (a translation-averaging drift
       // at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
@@ -667,11 +668,12 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
                                            {"first_image", names.front()},
                                            {"total_iterations", summary.total_iterations},
                                            {"final_cost", summary.final_cost},
-                                           {"guardrails_fired", summary.guardrails_fired},
-                                           {"returned_prior", summary.returned_prior}});
-    spdlog::info(fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
-                             summary.total_iterations, summary.total_seconds,
-                             summary.returned_prior ? " (guardrail fired: prior returned)" : ""));
+                                           {"guardrails_fired", summary.guardrails.fired},
+                                           {"returned_prior", summary.guardrails.returned_prior}});
+    spdlog::info(
+        fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
+                    summary.total_iterations, summary.timings.total_seconds,
+                    summary.guardrails.returned_prior ? " (guardrail fired: prior returned)" : ""));
   }
 
   // The refined pose set, its ray times, (self-calibrating) the refined cameras, the summary and

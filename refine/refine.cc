@@ -117,12 +117,13 @@ void RunRecipe(const RefineInput& input, const RefineOptions& options,
 // Iterations, times, costs and failure over the passes.
 void AddUpPasses(RefineSummary* summary) {
   for (const RefinePassSummary& pass : summary->passes) {
-    summary->build_seconds += pass.build_seconds;
-    summary->solve_seconds += pass.solve_seconds;
+    summary->timings.build_seconds += pass.build_seconds;
+    summary->timings.solve_seconds += pass.solve_seconds;
     for (const GncStageSummary& stage : pass.stages) {
       summary->total_iterations += stage.iterations;
-      summary->jacobian_seconds += stage.jacobian_seconds;
-      summary->solver_failed = summary->solver_failed || stage.termination == "FAILURE";
+      summary->timings.jacobian_seconds += stage.jacobian_seconds;
+      summary->guardrails.solver_failed =
+          summary->guardrails.solver_failed || stage.termination == "FAILURE";
     }
   }
   summary->initial_cost = summary->passes.front().stages.front().initial_cost;
@@ -136,40 +137,41 @@ void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
                      const std::vector<Rigid3>& prior, const PassState& state,
                      const std::optional<RefineInput>& pruned, RefineSummary* summary) {
   // Against the original prior: these return it.
-  if (summary->solver_failed) summary->guardrails_fired.push_back("solver_failure");
+  if (summary->guardrails.solver_failed) summary->guardrails.fired.push_back("solver_failure");
   if (options.trust_region) {
-    summary->trust_region =
+    summary->guardrails.trust_region =
         CheckTrustRegion(prior, state.world_from_cam, options.trust_region_rotation_deg,
                          options.trust_region_translation_m * options.length_unit_m);
-    if (summary->trust_region.fired) summary->guardrails_fired.push_back("trust_region");
+    if (summary->guardrails.trust_region.fired) summary->guardrails.fired.push_back("trust_region");
   }
   if (options.wander_test) {
-    summary->wander =
+    summary->guardrails.wander =
         CheckWander(prior, state.world_from_cam, options.wander_expected_m * options.length_unit_m,
                     options.wander_factor);
-    if (summary->wander.fired) summary->guardrails_fired.push_back("wander");
+    if (summary->guardrails.wander.fired) summary->guardrails.fired.push_back("wander");
   }
-  summary->returned_prior = !summary->guardrails_fired.empty();
+  summary->guardrails.returned_prior = !summary->guardrails.fired.empty();
   // Against the solve's own matches (prior-independent), flag only.
   if (options.inconsistent_pairs_test) {
-    summary->inconsistent_pairs = CheckInconsistentPairs(
+    summary->guardrails.inconsistent_pairs = CheckInconsistentPairs(
         SolvedPairResiduals(pruned ? *pruned : input, state), options.inconsistent_pair_px,
         options.inconsistent_pair_median_multiple, options.max_inconsistent_pair_fraction);
-    if (summary->inconsistent_pairs.fired) {
-      summary->guardrails_fired.push_back("inconsistent_pairs");
+    if (summary->guardrails.inconsistent_pairs.fired) {
+      summary->guardrails.fired.push_back("inconsistent_pairs");
     }
   }
   // A part resting on a pair or two nothing else checks looks consistent whether they are right or
   // not (its poses simply follow them), as does one whose disagreeing pairs the removal took.
-  summary->loose_parts = CheckLooseParts(input, summary->pair_removal, state, options,
-                                         options.inconsistent_pairs_test
-                                             ? summary->inconsistent_pairs.pair_threshold_px
-                                             : options.inconsistent_pair_px);
-  if (!summary->loose_parts.images.empty()) summary->guardrails_fired.push_back("loose_parts");
+  summary->guardrails.loose_parts = CheckLooseParts(
+      input, summary->pair_removal, state, options,
+      options.inconsistent_pairs_test ? summary->guardrails.inconsistent_pairs.pair_threshold_px
+                                      : options.inconsistent_pair_px);
+  if (!summary->guardrails.loose_parts.images.empty())
+    summary->guardrails.fired.push_back("loose_parts");
 
-  if (summary->returned_prior) {
+  if (summary->guardrails.returned_prior) {
     summary->decision = "returned_prior";
-  } else if (!summary->guardrails_fired.empty()) {
+  } else if (!summary->guardrails.fired.empty()) {
     summary->decision = "flagged";
   } else if (!summary->pair_removal.removed.empty()) {
     summary->decision = "re_solved";
@@ -179,22 +181,24 @@ void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
 }
 
 void LogGuardrailMeasures(const RefineSummary& summary) {
-  if (summary.trust_region.enabled) {
-    spdlog::info(fmt::format(
-        "refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
-        "{:.4g}){}",
-        summary.trust_region.max_rotation_deg, summary.trust_region.max_translation,
-        summary.trust_region.rotation_threshold_deg, summary.trust_region.translation_threshold,
-        summary.trust_region.fired ? ": FIRED" : ""));
-  }
-  if (summary.wander.enabled) {
+  if (summary.guardrails.trust_region.enabled) {
     spdlog::info(
-        fmt::format("refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
+        fmt::format("refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
                     "{:.4g}){}",
-                    summary.wander.median_displacement, summary.wander.threshold,
-                    summary.wander.fired ? ": FIRED" : ""));
+                    summary.guardrails.trust_region.max_rotation_deg,
+                    summary.guardrails.trust_region.max_translation,
+                    summary.guardrails.trust_region.rotation_threshold_deg,
+                    summary.guardrails.trust_region.translation_threshold,
+                    summary.guardrails.trust_region.fired ? ": FIRED" : ""));
   }
-  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  if (summary.guardrails.wander.enabled) {
+    spdlog::info(fmt::format(
+        "refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
+        "{:.4g}){}",
+        summary.guardrails.wander.median_displacement, summary.guardrails.wander.threshold,
+        summary.guardrails.wander.fired ? ": FIRED" : ""));
+  }
+  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
   if (pairs.enabled) {
     spdlog::info(fmt::format(
         "refine: inconsistent pairs: {} of {} pairs above {:.3g} px (median pair {:.3g} px), "
@@ -202,9 +206,9 @@ void LogGuardrailMeasures(const RefineSummary& summary) {
         pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
         pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : ""));
   }
-  if (summary.returned_prior) {
+  if (summary.guardrails.returned_prior) {
     spdlog::warn(fmt::format("refine: guardrail fired ({}): returning the prior",
-                             summary.guardrails_fired.front()));
+                             summary.guardrails.fired.front()));
   }
   const PairRemovalSummary& removal = summary.pair_removal;
   if (removal.enabled) {
@@ -221,7 +225,7 @@ void LogGuardrailMeasures(const RefineSummary& summary) {
 // The loose parts (the outermost of nested ones: the others are in the summary), the decision and
 // the inconsistent pairs, by image name.
 void LogVerdicts(const RefineInput& input, const RefineSummary& summary) {
-  const auto& cuts = summary.loose_parts.cuts;
+  const auto& cuts = summary.guardrails.loose_parts.cuts;
   for (const LooseCut& cut : cuts) {
     const auto holds = [&](const LooseCut& other) {
       return other.images.size() > cut.images.size() &&
@@ -240,7 +244,7 @@ void LogVerdicts(const RefineInput& input, const RefineSummary& summary) {
         fmt::join(Labels(input, cut.images), ", ")));
   }
   spdlog::info(fmt::format("refine: decision: {}", summary.decision));
-  const InconsistentPairsVerdict& pairs = summary.inconsistent_pairs;
+  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
   if (!pairs.fired) return;
   // The first few in the log; all of them in the summary.
   constexpr size_t kLogged = 8;
@@ -290,36 +294,14 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);
   output->solved_observations = SolvedObservationsOf(state);
-  output->world_from_cam = summary.returned_prior ? prior : state.world_from_cam;
-  output->cameras = summary.returned_prior ? input.cameras : output->solved_cameras;
-  summary.total_seconds = SecondsSince(start);
+  output->world_from_cam = summary.guardrails.returned_prior ? prior : state.world_from_cam;
+  output->cameras = summary.guardrails.returned_prior ? input.cameras : output->solved_cameras;
+  summary.timings.total_seconds = SecondsSince(start);
   LogGuardrailMeasures(summary);
   LogVerdicts(input, summary);
   return summary;
 }
 
-nlohmann::json RefineSummary::ToJson() const {
-  return {{"passes", passes},
-          {"cameras", cameras},
-          {"total_iterations", total_iterations},
-          {"initial_cost", initial_cost},
-          {"final_cost", final_cost},
-          {"timings",
-           {{"build_seconds", build_seconds},
-            {"solve_seconds", solve_seconds},
-            {"jacobian_seconds", jacobian_seconds},
-            {"total_seconds", total_seconds}}},
-          {"orientation_prior", orientation_prior},
-          {"pair_removal", pair_removal},
-          {"decision", decision},
-          {"guardrails",
-           {{"fired", guardrails_fired},
-            {"returned_prior", returned_prior},
-            {"solver_failed", solver_failed},
-            {"trust_region", trust_region},
-            {"wander", wander},
-            {"inconsistent_pairs", inconsistent_pairs},
-            {"loose_parts", loose_parts}}}};
-}
+nlohmann::json RefineSummary::ToJson() const { return *this; }
 
 }  // namespace raytime

@@ -6,7 +6,7 @@
 //   RefineOutput output;
 //   const RefineSummary summary = RefinePoses(input, RefineOptions(), &output);
 //   if (summary.returned_prior) ...  // a guardrail fired: output holds the prior
-//   if (!summary.guardrails_fired.empty()) ...  // also flag-only ones ("inconsistent_pairs")
+//   if (!summary.guardrails.fired.empty()) ...  // also flag-only ones ("inconsistent_pairs")
 #pragma once
 
 #include "refine/refine_options.h"

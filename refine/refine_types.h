@@ -283,6 +283,31 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(CameraBlocksSummary, sharing, num_cameras, nu
                                    min_block_observations, max_start_disagreement_px,
                                    cameras_differ)
 
+// Wall time of a refine call, seconds: totals over passes and stages.
+struct RefineTimings {
+  double build_seconds = 0.0;
+  double solve_seconds = 0.0;
+  double jacobian_seconds = 0.0;
+  double total_seconds = 0.0;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineTimings, build_seconds, solve_seconds, jacobian_seconds,
+                                   total_seconds)
+
+// The posterior guardrails' verdicts (§3.6, §4.3 and beyond the paper).
+struct RefineGuardrails {
+  // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs",
+  // "loose_parts" (flag only), in this order.
+  std::vector<std::string> fired;
+  bool returned_prior = false;
+  bool solver_failed = false;  // a Ceres solve reported FAILURE
+  TrustRegionVerdict trust_region;
+  WanderVerdict wander;
+  InconsistentPairsVerdict inconsistent_pairs;
+  LoosePartsVerdict loose_parts;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineGuardrails, fired, returned_prior, solver_failed,
+                                   trust_region, wander, inconsistent_pairs, loose_parts)
+
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
   CameraBlocksSummary cameras;
@@ -292,30 +317,19 @@ struct RefineSummary {
   // E at the returned solve: the last stage's final cost (the nominal objective) less what the
   // last pass's gauge polish removed from the prior terms.
   double final_cost = 0.0;
-  double build_seconds = 0.0;
-  double solve_seconds = 0.0;
-  double jacobian_seconds = 0.0;
-  double total_seconds = 0.0;
-  bool solver_failed = false;  // a Ceres solve reported FAILURE
+  RefineTimings timings;
   OrientationPriorProbe orientation_prior;
   PairRemovalSummary pair_removal;
-  TrustRegionVerdict trust_region;
-  WanderVerdict wander;
-  InconsistentPairsVerdict inconsistent_pairs;
-  LoosePartsVerdict loose_parts;
-  // "solver_failure", "trust_region", "wander" (these return the prior), "inconsistent_pairs",
-  // "loose_parts" (flag only), in this order.
-  std::vector<std::string> guardrails_fired;
-  bool returned_prior = false;
   // What was returned, one word: "accepted" (no check fired), "re_solved" (accepted after
   // removing pairs, pair_removal), "flagged" (returned with a flag-only check fired),
   // "returned_prior" (a check returned the prior).
   std::string decision;
+  RefineGuardrails guardrails;
 
-  // The fields by name (as the NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE lists above), with the four
-  // totals of seconds under "timings" and the verdicts under "guardrails" ("fired" =
-  // guardrails_fired).
-  nlohmann::json ToJson() const;
+  nlohmann::json ToJson() const;  // the fields by name
 };
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineSummary, passes, cameras, total_iterations, initial_cost,
+                                   final_cost, timings, orientation_prior, pair_removal, decision,
+                                   guardrails)
 
 }  // namespace raytime

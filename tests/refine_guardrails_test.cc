@@ -76,12 +76,13 @@ TEST(RefineGuardrailTest, TrustRegionFiresOnMatchesThatPullAwayAndNotOnAHealthyS
   healthy.input.prior_world_from_cam = JitterPoses(healthy.ground_truth, 0.5, 0.05, 3);
   RefineOutput output;
   const RefineSummary quiet = RefinePoses(healthy.input, options, &output);
-  EXPECT_TRUE(quiet.trust_region.enabled);
-  EXPECT_FALSE(quiet.trust_region.fired);
-  EXPECT_FALSE(quiet.returned_prior);
-  EXPECT_TRUE(quiet.guardrails_fired.empty());
-  EXPECT_NEAR(quiet.trust_region.translation_threshold, 0.66, 1e-12);
-  EXPECT_GT(quiet.trust_region.max_rotation_deg, 0.1) << "the healthy solve does correct the prior";
+  EXPECT_TRUE(quiet.guardrails.trust_region.enabled);
+  EXPECT_FALSE(quiet.guardrails.trust_region.fired);
+  EXPECT_FALSE(quiet.guardrails.returned_prior);
+  EXPECT_TRUE(quiet.guardrails.fired.empty());
+  EXPECT_NEAR(quiet.guardrails.trust_region.translation_threshold, 0.66, 1e-12);
+  EXPECT_GT(quiet.guardrails.trust_region.max_rotation_deg, 0.1)
+      << "the healthy solve does correct the prior";
 
   SyntheticScene corrupted = MakeSyntheticScene(Scene());
   Rigid3 wrong = corrupted.ground_truth[3];
@@ -90,11 +91,11 @@ TEST(RefineGuardrailTest, TrustRegionFiresOnMatchesThatPullAwayAndNotOnAHealthyS
       wrong.rotation;
   ReprojectCamera(&corrupted, 3, wrong);
   const RefineSummary fired = RefinePoses(corrupted.input, options, &output);
-  EXPECT_TRUE(fired.trust_region.fired);
-  EXPECT_GT(fired.trust_region.max_rotation_deg, 3.5);
-  EXPECT_TRUE(fired.returned_prior);
-  ASSERT_EQ(fired.guardrails_fired.size(), 1u);
-  EXPECT_EQ(fired.guardrails_fired[0], "trust_region");
+  EXPECT_TRUE(fired.guardrails.trust_region.fired);
+  EXPECT_GT(fired.guardrails.trust_region.max_rotation_deg, 3.5);
+  EXPECT_TRUE(fired.guardrails.returned_prior);
+  ASSERT_EQ(fired.guardrails.fired.size(), 1u);
+  EXPECT_EQ(fired.guardrails.fired[0], "trust_region");
   for (size_t i = 0; i < output.world_from_cam.size(); ++i) {
     EXPECT_EQ(output.world_from_cam[i].translation, corrupted.ground_truth[i].translation);
   }
@@ -118,11 +119,11 @@ TEST(RefineGuardrailTest, WanderTestFiresOnAWarpedSolveAndNotOnAHealthySolve) {
   healthy.input.prior_world_from_cam = JitterPoses(healthy.ground_truth, 0.0, 0.02, 4);
   RefineOutput output;
   const RefineSummary quiet = RefinePoses(healthy.input, options, &output);
-  EXPECT_TRUE(quiet.wander.enabled);
-  EXPECT_FALSE(quiet.wander.fired);
-  EXPECT_FALSE(quiet.trust_region.enabled);
-  EXPECT_LT(quiet.wander.median_displacement, 0.1);
-  EXPECT_FALSE(quiet.returned_prior);
+  EXPECT_TRUE(quiet.guardrails.wander.enabled);
+  EXPECT_FALSE(quiet.guardrails.wander.fired);
+  EXPECT_FALSE(quiet.guardrails.trust_region.enabled);
+  EXPECT_LT(quiet.guardrails.wander.median_displacement, 0.1);
+  EXPECT_FALSE(quiet.guardrails.returned_prior);
 
   SyntheticScene warped = MakeSyntheticScene(Scene());
   const std::vector<Rigid3> displaced = JitterPoses(warped.ground_truth, 0.0, 1.0, 5);
@@ -130,11 +131,11 @@ TEST(RefineGuardrailTest, WanderTestFiresOnAWarpedSolveAndNotOnAHealthySolve) {
     ReprojectCamera(&warped, i, displaced[i]);
   }
   const RefineSummary fired = RefinePoses(warped.input, options, &output);
-  EXPECT_TRUE(fired.wander.fired);
-  EXPECT_GT(fired.wander.median_displacement, 0.1);
-  EXPECT_TRUE(fired.returned_prior);
-  ASSERT_EQ(fired.guardrails_fired.size(), 1u);
-  EXPECT_EQ(fired.guardrails_fired[0], "wander");
+  EXPECT_TRUE(fired.guardrails.wander.fired);
+  EXPECT_GT(fired.guardrails.wander.median_displacement, 0.1);
+  EXPECT_TRUE(fired.guardrails.returned_prior);
+  ASSERT_EQ(fired.guardrails.fired.size(), 1u);
+  EXPECT_EQ(fired.guardrails.fired[0], "wander");
   EXPECT_EQ(output.world_from_cam[0].translation, warped.ground_truth[0].translation);
 }
 
@@ -549,13 +550,13 @@ TEST(RefineGuardrailTest, InconsistentPairsStaysQuietOnAHealthySolve) {
     options.num_threads = 2;
     RefineOutput output;
     const RefineSummary summary = RefinePoses(scene.input, options, &output);
-    const InconsistentPairsVerdict& verdict = summary.inconsistent_pairs;
+    const InconsistentPairsVerdict& verdict = summary.guardrails.inconsistent_pairs;
     EXPECT_TRUE(verdict.enabled);
     EXPECT_FALSE(verdict.fired);
     EXPECT_EQ(verdict.num_pairs, static_cast<int>(scene.input.pairs.size()));
     EXPECT_EQ(verdict.num_inconsistent, 0);
     EXPECT_LT(verdict.median_pair_px, 1e-3);
-    EXPECT_TRUE(summary.guardrails_fired.empty());
+    EXPECT_TRUE(summary.guardrails.fired.empty());
     EXPECT_EQ(summary.ToJson()["guardrails"]["inconsistent_pairs"]["fired"], false);
   }
 }
@@ -588,7 +589,7 @@ TEST(RefineGuardrailTest, InconsistentPairsFlagsWrongPairsAndReturnsTheSolution)
   options.num_threads = 2;
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
-  const InconsistentPairsVerdict& verdict = summary.inconsistent_pairs;
+  const InconsistentPairsVerdict& verdict = summary.guardrails.inconsistent_pairs;
   EXPECT_TRUE(verdict.fired);
   EXPECT_EQ(verdict.num_pairs, num_pairs);
   EXPECT_NEAR(verdict.fraction, 6.0 / 18.0, 1e-12);
@@ -601,9 +602,9 @@ TEST(RefineGuardrailTest, InconsistentPairsFlagsWrongPairsAndReturnsTheSolution)
     EXPECT_LE(pair.num_matches, 100);
   }
   EXPECT_EQ(listed, corrupted);
-  ASSERT_EQ(summary.guardrails_fired.size(), 1u);
-  EXPECT_EQ(summary.guardrails_fired[0], "inconsistent_pairs");
-  EXPECT_FALSE(summary.returned_prior);
+  ASSERT_EQ(summary.guardrails.fired.size(), 1u);
+  EXPECT_EQ(summary.guardrails.fired[0], "inconsistent_pairs");
+  EXPECT_FALSE(summary.guardrails.returned_prior);
   for (size_t i = 0; i < output.world_from_cam.size(); ++i) {
     EXPECT_EQ(output.world_from_cam[i].translation, output.solved_world_from_cam[i].translation);
   }
@@ -620,9 +621,9 @@ TEST(RefineGuardrailTest, InconsistentPairsFlagsWrongPairsAndReturnsTheSolution)
 
   options.inconsistent_pairs_test = false;
   const RefineSummary off = RefinePoses(scene.input, options, &output);
-  EXPECT_FALSE(off.inconsistent_pairs.enabled);
-  EXPECT_FALSE(off.inconsistent_pairs.fired);
-  EXPECT_TRUE(off.guardrails_fired.empty());
+  EXPECT_FALSE(off.guardrails.inconsistent_pairs.enabled);
+  EXPECT_FALSE(off.guardrails.inconsistent_pairs.fired);
+  EXPECT_TRUE(off.guardrails.fired.empty());
 }
 
 // The basin-first solve with wrong-pair removal (the auto preset's max_pair_removal_rounds), on
@@ -653,11 +654,13 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
   }
   EXPECT_EQ(removed, corrupted);
   EXPECT_EQ(summary.passes[1].name, "basin_round2");
-  EXPECT_EQ(summary.inconsistent_pairs.num_pairs, 12) << "the final check sees the kept pairs";
-  EXPECT_TRUE(summary.guardrails_fired.empty());
+  EXPECT_EQ(summary.guardrails.inconsistent_pairs.num_pairs, 12)
+      << "the final check sees the kept pairs";
+  EXPECT_TRUE(summary.guardrails.fired.empty());
   EXPECT_EQ(summary.decision, "re_solved");
   EXPECT_EQ(summary.ToJson()["pair_removal"]["removed"].size(), 6u);
-  EXPECT_TRUE(summary.loose_parts.images.empty()) << "every camera keeps two or more pairs";
+  EXPECT_TRUE(summary.guardrails.loose_parts.images.empty())
+      << "every camera keeps two or more pairs";
   const double error = MeanRotationErrorDeg(output.world_from_cam, scene.ground_truth);
   EXPECT_LT(error, 0.1);
 
@@ -665,7 +668,7 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
   const RefineSummary kept = RefinePoses(scene.input, options, &output);
   EXPECT_FALSE(kept.pair_removal.enabled);
   EXPECT_EQ(kept.decision, "flagged");
-  EXPECT_EQ(kept.guardrails_fired, std::vector<std::string>{"inconsistent_pairs"});
+  EXPECT_EQ(kept.guardrails.fired, std::vector<std::string>{"inconsistent_pairs"});
   EXPECT_GT(MeanRotationErrorDeg(output.world_from_cam, scene.ground_truth), 0.9 * error);
 }
 
@@ -696,14 +699,15 @@ TEST(RefineGuardrailTest, BasinFirstNamesACameraLeftOnOneUncheckedPair) {
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   ASSERT_EQ(summary.pair_removal.removed.size(), 1u);
   EXPECT_EQ(summary.pair_removal.removed[0].image2, last);
-  EXPECT_EQ(summary.loose_parts.images, std::vector<int>{last});
-  ASSERT_EQ(summary.loose_parts.cuts.size(), 1u);
-  EXPECT_EQ(summary.loose_parts.cuts[0].pairs_across, 2);
-  EXPECT_EQ(summary.loose_parts.cuts[0].pairs_removed, 1);
-  EXPECT_FALSE(summary.inconsistent_pairs.fired) << "the pose follows the pair that is left";
-  EXPECT_EQ(summary.guardrails_fired, std::vector<std::string>{"loose_parts"});
+  EXPECT_EQ(summary.guardrails.loose_parts.images, std::vector<int>{last});
+  ASSERT_EQ(summary.guardrails.loose_parts.cuts.size(), 1u);
+  EXPECT_EQ(summary.guardrails.loose_parts.cuts[0].pairs_across, 2);
+  EXPECT_EQ(summary.guardrails.loose_parts.cuts[0].pairs_removed, 1);
+  EXPECT_FALSE(summary.guardrails.inconsistent_pairs.fired)
+      << "the pose follows the pair that is left";
+  EXPECT_EQ(summary.guardrails.fired, std::vector<std::string>{"loose_parts"});
   EXPECT_EQ(summary.decision, "flagged");
-  EXPECT_FALSE(summary.returned_prior);
+  EXPECT_FALSE(summary.guardrails.returned_prior);
   EXPECT_EQ(summary.ToJson()["guardrails"]["loose_parts"]["images"][0], last);
 }
 
@@ -799,9 +803,9 @@ TEST(RefineGuardrailTest, InconsistentPairsIgnoresStuckRayTimes) {
   options.num_threads = 2;
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
-  ASSERT_TRUE(summary.inconsistent_pairs.enabled);
-  EXPECT_FALSE(summary.inconsistent_pairs.fired);
-  EXPECT_EQ(summary.inconsistent_pairs.num_inconsistent, 0);
+  ASSERT_TRUE(summary.guardrails.inconsistent_pairs.enabled);
+  EXPECT_FALSE(summary.guardrails.inconsistent_pairs.fired);
+  EXPECT_EQ(summary.guardrails.inconsistent_pairs.num_inconsistent, 0);
 
   const ProblemLayout layout =
       BuildPerObservationLayout(scene.input, options.max_matches_per_pair, options.match_cap_seed);
@@ -839,7 +843,7 @@ TEST(RefineGuardrailTest, InconsistentPairsIgnoresStuckRayTimes) {
       options.max_inconsistent_pair_fraction);
   EXPECT_FALSE(verdict.fired);
   EXPECT_EQ(verdict.num_inconsistent, 0);
-  EXPECT_DOUBLE_EQ(verdict.median_pair_px, summary.inconsistent_pairs.median_pair_px);
+  EXPECT_DOUBLE_EQ(verdict.median_pair_px, summary.guardrails.inconsistent_pairs.median_pair_px);
 }
 
 }  // namespace

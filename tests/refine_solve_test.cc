@@ -167,11 +167,11 @@ TEST_P(RefineRecoveryTest, GncRecoversAnEightDegreePrior) {
   const PoseErrorSummary after = Errors(output.world_from_cam, scene.ground_truth, "sim3");
   std::printf("%s GNC from 8 deg: %.3f -> %.4f deg (Sim(3)), %d iterations, %.2f s\n", GetParam(),
               before.mean_rotation_deg, after.mean_rotation_deg, summary.total_iterations,
-              summary.total_seconds);
+              summary.timings.total_seconds);
   EXPECT_GT(before.mean_rotation_deg, 7.0);
   EXPECT_LT(after.mean_rotation_deg, 1.0);
   EXPECT_LT(after.mean_rotation_deg, 0.1) << "a recovered solve sits at the noise floor";
-  EXPECT_FALSE(summary.returned_prior);
+  EXPECT_FALSE(summary.guardrails.returned_prior);
   if (std::string(GetParam()) == "anchored") {
     EXPECT_GT(summary.passes[0].num_tracks, 0);
     EXPECT_EQ(summary.passes[0].num_ray_times, summary.passes[0].num_tracks);
@@ -397,7 +397,7 @@ TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
   EXPECT_EQ(probe.prior_match_cost_px2, summary.passes[1].match_cost_px2);
   EXPECT_EQ(summary.passes[2].orientation_weight, 1e3);
   EXPECT_LT(Errors(output.world_from_cam, scene.ground_truth, "sim3").mean_rotation_deg, 0.05);
-  EXPECT_TRUE(summary.guardrails_fired.empty());
+  EXPECT_TRUE(summary.guardrails.fired.empty());
 }
 
 // With a quarter of the matches on a copy 0.15 m away (9-23 px off), the nominal-scale finish
@@ -576,7 +576,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
   options.num_threads = 1;
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
-  ASSERT_FALSE(summary.inconsistent_pairs.pairs.empty());
+  ASSERT_FALSE(summary.guardrails.inconsistent_pairs.pairs.empty());
   const nlohmann::json json = summary.ToJson();
   std::set<std::string> keys;
   CollectKeyPaths(json, "", &keys);
@@ -700,10 +700,10 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
   };
   EXPECT_EQ(keys, expected);
   // Values come from the fields of the same name.
-  EXPECT_EQ(json["timings"]["total_seconds"], summary.total_seconds);
-  EXPECT_EQ(json["guardrails"]["fired"], summary.guardrails_fired);
+  EXPECT_EQ(json["timings"]["total_seconds"], summary.timings.total_seconds);
+  EXPECT_EQ(json["guardrails"]["fired"], summary.guardrails.fired);
   EXPECT_EQ(json["guardrails"]["inconsistent_pairs"]["num_inconsistent"],
-            summary.inconsistent_pairs.num_inconsistent);
+            summary.guardrails.inconsistent_pairs.num_inconsistent);
   EXPECT_EQ(json["passes"][0]["stages"].size(), summary.passes[0].stages.size());
   EXPECT_EQ(json["passes"][0]["stages"][0]["iterations"], summary.passes[0].stages[0].iterations);
 }
