@@ -5,7 +5,7 @@
 //   RefineInput input;             // cameras, prior world_from_cam, keypoints, matches
 //   RefineOutput output;
 //   const RefineSummary summary = RefinePoses(input, RefineOptions(), &output);
-//   if (summary.returned_prior) ...  // a guardrail fired: output holds the prior
+//   if (summary.guardrails.returned_prior) ...  // a guardrail fired: output holds the prior
 //   if (!summary.guardrails.fired.empty()) ...  // also flag-only ones ("inconsistent_pairs")
 #pragma once
 
