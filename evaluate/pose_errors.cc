@@ -6,9 +6,9 @@
 #include <limits>
 #include <numeric>
 #include <stdexcept>
-#include <type_traits>
 
 #include "core/error.h"
+#include "core/json_fields.h"
 #include "core/statistics.h"
 
 namespace raytime {
@@ -182,28 +182,11 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
 }
 
 void to_json(nlohmann::json& json, const PoseErrorStatistics& statistics) {
-  json = nlohmann::json::object();
-  PoseErrorStatistics::VisitFields(statistics, [&](const char* key, const auto& value) {
-    if constexpr (std::is_floating_point_v<std::decay_t<decltype(value)>>) {
-      json[key] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
-    } else {
-      json[key] = value;
-    }
-  });
+  json = FieldsToJson(statistics);
 }
 
 void from_json(const nlohmann::json& json, PoseErrorStatistics& statistics) {
-  PoseErrorStatistics::VisitFields(statistics, [&](const char* key, auto& value) {
-    using Field = std::decay_t<decltype(value)>;
-    const auto it = json.find(key);
-    const bool present = it != json.end() && !it->is_null();
-    if constexpr (std::is_floating_point_v<Field>) {
-      value = present && it->is_number() ? it->template get<Field>()
-                                         : std::numeric_limits<Field>::quiet_NaN();
-    } else {
-      value = present ? it->template get<Field>() : Field{};
-    }
-  });
+  statistics = FieldsFromJson<PoseErrorStatistics>(json);
 }
 
 nlohmann::json PoseErrorSummary::ToJson(bool with_frames) const {

@@ -9,47 +9,16 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/json_fields.h"
 
 namespace raytime {
-namespace {
 
 using nlohmann::json;
 
-json Number(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
-
-double NumberOr(const json& object, const char* key) {
-  const auto it = object.find(key);
-  return it != object.end() && it->is_number() ? it->get<double>() : SweepSplatResult::kNone;
-}
-
-}  // namespace
-
-json SweepSplatResult::ToJson() const {
-  return {{"trainer", trainer},
-          {"status", status},
-          {"psnr", Number(psnr)},
-          {"ssim", Number(ssim)},
-          {"lpips", Number(lpips)},
-          {"raytime_psnr", Number(raytime_psnr)},
-          {"raytime_ssim", Number(raytime_ssim)},
-          {"seconds", Number(seconds)}};
-}
+json SweepSplatResult::ToJson() const { return FieldsToJson(*this); }
 
 SweepSplatResult SweepSplatResult::FromJson(const json& object) {
-  SweepSplatResult r;
-  const auto text = [&](const char* key) {
-    const auto it = object.find(key);
-    return it != object.end() && it->is_string() ? it->get<std::string>() : std::string();
-  };
-  r.trainer = text("trainer");
-  r.status = text("status");
-  r.psnr = NumberOr(object, "psnr");
-  r.ssim = NumberOr(object, "ssim");
-  r.lpips = NumberOr(object, "lpips");
-  r.raytime_psnr = NumberOr(object, "raytime_psnr");
-  r.raytime_ssim = NumberOr(object, "raytime_ssim");
-  r.seconds = NumberOr(object, "seconds");
-  return r;
+  return FieldsFromJson<SweepSplatResult>(object);
 }
 
 namespace {
@@ -179,14 +148,13 @@ std::vector<std::pair<std::string, std::string>> SweepRow::Columns() const {
   for (const auto& [id, by_pose_set] : splat) {
     for (const auto& [pose_set, r] : by_pose_set) {
       const std::string prefix = "metrics." + id + "." + pose_set + ".";
-      columns.emplace_back(prefix + "trainer", r.trainer);
-      columns.emplace_back(prefix + "status", r.status);
-      columns.emplace_back(prefix + "psnr", NumberText(r.psnr));
-      columns.emplace_back(prefix + "ssim", NumberText(r.ssim));
-      columns.emplace_back(prefix + "lpips", NumberText(r.lpips));
-      columns.emplace_back(prefix + "raytime_psnr", NumberText(r.raytime_psnr));
-      columns.emplace_back(prefix + "raytime_ssim", NumberText(r.raytime_ssim));
-      columns.emplace_back(prefix + "seconds", NumberText(r.seconds));
+      SweepSplatResult::VisitFields(r, [&](const char* field, const auto& value) {
+        if constexpr (std::is_floating_point_v<std::decay_t<decltype(value)>>) {
+          columns.emplace_back(prefix + field, NumberText(value));
+        } else {
+          columns.emplace_back(prefix + field, value);
+        }
+      });
     }
   }
   for (const auto& [id, fired] : guardrails_fired) {

@@ -29,6 +29,18 @@ struct SweepSplatResult {
   double seconds = kNone;  // the trainer's wall time
 
   bool ok() const { return status == "ok"; }
+  template <class Self, class Visitor>
+  static void VisitFields(Self& self, Visitor&& v) {
+    v("trainer", self.trainer);
+    v("status", self.status);
+    v("psnr", self.psnr);
+    v("ssim", self.ssim);
+    v("lpips", self.lpips);
+    v("raytime_psnr", self.raytime_psnr);
+    v("raytime_ssim", self.raytime_ssim);
+    v("seconds", self.seconds);
+  }
+  // core/json_fields.h: NaN as null, absent numbers NaN.
   nlohmann::json ToJson() const;
   static SweepSplatResult FromJson(const nlohmann::json& json);
 };

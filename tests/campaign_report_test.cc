@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -21,6 +22,47 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
+
+// A sweep row's records (core/json_fields.h): a number that is not finite is written as null and
+// read back as NaN, and so is one a summary does not have (an older run's): "not reported", never
+// 0; other fields absent or of another type take their default.
+TEST(SweepRowTest, ANumberNotReportedReadsBackAsNaNAndNotAsZero) {
+  PoseErrorStatistics statistics;
+  statistics.num_frames = 11;
+  statistics.mean_rotation_deg = 0.25;
+  statistics.alignment_rotation_sigma_deg = std::numeric_limits<double>::infinity();
+  statistics.success = true;
+  const nlohmann::json written = statistics;
+  EXPECT_TRUE(written.at("alignment_rotation_sigma_deg").is_null());
+  const PoseErrorStatistics read = written.get<PoseErrorStatistics>();
+  EXPECT_EQ(read.num_frames, 11);
+  EXPECT_EQ(read.mean_rotation_deg, 0.25);
+  EXPECT_TRUE(std::isnan(read.alignment_rotation_sigma_deg));
+  EXPECT_TRUE(read.success);
+
+  const PoseErrorStatistics older = nlohmann::json{
+      {"num_frames", 3},
+      {"mean_rotation_deg", 1.5},
+      {"success", "yes"}}.get<PoseErrorStatistics>();
+  EXPECT_EQ(older.num_frames, 3);
+  EXPECT_EQ(older.mean_rotation_deg, 1.5);
+  EXPECT_TRUE(std::isnan(older.median_rotation_deg));
+  EXPECT_TRUE(std::isnan(older.mean_relative_rotation_deg));
+  EXPECT_EQ(older.num_relative_pairs, 0);
+  EXPECT_FALSE(older.success);  // not a boolean
+
+  SweepSplatResult splat;
+  splat.trainer = "gsplat";
+  splat.status = "ok";
+  splat.psnr = 24.5;
+  const SweepSplatResult back = SweepSplatResult::FromJson(splat.ToJson());
+  EXPECT_EQ(back.trainer, "gsplat");
+  EXPECT_TRUE(back.ok());
+  EXPECT_EQ(back.psnr, 24.5);
+  EXPECT_TRUE(std::isnan(back.lpips));
+  EXPECT_TRUE(splat.ToJson().at("lpips").is_null());
+  EXPECT_EQ(SweepSplatResult::FromJson({{"trainer", 7}}).trainer, "");
+}
 
 TEST(WilsonIntervalTest, MatchesReferenceValues) {
   // Reference values: roots of (k/n - p)^2 = z^2 p (1 - p) / n found by bisection, z = 1.959964.
