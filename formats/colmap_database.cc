@@ -448,153 +448,192 @@ void ReadDatabaseImages(const Sqlite& db, const std::string& path,
   }
 }
 
-}  // namespace
+using MatchMatrix = Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor>;
 
-ColmapDatabase ReadColmapDatabase(const std::string& path) {
-  if (!fs::is_regular_file(path)) ThrowInput(path, 0, "no such file (COLMAP database.db expected)");
-  const Sqlite db(path, SQLITE_OPEN_READONLY);
-  CheckTables(db);
+// The tables after cameras and images, read into `out` with every row checked against what is
+// already read: keypoints and descriptors per image, then the pairs, the union of `matches` and
+// `two_view_geometries`, keyed by (index1, index2) in name order.
+class DatabaseTablesReader {
+ public:
+  DatabaseTablesReader(const Sqlite& db, const std::string& path,
+                       const std::map<int64_t, int>& image_index, ColmapDatabase* out)
+      : db_(db), path_(path), image_index_(image_index), out_(out) {}
 
-  const std::map<int64_t, ColmapCamera> cameras = ReadDatabaseCameras(db, path);
-  ColmapDatabase out;
-  std::map<int64_t, int> image_index;
-  ReadDatabaseImages(db, path, cameras, &out, &image_index);
-  const auto name_of = [&](int64_t image_id) {
-    const auto it = image_index.find(image_id);
-    return it == image_index.end() ? std::string("?") : out.images.images[it->second].name;
-  };
-
-  // Keypoints and descriptors.
-  out.features.resize(out.images.images.size());
-  for (auto& f : out.features) f.keypoints.resize(0, 4);
-  {
-    Statement stmt(db, "SELECT image_id, rows, cols, data FROM keypoints");
+  void ReadKeypoints() {
+    out_->features.resize(out_->images.images.size());
+    for (auto& f : out_->features) f.keypoints.resize(0, 4);
+    Statement stmt(db_, "SELECT image_id, rows, cols, data FROM keypoints");
     while (stmt.Step("cannot read table keypoints")) {
       const int64_t id = stmt.Int(0);
       const std::string where = "table keypoints, image_id " + std::to_string(id);
-      const auto index = image_index.find(id);
-      if (index == image_index.end()) ThrowInput(path, 0, where + ": no such image");
+      const int index = ImageIndex(id, where);
       using Blob = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-      const Blob blob = ReadMatrixBlob<Blob>(db, stmt, 1, where + " (" + name_of(id) + ")");
+      const Blob blob = ReadMatrixBlob<Blob>(db_, stmt, 1, where + " (" + NameOf(id) + ")");
       if (blob.rows() > 0 && blob.cols() != 2 && blob.cols() != 4 && blob.cols() != 6) {
-        ThrowInput(path, 0,
-                   where + " (" + name_of(id) + "): " + std::to_string(blob.cols()) +
+        ThrowInput(path_, 0,
+                   where + " (" + NameOf(id) + "): " + std::to_string(blob.cols()) +
                        " columns; COLMAP keypoints have 2, 4 or 6");
       }
-      out.features[index->second] = FeaturesFromColmapKeypoints(blob);
+      out_->features[index] = FeaturesFromColmapKeypoints(blob);
     }
   }
-  {
-    Statement stmt(db, "SELECT image_id, rows, cols, data FROM descriptors");
+
+  void ReadDescriptors() {
+    Statement stmt(db_, "SELECT image_id, rows, cols, data FROM descriptors");
     while (stmt.Step("cannot read table descriptors")) {
       const int64_t id = stmt.Int(0);
       const std::string where = "table descriptors, image_id " + std::to_string(id);
-      const auto index = image_index.find(id);
-      if (index == image_index.end()) ThrowInput(path, 0, where + ": no such image");
-      ImageFeatures& f = out.features[index->second];
+      ImageFeatures& f = out_->features[ImageIndex(id, where)];
       f.descriptors = ReadMatrixBlob<std::decay_t<decltype(f.descriptors)>>(
-          db, stmt, 1, where + " (" + name_of(id) + ")");
+          db_, stmt, 1, where + " (" + NameOf(id) + ")");
       if (f.descriptors.rows() != 0 && f.descriptors.rows() != f.keypoints.rows()) {
-        ThrowInput(path, 0,
-                   where + " (" + name_of(id) + "): " + std::to_string(f.descriptors.rows()) +
+        ThrowInput(path_, 0,
+                   where + " (" + NameOf(id) + "): " + std::to_string(f.descriptors.rows()) +
                        " descriptors for " + std::to_string(f.keypoints.rows()) + " keypoints");
       }
     }
   }
 
-  // Pairs: the union of `matches` and `two_view_geometries`, keyed by (index1, index2).
-  using MatchMatrix = Eigen::Matrix<uint32_t, Eigen::Dynamic, 2, Eigen::RowMajor>;
-  std::map<std::pair<int, int>, PairMatches> pairs;
-  // Resolves a pair id; `swapped` when name order runs against COLMAP's id order.
-  const auto resolve = [&](int64_t pair_id, const std::string& table, bool* swapped,
-                           std::string* where) -> PairMatches& {
+  void ReadMatches() {
+    Statement stmt(db_, "SELECT pair_id, rows, cols, data FROM matches");
+    while (stmt.Step("cannot read table matches")) {
+      bool swapped = false;
+      std::string where;
+      PairMatches& pair = Resolve(stmt.Int(0), "matches", &swapped, &where);
+      pair.matches =
+          CheckAndOrient(ReadMatrixBlob<MatchMatrix>(db_, stmt, 1, where), pair, swapped, where);
+    }
+  }
+
+  void ReadTwoViewGeometries() {
+    // Databases older than COLMAP 3.5 lack some geometry columns; they read as zero.
+    const std::set<std::string> columns = Columns(db_, "two_view_geometries");
+    std::string select = "SELECT pair_id, rows, cols, data, config";
+    for (const char* column : {"F", "E", "H", "qvec", "tvec"}) {
+      select += columns.count(column) ? std::string(", ") + column : ", NULL";
+    }
+    Statement stmt(db_, select + " FROM two_view_geometries");
+    while (stmt.Step("cannot read table two_view_geometries")) {
+      bool swapped = false;
+      std::string where;
+      PairMatches& pair = Resolve(stmt.Int(0), "two_view_geometries", &swapped, &where);
+      pair.geometry.inlier_matches =
+          CheckAndOrient(ReadMatrixBlob<MatchMatrix>(db_, stmt, 1, where), pair, swapped, where);
+      ReadGeometry(stmt, swapped, where, &pair.geometry);
+    }
+  }
+
+  std::vector<PairMatches> TakePairs() {
+    std::vector<PairMatches> out;
+    out.reserve(pairs_.size());
+    for (auto& [key, pair] : pairs_) out.push_back(std::move(pair));
+    return out;
+  }
+
+ private:
+  std::string NameOf(int64_t image_id) const {
+    const auto it = image_index_.find(image_id);
+    return it == image_index_.end() ? std::string("?") : out_->images.images[it->second].name;
+  }
+
+  int ImageIndex(int64_t image_id, const std::string& where) const {
+    const auto it = image_index_.find(image_id);
+    if (it == image_index_.end()) ThrowInput(path_, 0, where + ": no such image");
+    return it->second;
+  }
+
+  // The pair of a pair id; `swapped` when name order runs against COLMAP's id order.
+  PairMatches& Resolve(int64_t pair_id, const std::string& table, bool* swapped,
+                       std::string* where) {
     uint32_t id1 = 0, id2 = 0;
     ColmapImageIdsFromPairId(static_cast<uint64_t>(pair_id), &id1, &id2);
     *where = "table " + table + ", pair_id " + std::to_string(pair_id) + " (image ids " +
              std::to_string(id1) + ", " + std::to_string(id2) + ")";
-    const auto i1 = image_index.find(id1), i2 = image_index.find(id2);
-    if (pair_id < 0 || i1 == image_index.end() || i2 == image_index.end() || id1 == id2) {
-      ThrowInput(path, 0, *where + ": no such image pair");
+    const auto i1 = image_index_.find(id1), i2 = image_index_.find(id2);
+    if (pair_id < 0 || i1 == image_index_.end() || i2 == image_index_.end() || id1 == id2) {
+      ThrowInput(path_, 0, *where + ": no such image pair");
     }
-    *where += " " + PairName(name_of(id1), name_of(id2));
+    *where += " " + PairName(NameOf(id1), NameOf(id2));
     *swapped = i1->second > i2->second;
     const int a = std::min(i1->second, i2->second), b = std::max(i1->second, i2->second);
-    PairMatches& pair = pairs[{a, b}];
+    PairMatches& pair = pairs_[{a, b}];
     pair.image1 = a;
     pair.image2 = b;
     return pair;
-  };
+  }
+
   // Match rows index keypoints of COLMAP's image_id1 (left) and image_id2 (right).
-  const auto check_and_orient = [&](MatchMatrix m, const PairMatches& pair, bool swapped,
-                                    const std::string& where) {
+  MatchMatrix CheckAndOrient(MatchMatrix m, const PairMatches& pair, bool swapped,
+                             const std::string& where) const {
     // Columns of an empty matrix would be offsets from its null data pointer (undefined).
     if (swapped && m.rows() > 0) m.col(0).swap(m.col(1));
-    const Eigen::Index n1 = out.features[pair.image1].keypoints.rows();
-    const Eigen::Index n2 = out.features[pair.image2].keypoints.rows();
+    const Eigen::Index n1 = out_->features[pair.image1].keypoints.rows();
+    const Eigen::Index n2 = out_->features[pair.image2].keypoints.rows();
     for (Eigen::Index r = 0; r < m.rows(); ++r) {
       if (int64_t(m(r, 0)) >= n1 || int64_t(m(r, 1)) >= n2) {
-        ThrowInput(path, 0,
+        ThrowInput(path_, 0,
                    where + ": match " + std::to_string(r) + " (" + std::to_string(m(r, 0)) + ", " +
                        std::to_string(m(r, 1)) + ") is out of range for " + std::to_string(n1) +
                        " and " + std::to_string(n2) + " keypoints");
       }
     }
     return m;
-  };
-  {
-    Statement stmt(db, "SELECT pair_id, rows, cols, data FROM matches");
-    while (stmt.Step("cannot read table matches")) {
-      bool swapped = false;
-      std::string where;
-      PairMatches& pair = resolve(stmt.Int(0), "matches", &swapped, &where);
-      pair.matches =
-          check_and_orient(ReadMatrixBlob<MatchMatrix>(db, stmt, 1, where), pair, swapped, where);
-    }
   }
-  {
-    // Databases older than COLMAP 3.5 lack some geometry columns; they read as zero.
-    const std::set<std::string> columns = Columns(db, "two_view_geometries");
-    std::string select = "SELECT pair_id, rows, cols, data, config";
-    for (const char* column : {"F", "E", "H", "qvec", "tvec"}) {
-      select += columns.count(column) ? std::string(", ") + column : ", NULL";
+
+  // config, F, E, H and the relative pose of a two_view_geometries row, in raytime's pixel
+  // convention and name order.
+  void ReadGeometry(const Statement& stmt, bool swapped, const std::string& where,
+                    TwoViewGeometry* g) const {
+    const int64_t config = stmt.Int(4);
+    if (config < 0 || config > static_cast<int>(TwoViewConfig::kMultiple)) {
+      ThrowInput(path_, 0, where + ": unknown config " + std::to_string(config));
     }
-    Statement stmt(db, select + " FROM two_view_geometries");
-    while (stmt.Step("cannot read table two_view_geometries")) {
-      bool swapped = false;
-      std::string where;
-      PairMatches& pair = resolve(stmt.Int(0), "two_view_geometries", &swapped, &where);
-      TwoViewGeometry& g = pair.geometry;
-      g.inlier_matches =
-          check_and_orient(ReadMatrixBlob<MatchMatrix>(db, stmt, 1, where), pair, swapped, where);
-      const int64_t config = stmt.Int(4);
-      if (config < 0 || config > static_cast<int>(TwoViewConfig::kMultiple)) {
-        ThrowInput(path, 0, where + ": unknown config " + std::to_string(config));
-      }
-      g.config = static_cast<TwoViewConfig>(config);
-      Eigen::Matrix3d f = ReadMatrix3Blob(db, stmt, 5, where + ", F");
-      Eigen::Matrix3d e = ReadMatrix3Blob(db, stmt, 6, where + ", E");
-      Eigen::Matrix3d h = ReadMatrix3Blob(db, stmt, 7, where + ", H");
-      const Eigen::Vector4d qvec = ReadVectorBlob<4>(db, stmt, 8, where + ", qvec");  // w x y z
-      const Eigen::Vector3d tvec = ReadVectorBlob<3>(db, stmt, 9, where + ", tvec");
-      // COLMAP writes a zero quaternion when it did not estimate the relative pose.
-      Rigid3 cam2_from_cam1;
-      if (qvec.norm() > 0) {
-        cam2_from_cam1 = Rigid3(Eigen::Quaterniond(qvec[0], qvec[1], qvec[2], qvec[3]), tvec);
-      }
-      if (swapped) {
-        f.transposeInPlace();
-        e.transposeInPlace();
-        if (h != Eigen::Matrix3d::Zero()) h = h.inverse().eval();
-        cam2_from_cam1 = cam2_from_cam1.Inverse();
-      }
-      g.F = ConvertF(f, ColmapFromOpenCvPixel());
-      g.E = e;
-      g.H = ConvertH(h, OpenCvFromColmapPixel(), ColmapFromOpenCvPixel());
-      g.cam2_from_cam1 = cam2_from_cam1;
+    g->config = static_cast<TwoViewConfig>(config);
+    Eigen::Matrix3d f = ReadMatrix3Blob(db_, stmt, 5, where + ", F");
+    Eigen::Matrix3d e = ReadMatrix3Blob(db_, stmt, 6, where + ", E");
+    Eigen::Matrix3d h = ReadMatrix3Blob(db_, stmt, 7, where + ", H");
+    const Eigen::Vector4d qvec = ReadVectorBlob<4>(db_, stmt, 8, where + ", qvec");  // w x y z
+    const Eigen::Vector3d tvec = ReadVectorBlob<3>(db_, stmt, 9, where + ", tvec");
+    // COLMAP writes a zero quaternion when it did not estimate the relative pose.
+    Rigid3 cam2_from_cam1;
+    if (qvec.norm() > 0) {
+      cam2_from_cam1 = Rigid3(Eigen::Quaterniond(qvec[0], qvec[1], qvec[2], qvec[3]), tvec);
     }
+    if (swapped) {
+      f.transposeInPlace();
+      e.transposeInPlace();
+      if (h != Eigen::Matrix3d::Zero()) h = h.inverse().eval();
+      cam2_from_cam1 = cam2_from_cam1.Inverse();
+    }
+    g->F = ConvertF(f, ColmapFromOpenCvPixel());
+    g->E = e;
+    g->H = ConvertH(h, OpenCvFromColmapPixel(), ColmapFromOpenCvPixel());
+    g->cam2_from_cam1 = cam2_from_cam1;
   }
-  out.pairs.reserve(pairs.size());
-  for (auto& [key, pair] : pairs) out.pairs.push_back(std::move(pair));
+
+  const Sqlite& db_;
+  const std::string& path_;
+  const std::map<int64_t, int>& image_index_;
+  ColmapDatabase* out_;
+  std::map<std::pair<int, int>, PairMatches> pairs_;
+};
+
+}  // namespace
+
+ColmapDatabase ReadColmapDatabase(const std::string& path) {
+  if (!fs::is_regular_file(path)) ThrowInput(path, 0, "no such file (COLMAP database.db expected)");
+  const Sqlite db(path, SQLITE_OPEN_READONLY);
+  CheckTables(db);
+  const std::map<int64_t, ColmapCamera> cameras = ReadDatabaseCameras(db, path);
+  ColmapDatabase out;
+  std::map<int64_t, int> image_index;
+  ReadDatabaseImages(db, path, cameras, &out, &image_index);
+  DatabaseTablesReader tables(db, path, image_index, &out);
+  tables.ReadKeypoints();
+  tables.ReadDescriptors();
+  tables.ReadMatches();
+  tables.ReadTwoViewGeometries();
+  out.pairs = tables.TakePairs();
   return out;
 }
 
