@@ -512,6 +512,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     result["prior_convention"] = convention;
     if (options_.check_frame_doubts) result["frame_doubts"] = solves.frame_doubts;
     result["num_images_without_prior"] = num_without_prior;
+    // By image name, over every component whose solve was returned.
+    result["uncertainty"]["cameras"] = solves.uncertainty;
     Write(context, images, &solves);
     return result;
   }
@@ -538,6 +540,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // bootstrap repaired, the smaller components), left out of the export.
     std::vector<std::string> loose;
     FrameDoubtVerdict frame_doubts;  // of the largest component
+    // Per image name, σ of its rotation and centre at the solution (refine/pose_uncertainty.h).
+    nlohmann::json uncertainty = nlohmann::json::object();
     std::vector<CameraIntrinsics> cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
@@ -659,6 +663,9 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
         if (largest) solves->frame_doubts = verdict;
       }
       AppendRayTimes(input, output.solved_observations, names, &solves->rays);
+      for (size_t k = 0; k < names.size() && summary.uncertainty.computed; ++k) {
+        solves->uncertainty[names[k]] = summary.uncertainty.cameras[k];
+      }
     }
     if (largest) {
       solves->result = summary.ToJson();
@@ -699,6 +706,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteJson(kUnexplainedImagesJson, solves->unexplained);
     writer.WriteJson(kDoubtedImagesJson, solves->doubted);
     writer.WriteJson(kLooseImagesJson, solves->loose);
+    writer.WriteJson(kPoseUncertaintyJson, solves->uncertainty);
     writer.Commit();
   }
 };

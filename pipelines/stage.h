@@ -38,6 +38,9 @@ inline constexpr const char* kDoubtedImagesJson = "doubted_images";
 // removal took; and, after a prior repaired as coarse, the smaller components of the match
 // graph). Written by refine, read by export.
 inline constexpr const char* kLooseImagesJson = "loose_images";
+// JSON document beside a refined pose set: per image name, σ of its rotation (degrees) and centre
+// (prior length units) at the solution (refine/pose_uncertainty.h). Written by refine.
+inline constexpr const char* kPoseUncertaintyJson = "pose_uncertainty";
 // JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";

@@ -38,6 +38,10 @@ struct RayTimeLmResidual {
   int target_image = 0;
   Eigen::Vector3d source_ray;          // unit ray d in the source camera frame
   Eigen::Vector2d target_undistorted;  // û, the target's undistorted pixel
+  // The layout's observations the two come from (refine/pose_uncertainty.h: residuals sharing an
+  // observation share its keypoint's noise); -1 when unknown.
+  int source_observation = -1;
+  int target_observation = -1;
 };
 
 struct RayTimeLmProblem {

@@ -289,6 +289,14 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
       options.SelfCalibrates() ? "self-calibrated, " : "fixed",
       options.SelfCalibrates() ? options.intrinsics_sharing : "",
       summary.cameras.min_block_observations));
+  summary.uncertainty = PoseUncertaintyOf(input, options, state, summary.passes.back(), prior);
+  if (summary.uncertainty.computed) {
+    spdlog::info(fmt::format(
+        "refine: uncertainty at the solution (keypoint noise {:.3g} px): median σ {:.3g}° "
+        "rotation, {:.3g} centre ({:.2f} s)",
+        summary.uncertainty.sigma_px, summary.uncertainty.median_rotation_deg,
+        summary.uncertainty.median_centre, summary.uncertainty.seconds));
+  }
   ApplyGuardrails(input, options, prior, state, pruned, &summary);
 
   output->solved_world_from_cam = state.world_from_cam;

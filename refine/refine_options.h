@@ -36,6 +36,10 @@ struct RefineOptions {
   // 0 fits the gauge to the prior centres only. Beyond the paper (its basin arm keeps the
   // solve's own gauge; Table 8).
   double gauge_orientation_weight = 1e3;
+  // Per-camera uncertainty at the solution (refine/pose_uncertainty.h, issue 32): dense in the
+  // cameras, O((6n)³), computed up to this many (2.9 s of a 45 s refine on the 153-frame desk
+  // capture); 0 = off.
+  int uncertainty_max_cameras = 300;
 
   // Ray-time initialization (§3.2, SPEC §3): "auto" = per image, the median of the positive
   // closest-approach depths of its matched rays under the prior poses (global median for an
@@ -212,6 +216,9 @@ struct RefineOptions {
     v("gauge_orientation_weight", gauge_orientation_weight,
       "Weight of the prior's rotations when fitting the solution's global similarity after the "
       "solve, 1/rad² (0 = centres only)",
+      NonNegative());
+    v("uncertainty_max_cameras", uncertainty_max_cameras,
+      "Per-camera pose uncertainty (σ of rotation and centre) up to this many cameras; 0 = off",
       NonNegative());
     v("ray_time_init", ray_time_init,
       "Ray-time start: per-image median closest-approach depth under the prior, or the constant "

@@ -14,6 +14,7 @@
 #include "refine/ceres_gnc.h"
 #include "refine/gauge_polish.h"
 #include "refine/pair_consistency.h"
+#include "refine/pose_uncertainty.h"
 #include "refine/ray_geometry.h"
 #include "refine/ray_time_init.h"
 #include "refine/ray_time_lm_solver.h"
@@ -94,6 +95,8 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
     r.target_image = layout.observations[residual.target].image;
     r.source_ray = fixed.rays[residual.source];
     r.target_undistorted = fixed.undistorted[residual.target];
+    r.source_observation = residual.source;
+    r.target_observation = residual.target;
     problem.residuals.push_back(r);
   }
   std::stable_sort(problem.residuals.begin(), problem.residuals.end(),
@@ -235,6 +238,37 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
       "match term {:.4g} px²",
       pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2));
   return pass;
+}
+
+PoseUncertaintySummary PoseUncertaintyOf(const RefineInput& input, const RefineOptions& options,
+                                         const PassState& state, const RefinePassSummary& last,
+                                         const std::vector<Rigid3>& prior) {
+  PoseUncertaintySummary off;
+  if (options.uncertainty_max_cameras == 0) {
+    off.reason = "off (uncertainty_max_cameras: 0)";
+    return off;
+  }
+  if (last.self_calibration) {
+    off.reason = "the last pass self-calibrated (the intrinsics' uncertainty is not modelled)";
+    return off;
+  }
+  const ProblemLayout& layout = state.layout;
+  std::vector<double> ray_times(layout.ray_time_observation.size(), 0.0);
+  for (size_t t = 0; t < ray_times.size(); ++t) {
+    ray_times[t] = state.ray_time_by_observation.at(
+        KeyOf(layout.observations[layout.ray_time_observation[t]]));
+  }
+  // The prior terms only hold the gauge (projected onto the polish's below) and curve the shape by
+  // some 1e-7 of the match term: the input prior and the last pass's weights.
+  const RayTimeLmProblem problem =
+      BuildRayTimeLmProblem(input, layout, prior, state.world_from_cam, state.cameras,
+                            options.position_weight, last.orientation_weight, std::move(ray_times));
+  PoseUncertaintySettings settings;
+  settings.scale_px2 = last.stages.back().loss_scale_px2;
+  settings.gauge_position_weight = options.position_weight;
+  settings.gauge_orientation_weight = options.gauge_orientation_weight;
+  settings.max_cameras = options.uncertainty_max_cameras;
+  return EstimatePoseUncertainty(problem, settings);
 }
 
 SolvedObservations SolvedObservationsOf(const PassState& state) {

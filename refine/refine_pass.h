@@ -44,6 +44,12 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
                           const PassSettings& settings, const std::vector<Rigid3>& anchor,
                           PassState* state);
 
+// How well the last pass's solution (in *state) determines each camera (pose_uncertainty.h), with
+// that pass's summary `last`; not computed after a self-calibrating pass or when turned off.
+PoseUncertaintySummary PoseUncertaintyOf(const RefineInput& input, const RefineOptions& options,
+                                         const PassState& state, const RefinePassSummary& last,
+                                         const std::vector<Rigid3>& prior);
+
 // The last pass's observations, their solved ray times and its used matches (RefineOutput).
 SolvedObservations SolvedObservationsOf(const PassState& state);
 

@@ -14,6 +14,7 @@
 #include "core/geometry.h"
 #include "refine/gauge_polish.h"
 #include "refine/loose_parts.h"
+#include "refine/pose_uncertainty.h"
 
 namespace raytime {
 
@@ -325,11 +326,13 @@ struct RefineSummary {
   // "returned_prior" (a check returned the prior).
   std::string decision;
   RefineGuardrails guardrails;
+  // How well the last pass's solution determines each camera (refine/pose_uncertainty.h).
+  PoseUncertaintySummary uncertainty;
 
   nlohmann::json ToJson() const;  // the fields by name
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineSummary, passes, cameras, total_iterations, initial_cost,
                                    final_cost, timings, orientation_prior, pair_removal, decision,
-                                   guardrails)
+                                   guardrails, uncertainty)
 
 }  // namespace raytime

@@ -697,6 +697,17 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "guardrails.loose_parts",
       "guardrails.loose_parts.cuts",
       "guardrails.loose_parts.images",
+      "uncertainty",
+      "uncertainty.computed",
+      "uncertainty.reason",
+      "uncertainty.sigma_px",
+      "uncertainty.sigma_px_estimated",
+      "uncertainty.median_rotation_deg",
+      "uncertainty.median_centre",
+      "uncertainty.cameras",
+      "uncertainty.cameras[].rotation_deg",
+      "uncertainty.cameras[].centre",
+      "uncertainty.seconds",
   };
   EXPECT_EQ(keys, expected);
   // Values come from the fields of the same name.
