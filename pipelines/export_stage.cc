@@ -9,6 +9,7 @@
 #include <map>
 #include <optional>
 
+#include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
@@ -162,6 +163,31 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   return poses;
 }
 
+// The refine stage's per-camera uncertainty of pose set `name` (/json/pose_uncertainty beside
+// it), for the images of `poses` only; null when the set has none (not refined, or not computed).
+nlohmann::json UncertaintyOf(const StageContext& context, const std::string& name,
+                             const PoseSet& poses) {
+  const Hdf5Reader reader(context.Require(PoseArtifact(name)));
+  if (!reader.HasJson(kPoseUncertaintyJson)) return nullptr;
+  const nlohmann::json all = reader.ReadJson(kPoseUncertaintyJson);
+  nlohmann::json exported = nlohmann::json::object();
+  for (const auto& [image, uncertainty] : all.items()) {
+    if (poses.Has(image)) exported[image] = uncertainty;
+  }
+  if (exported.empty()) return nullptr;
+  return {{"about",
+           "sigma of each camera's rotation (degrees, RMS angle) and centre (prior length "
+           "units) at the refined solution, from keypoint noise (raytime docs/uncertainty.md)"},
+          {"cameras", exported}};
+}
+
+// pose_uncertainty.json inside an exported folder, when the pose set has it.
+void WriteUncertaintyInto(const std::string& folder, const nlohmann::json& uncertainty) {
+  if (uncertainty.is_null()) return;
+  WriteTextFileAtomically((fs::path(folder) / "pose_uncertainty.json").string(),
+                          uncertainty.dump(2) + "\n");
+}
+
 class ExportStage : public StageWithOptions<ExportStageOptions> {
  public:
   std::string type() const override { return "export"; }
@@ -198,13 +224,16 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
       const PoseSet poses = ExportablePoses(context, name, options_.leave_out_unexplained_images,
                                             options_.leave_out_doubted_images, &warnings);
       exportable[name] = poses;
+      const nlohmann::json uncertainty = UncertaintyOf(context, name, poses);
       for (const auto& format : options_.formats) {
         if (format == "3dgs") continue;  // all pose sets at once, below
         const std::string path = (fs::path(context.workdir) / ExportPath(name, format)).string();
         if (format == "colmap_text") {
           WriteColmapModelText(ToColmapModel(images, poses), path);
+          WriteUncertaintyInto(path, uncertainty);
         } else if (format == "colmap_binary") {
           WriteColmapModelBinary(ToColmapModel(images, poses), path);
+          WriteUncertaintyInto(path, uncertainty);
         } else if (format == "transforms_json") {
           std::string prefix = "images/";
           if (images.image_root.empty()) {
@@ -231,7 +260,12 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     nlohmann::json result = {{"written", written}};
     if (options_.Has3dgs()) {
       const TrainerExportSummary summary = Export3dgs(context, images, exportable, &warnings);
-      for (const std::string& dir : summary.directories) written.push_back(dir);
+      for (size_t k = 0; k < summary.directories.size(); ++k) {
+        const std::string& name = summary.pose_sets[k];
+        WriteUncertaintyInto(summary.directories[k],
+                             UncertaintyOf(context, name, exportable.at(name)));
+        written.push_back(summary.directories[k]);
+      }
       result["written"] = written;
       result["3dgs"] = summary;
     }

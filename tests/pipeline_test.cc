@@ -77,6 +77,15 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   EXPECT_LT(refined["none"]["mean_rotation_deg"].get<double>(), 2.0);
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined" / "images.txt"));
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined_transforms.json"));
+  // Each exported camera's σ from the solve (refine/pose_uncertainty.h) beside its model, per
+  // image: small on this scene (median 0.004° measured) and positive.
+  const json uncertainty = ReadJson(fs::path(run_dir) / "refined" / "pose_uncertainty.json");
+  ASSERT_EQ(uncertainty["cameras"].size(), 11u);
+  for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
+    EXPECT_GT(sigma["rotation_deg"].get<double>(), 0.0) << image;
+    EXPECT_LT(sigma["rotation_deg"].get<double>(), 0.05) << image;
+    EXPECT_GT(sigma["centre"].get<double>(), 0.0) << image;
+  }
 
   CommandResult second = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(second.exit_code, 0) << second.output;

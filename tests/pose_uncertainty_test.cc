@@ -123,12 +123,13 @@ TEST(PoseUncertaintyTest, PredictedSigmaMatchesTheSpreadOverNoiseDraws) {
         Calibrate(scene, test.sigma_px, 40, test.orientation_weight, test.parameterization);
     const double rotation = MedianRatio(c.predicted_rotation_deg, c.observed_rotation_deg);
     const double centre = MedianRatio(c.predicted_centre, c.observed_centre);
-    std::printf("%s: median σ rotation predicted %.4f° observed %.4f° (ratio %.2f), centre "
-                "predicted %.5f observed %.5f (ratio %.2f); keypoint noise estimated %.3f px "
-                "(true %.2f)\n",
-                test.name, Median(c.predicted_rotation_deg, 0.0),
-                Median(c.observed_rotation_deg, 0.0), rotation, Median(c.predicted_centre, 0.0),
-                Median(c.observed_centre, 0.0), centre, c.sigma_px_estimated, test.sigma_px);
+    std::printf(
+        "%s: median σ rotation predicted %.4f° observed %.4f° (ratio %.2f), centre "
+        "predicted %.5f observed %.5f (ratio %.2f); keypoint noise estimated %.3f px "
+        "(true %.2f)\n",
+        test.name, Median(c.predicted_rotation_deg, 0.0), Median(c.observed_rotation_deg, 0.0),
+        rotation, Median(c.predicted_centre, 0.0), Median(c.observed_centre, 0.0), centre,
+        c.sigma_px_estimated, test.sigma_px);
     EXPECT_NEAR(c.sigma_px_estimated / test.sigma_px, 1.0, 0.2);
     EXPECT_NEAR(rotation, 1.0, 0.2);
     EXPECT_NEAR(centre, 1.0, 0.2);
