@@ -212,7 +212,8 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
 }
 
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
-                         const std::string& image_prefix, const json& extra_fields) {
+                         const std::string& image_prefix, const json& extra_fields,
+                         const json& frame_fields) {
   const NameJoin join = JoinNames(Names(images), Names(poses));
   if (!join.only_right.empty()) {
     throw InputError("poses without an image: " + join.Describe("images", "poses"));
@@ -247,6 +248,10 @@ void WriteTransformsJson(const std::string& path, const ImageSet& images, const 
     json frame = shared ? json::object() : IntrinsicsJson(images.cameras[image->camera_index]);
     frame["file_path"] = image_prefix + image->name;
     frame["transform_matrix"] = matrix;
+    const auto fields = frame_fields.find(image->name);
+    if (fields != frame_fields.end()) {
+      for (const auto& [key, value] : fields->items()) frame[key] = value;
+    }
     frames.push_back(frame);
   }
   top["frames"] = frames;

@@ -20,9 +20,11 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
 // Writes shared intrinsics at the top level when every image uses the same camera, per-frame
 // otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Images
 // without a pose are left out; a pose without an image is an InputError. `extra_fields` are added
-// at the top level (e.g. ply_file_path, train_filenames, test_filenames). Atomic.
+// at the top level (e.g. ply_file_path, train_filenames, test_filenames), `frame_fields[name]` to
+// that image's frame (trainers ignore keys they do not know). Atomic.
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
                          const std::string& image_prefix = "images/",
-                         const nlohmann::json& extra_fields = nlohmann::json::object());
+                         const nlohmann::json& extra_fields = nlohmann::json::object(),
+                         const nlohmann::json& frame_fields = nlohmann::json::object());
 
 }  // namespace raytime

@@ -181,6 +181,18 @@ nlohmann::json UncertaintyOf(const StageContext& context, const std::string& nam
           {"cameras", exported}};
 }
 
+// Per image name, its σ as fields of its transforms.json frame (raytime_ keys: trainers ignore
+// them).
+nlohmann::json UncertaintyFrameFields(const nlohmann::json& uncertainty) {
+  nlohmann::json fields = nlohmann::json::object();
+  if (uncertainty.is_null()) return fields;
+  for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
+    fields[image] = {{"raytime_rotation_sigma_deg", sigma["rotation_deg"]},
+                     {"raytime_centre_sigma", sigma["centre"]}};
+  }
+  return fields;
+}
+
 // pose_uncertainty.json inside an exported folder, when the pose set has it.
 void WriteUncertaintyInto(const std::string& folder, const nlohmann::json& uncertainty) {
   if (uncertainty.is_null()) return;
@@ -249,7 +261,8 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
           } else {
             prefix = ImagePrefixFor(path, images.image_root);
           }
-          WriteTransformsJson(path, images, poses, prefix);
+          WriteTransformsJson(path, images, poses, prefix, nlohmann::json::object(),
+                              UncertaintyFrameFields(uncertainty));
         } else {
           WriteTumTrajectory(path, poses);
         }

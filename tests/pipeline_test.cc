@@ -86,6 +86,14 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
     EXPECT_LT(sigma["rotation_deg"].get<double>(), 0.05) << image;
     EXPECT_GT(sigma["centre"].get<double>(), 0.0) << image;
   }
+  // And in each transforms.json frame.
+  const json transforms = ReadJson(fs::path(run_dir) / "refined_transforms.json");
+  ASSERT_EQ(transforms["frames"].size(), 11u);
+  for (const json& frame : transforms["frames"]) {
+    const std::string image = fs::path(frame["file_path"].get<std::string>()).filename().string();
+    EXPECT_EQ(frame["raytime_rotation_sigma_deg"], uncertainty["cameras"][image]["rotation_deg"]);
+    EXPECT_EQ(frame["raytime_centre_sigma"], uncertainty["cameras"][image]["centre"]);
+  }
 
   CommandResult second = RunRaytime("run configs/demo.yaml --workdir " + run_dir);
   ASSERT_EQ(second.exit_code, 0) << second.output;
