@@ -17,6 +17,7 @@
 #include "pipelines/commands.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
+#include "pipelines/run_report.h"
 #include "pipelines/stage.h"
 #include "pipelines/sweep.h"
 
@@ -179,9 +180,9 @@ struct EvaluateFilesCommand {
   }
 };
 
-// `raytime report --sweep DIR`.
+// `raytime report --sweep DIR` (a campaign) or `raytime report --run WORKDIR` (one run's page).
 struct ReportCommand {
-  std::string sweep_dir, report_dir;
+  std::string sweep_dir, report_dir, run_dir;
   CampaignReportOptions report_options;
   bool collect = false;
   CLI::App* command = nullptr;
@@ -191,8 +192,11 @@ struct ReportCommand {
         "report",
         "Campaign report of a finished sweep: Markdown tables shaped like the paper's "
         "Tables 5, 6 and 8 (and 4 when it trained 3DGS), CSVs of cells, plots");
-    command->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)")
-        ->required();
+    CLI::Option* sweep =
+        command->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)");
+    CLI::Option* run = command->add_option(
+        "--run", run_dir, "A run's work directory: rebuild its page WORKDIR/report.html");
+    sweep->excludes(run);
     command->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
     command->add_flag("--collect", collect,
                       "First rebuild DIR/sweep.csv, sweep.json and summary.json from the runs' "
@@ -216,6 +220,11 @@ struct ReportCommand {
   }
 
   int Execute() const {
+    if (!run_dir.empty()) {
+      spdlog::info(fmt::format("report: {}", WriteRunReport(run_dir)));
+      return 0;
+    }
+    if (sweep_dir.empty()) throw InputError("raytime report: give --sweep DIR or --run WORKDIR");
     if (collect) CollectSweep(sweep_dir);
     return RunReportCommand(sweep_dir, report_dir, report_options);
   }

@@ -20,6 +20,7 @@
 #include "core/version.h"
 #include "core/warnings.h"
 #include "pipelines/content_hash.h"
+#include "pipelines/run_report.h"
 #include "pipelines/stage.h"
 
 namespace fs = std::filesystem;
@@ -438,6 +439,16 @@ void StepStage(const PipelineSpec& spec, size_t index, const std::string& workdi
   });
 }
 
+// WORKDIR/report.html (run_report.h); a page that cannot be written is said in the log, never
+// the run's failure.
+void WriteReportPage(const std::string& workdir) {
+  try {
+    spdlog::info(fmt::format("report: {}", WriteRunReport(workdir)));
+  } catch (const std::exception& e) {
+    spdlog::warn(fmt::format("report: cannot write {}/report.html: {}", workdir, e.what()));
+  }
+}
+
 }  // namespace
 
 json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
@@ -498,6 +509,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
       spdlog::error(
           fmt::format("cannot record the failure in summary.json: {}", summary_error.what()));
     }
+    WriteReportPage(workdir);
     throw;
   }
   run.Update([&](json& summary) {
@@ -505,6 +517,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
     finish(summary, summary["warnings"].empty() ? "ok" : "ok_with_warnings");
   });
   const json summary = run.Get();
+  WriteReportPage(workdir);
   if (summary["status"] == "ok_with_warnings") {
     spdlog::warn(fmt::format("finished with {} warning(s) (see {}/summary.json)",
                              summary["warnings"].size(), workdir));

@@ -11,6 +11,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -28,6 +29,11 @@ using raytime::RunRaytimeStdout;
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
   return json::parse(in);
+}
+
+std::string ReadText(const fs::path& path) {
+  std::ifstream in(path);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 std::vector<std::string> StageStatuses(const json& summary) {
@@ -86,6 +92,17 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
     EXPECT_LT(sigma["rotation_deg"].get<double>(), 0.05) << image;
     EXPECT_GT(sigma["centre"].get<double>(), 0.0) << image;
   }
+  // The run's page (pipelines/run_report.h): the verdict, every image in the camera table with a
+  // link from the top view, no fetch from the network (it opens offline).
+  const std::string page = ReadText(fs::path(run_dir) / "report.html");
+  EXPECT_NE(page.find("Status: <b>ok</b>"), std::string::npos);
+  EXPECT_NE(page.find("decision <b>accepted</b>"), std::string::npos);
+  for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
+    EXPECT_NE(page.find("<tr id=\"cam-" + image + "\">"), std::string::npos) << image;
+    EXPECT_NE(page.find("<a href=\"#cam-" + image + "\">"), std::string::npos) << image;
+  }
+  EXPECT_EQ(page.find("src=\"http"), std::string::npos);
+  EXPECT_EQ(page.find("<script"), std::string::npos);
   // And in each transforms.json frame.
   const json transforms = ReadJson(fs::path(run_dir) / "refined_transforms.json");
   ASSERT_EQ(transforms["frames"].size(), 11u);
