@@ -170,9 +170,11 @@ std::string CorrectionColour(double share) {
   return "rgb(" + std::to_string(red) + "," + std::to_string(green) + ",60)";
 }
 
-// Top view: the refined centres' two principal axes, prior (grey) and refined (coloured by the
-// centre correction) with the correction drawn; each refined camera links to its table row.
-std::string CamerasSvg(const RefinedRun& refined) {
+// One view of the centres: across, the refined centres' main direction; up, their principal
+// direction `vertical_axis` (1: the second, a top view; 0: the least, a side view). Prior grey,
+// refined coloured by its centre correction with the correction drawn; each refined camera links
+// to its table row.
+std::string CamerasSvg(const RefinedRun& refined, const std::string& view, int vertical_axis) {
   std::vector<std::string> names;
   for (const auto& [name, pose] : refined.refined.world_from_cam) names.push_back(name);
   if (names.size() < 2) return "<p>Fewer than two refined cameras: no view.</p>";
@@ -185,7 +187,8 @@ std::string CamerasSvg(const RefinedRun& refined) {
     scatter += d * d.transpose();
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(scatter);
-  const Eigen::Vector3d u = eigen.eigenvectors().col(2), v = eigen.eigenvectors().col(1);
+  const Eigen::Vector3d u = eigen.eigenvectors().col(2);
+  const Eigen::Vector3d v = eigen.eigenvectors().col(vertical_axis);
   const auto project = [&](const Eigen::Vector3d& x) {
     return Eigen::Vector2d((x - mean).dot(u), (x - mean).dot(v));
   };
@@ -215,10 +218,10 @@ std::string CamerasSvg(const RefinedRun& refined) {
     return Eigen::Vector2d(margin + (p.x() - lo.x()) * scale,
                            height - margin - (p.y() - lo.y()) * scale);
   };
-  std::string svg = "<svg id=\"cameras-top\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" +
-                    Number(width, 4) + "\" height=\"" + Number(height, 4) +
-                    "\" role=\"img\"><title>Camera centres, top view: prior grey, refined "
-                    "coloured by correction</title>";
+  std::string svg = "<svg id=\"cameras-" + view +
+                    "\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" + Number(width, 4) +
+                    "\" height=\"" + Number(height, 4) + "\" role=\"img\"><title>Camera centres, " +
+                    view + " view: prior grey, refined coloured by correction</title>";
   for (const auto& name : names) {
     const Eigen::Vector2d r = to_svg(project(refined.refined.world_from_cam.at(name).translation));
     const auto prior = refined.prior.world_from_cam.find(name);
@@ -247,7 +250,12 @@ std::string CamerasSection(const RefinedRun& refined, const json& run) {
   if (refined.stage_id.empty())
     return "<section id=\"cameras\"><h2>Cameras</h2><p>No refine stage ran.</p></section>";
   std::string html = "<section id=\"cameras\"><h2>Cameras: " + Escape(refined.prior_set) + " → " +
-                     Escape(refined.refined_set) + "</h2>" + CamerasSvg(refined);
+                     Escape(refined.refined_set) +
+                     "</h2><p>Top view (the centres' two main directions) and side view (the "
+                     "main and the least direction): prior grey, refined coloured green to red by "
+                     "the size of its correction, the correction drawn; a camera links to its "
+                     "row.</p>" +
+                     CamerasSvg(refined, "top", 1) + " " + CamerasSvg(refined, "side", 0);
   const json sigma =
       refined.summary.value("uncertainty", json::object()).value("cameras", json::object());
   const auto flags = FlagsByImage(run);
