@@ -232,11 +232,13 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     nlohmann::json written = nlohmann::json::array();
     Warnings warnings;
     std::map<std::string, PoseSet> exportable;
+    std::map<std::string, nlohmann::json> uncertainty_of;  // per pose set, null when it has none
     for (const auto& name : options_.poses) {
       const PoseSet poses = ExportablePoses(context, name, options_.leave_out_unexplained_images,
                                             options_.leave_out_doubted_images, &warnings);
       exportable[name] = poses;
-      const nlohmann::json uncertainty = UncertaintyOf(context, name, poses);
+      const nlohmann::json& uncertainty = uncertainty_of[name] =
+          UncertaintyOf(context, name, poses);
       for (const auto& format : options_.formats) {
         if (format == "3dgs") continue;  // all pose sets at once, below
         const std::string path = (fs::path(context.workdir) / ExportPath(name, format)).string();
@@ -275,8 +277,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
       const TrainerExportSummary summary = Export3dgs(context, images, exportable, &warnings);
       for (size_t k = 0; k < summary.directories.size(); ++k) {
         const std::string& name = summary.pose_sets[k];
-        WriteUncertaintyInto(summary.directories[k],
-                             UncertaintyOf(context, name, exportable.at(name)));
+        WriteUncertaintyInto(summary.directories[k], uncertainty_of.at(name));
         written.push_back(summary.directories[k]);
       }
       result["written"] = written;

@@ -170,38 +170,52 @@ std::string CorrectionColour(double share) {
   return "rgb(" + std::to_string(red) + "," + std::to_string(green) + ",60)";
 }
 
-// One view of the centres: across, the refined centres' main direction; up, their principal
-// direction `vertical_axis` (1: the second, a top view; 0: the least, a side view). Prior grey,
-// refined coloured by its centre correction with the correction drawn; each refined camera links
-// to its table row.
-std::string CamerasSvg(const RefinedRun& refined, const std::string& view, int vertical_axis) {
-  std::vector<std::string> names;
-  for (const auto& [name, pose] : refined.refined.world_from_cam) names.push_back(name);
-  if (names.size() < 2) return "<p>Fewer than two refined cameras: no view.</p>";
+// The frame the views share: the refined centres' mean and principal directions (columns,
+// ascending spread), and each camera's centre correction with the largest of them.
+struct CentreFrame {
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& name : names) mean += refined.refined.world_from_cam.at(name).translation;
-  mean /= static_cast<double>(names.size());
+  Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
+  std::map<std::string, double> correction;  // refined cameras with a prior pose
+  double largest = 0.0;
+};
+
+CentreFrame CentreFrameOf(const RefinedRun& refined) {
+  CentreFrame frame;
+  const auto& solved = refined.refined.world_from_cam;
+  for (const auto& [name, pose] : solved) frame.mean += pose.translation;
+  frame.mean /= static_cast<double>(std::max<size_t>(solved.size(), 1));
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (const auto& name : names) {
-    const Eigen::Vector3d d = refined.refined.world_from_cam.at(name).translation - mean;
+  for (const auto& [name, pose] : solved) {
+    const Eigen::Vector3d d = pose.translation - frame.mean;
     scatter += d * d.transpose();
+    const auto prior = refined.prior.world_from_cam.find(name);
+    if (prior == refined.prior.world_from_cam.end()) continue;
+    const double correction = (prior->second.translation - pose.translation).norm();
+    frame.correction[name] = correction;
+    frame.largest = std::max(frame.largest, correction);
   }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(scatter);
-  const Eigen::Vector3d u = eigen.eigenvectors().col(2);
-  const Eigen::Vector3d v = eigen.eigenvectors().col(vertical_axis);
+  frame.axes = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors();
+  return frame;
+}
+
+// One view of the centres: across, the main direction; up, the principal direction
+// `vertical_axis` (1: the second, a top view; 0: the least, a side view), at one scale, the height
+// following the spread. Prior grey, refined coloured by its centre correction with the correction
+// drawn; each refined camera links to its table row.
+std::string CamerasSvg(const RefinedRun& refined, const CentreFrame& frame, const std::string& view,
+                       int vertical_axis) {
+  const auto& solved = refined.refined.world_from_cam;
+  const Eigen::Vector3d u = frame.axes.col(2);
+  const Eigen::Vector3d v = frame.axes.col(vertical_axis);
   const auto project = [&](const Eigen::Vector3d& x) {
-    return Eigen::Vector2d((x - mean).dot(u), (x - mean).dot(v));
+    return Eigen::Vector2d((x - frame.mean).dot(u), (x - frame.mean).dot(v));
   };
   std::vector<Eigen::Vector2d> points;
-  double largest = 0.0;
-  for (const auto& name : names) {
-    points.push_back(project(refined.refined.world_from_cam.at(name).translation));
+  for (const auto& [name, pose] : solved) {
+    points.push_back(project(pose.translation));
     const auto prior = refined.prior.world_from_cam.find(name);
     if (prior != refined.prior.world_from_cam.end()) {
       points.push_back(project(prior->second.translation));
-      largest = std::max(
-          largest,
-          (prior->second.translation - refined.refined.world_from_cam.at(name).translation).norm());
     }
   }
   Eigen::Vector2d lo = points.front(), hi = points.front();
@@ -209,7 +223,6 @@ std::string CamerasSvg(const RefinedRun& refined, const std::string& view, int v
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   }
-  // The first principal axis across, the second up, at one scale; the height follows the spread.
   const double width = 640.0, margin = 20.0;
   const double extent = std::max(hi.x() - lo.x(), 1e-12);
   const double scale = (width - 2 * margin) / extent;
@@ -222,18 +235,13 @@ std::string CamerasSvg(const RefinedRun& refined, const std::string& view, int v
                     "\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" + Number(width, 4) +
                     "\" height=\"" + Number(height, 4) + "\" role=\"img\"><title>Camera centres, " +
                     view + " view: prior grey, refined coloured by correction</title>";
-  for (const auto& name : names) {
-    const Eigen::Vector2d r = to_svg(project(refined.refined.world_from_cam.at(name).translation));
+  for (const auto& [name, pose] : solved) {
+    const Eigen::Vector2d r = to_svg(project(pose.translation));
     const auto prior = refined.prior.world_from_cam.find(name);
     double share = 0.0;
     if (prior != refined.prior.world_from_cam.end()) {
       const Eigen::Vector2d p = to_svg(project(prior->second.translation));
-      share =
-          largest > 0
-              ? (prior->second.translation - refined.refined.world_from_cam.at(name).translation)
-                        .norm() /
-                    largest
-              : 0.0;
+      share = frame.largest > 0 ? frame.correction.at(name) / frame.largest : 0.0;
       svg += "<line x1=\"" + Number(p.x(), 6) + "\" y1=\"" + Number(p.y(), 6) + "\" x2=\"" +
              Number(r.x(), 6) + "\" y2=\"" + Number(r.y(), 6) + "\" stroke=\"" +
              CorrectionColour(share) + "\"/><circle cx=\"" + Number(p.x(), 6) + "\" cy=\"" +
@@ -246,6 +254,14 @@ std::string CamerasSvg(const RefinedRun& refined, const std::string& view, int v
   return svg + "</svg>";
 }
 
+std::string CamerasViews(const RefinedRun& refined) {
+  if (refined.refined.world_from_cam.size() < 2) {
+    return "<p>Fewer than two refined cameras: no view.</p>";
+  }
+  const CentreFrame frame = CentreFrameOf(refined);
+  return CamerasSvg(refined, frame, "top", 1) + " " + CamerasSvg(refined, frame, "side", 0);
+}
+
 std::string CamerasSection(const RefinedRun& refined, const json& run) {
   if (refined.stage_id.empty())
     return "<section id=\"cameras\"><h2>Cameras</h2><p>No refine stage ran.</p></section>";
@@ -255,7 +271,7 @@ std::string CamerasSection(const RefinedRun& refined, const json& run) {
                      "main and the least direction): prior grey, refined coloured green to red by "
                      "the size of its correction, the correction drawn; a camera links to its "
                      "row.</p>" +
-                     CamerasSvg(refined, "top", 1) + " " + CamerasSvg(refined, "side", 0);
+                     CamerasViews(refined);
   const json sigma =
       refined.summary.value("uncertainty", json::object()).value("cameras", json::object());
   const auto flags = FlagsByImage(run);

@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "core/geometry.h"
 #include "core/json_fields.h"
 #include "core/statistics.h"
 #include "core/timing.h"
@@ -18,11 +19,16 @@ namespace {
 
 using Matrix62 = Eigen::Matrix<double, 6, 2>;
 using Matrix26 = Eigen::Matrix<double, 2, 6>;
-// One observation's (or one residual's) blocks, per variable camera: sparse columns of a 6n-row
-// matrix.
-using CameraBlocks62 = std::vector<std::pair<int, Matrix62>>;
+// Blocks of a 6n-row matrix per variable camera, sparse (the few cameras a ray time or an
+// observation reaches): an observation's noise columns, a ray time's H_tc.
+template <class Block>
+using SparseCameraBlocks = std::vector<std::pair<int, Block>>;
+using CameraBlocks62 = SparseCameraBlocks<Matrix62>;
 
-void AddTo(CameraBlocks62* blocks, int camera, const Matrix62& value) {
+// Adds `value` to `camera`'s block; a held camera (-1) has none.
+template <class Block>
+void AddTo(SparseCameraBlocks<Block>* blocks, int camera, const Block& value) {
+  if (camera < 0) return;
   for (auto& [c, block] : *blocks) {
     if (c == camera) {
       block += value;
@@ -83,17 +89,7 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
     while (end < problem.residuals.size() && problem.residuals[end].ray_time == t) ++end;
     group.clear();
     double h_tt = 0.0;
-    std::vector<std::pair<int, Eigen::Matrix<double, 6, 1>>> h_tc;
-    const auto add_h_tc = [&](int camera, const Eigen::Matrix<double, 6, 1>& value) {
-      if (camera < 0) return;
-      for (auto& [c, v] : h_tc) {
-        if (c == camera) {
-          v += value;
-          return;
-        }
-      }
-      h_tc.emplace_back(camera, value);
-    };
+    SparseCameraBlocks<Eigen::Matrix<double, 6, 1>> h_tc;
     for (size_t k = begin; k < end; ++k) {
       const RayTimeLmResidual& res = problem.residuals[k];
       Linearized lin;
@@ -105,7 +101,7 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
           res.source_ray, res.target_undistorted, &residual, &lin.source, &lin.ray_time,
           &lin.target);
       const double s = residual.squaredNorm();
-      lin.a = problem.match_loss_weight * scale_px2 * scale_px2 / (s * s + scale_px2 * scale_px2);
+      lin.a = ScaledArctanLoss{scale_px2, problem.match_loss_weight}.Derivative(s);
       // ∂r/∂X is the source centre's block; X moves with d by t·R_s.
       lin.source_noise = problem.ray_times[t] * lin.source.rightCols<3>() *
                          rotation[res.source_image] *
@@ -118,8 +114,10 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
       out.weighted_expected += lin.a * (2.0 + lin.source_noise.squaredNorm());
       ++out.num_residuals;
       h_tt += lin.a * lin.ray_time.squaredNorm();
-      add_h_tc(lin.source_camera, lin.a * lin.source.transpose() * lin.ray_time);
-      add_h_tc(lin.target_camera, lin.a * lin.target.transpose() * lin.ray_time);
+      AddTo<Eigen::Matrix<double, 6, 1>>(&h_tc, lin.source_camera,
+                                         lin.a * lin.source.transpose() * lin.ray_time);
+      AddTo<Eigen::Matrix<double, 6, 1>>(&h_tc, lin.target_camera,
+                                         lin.a * lin.target.transpose() * lin.ray_time);
       // The residual's own camera blocks of S.
       const std::pair<int, const Matrix26*> blocks[2] = {{lin.source_camera, &lin.source},
                                                          {lin.target_camera, &lin.target}};
@@ -143,16 +141,16 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
       // keypoints that move the residual.
       for (const Linearized& lin : group) {
         CameraBlocks62 b;
-        for (const auto& [c, v] : h_tc) AddTo(&b, c, -lin.a * v * lin.ray_time.transpose() / h_tt);
-        if (lin.source_camera >= 0) AddTo(&b, lin.source_camera, lin.a * lin.source.transpose());
-        if (lin.target_camera >= 0) AddTo(&b, lin.target_camera, lin.a * lin.target.transpose());
+        for (const auto& [c, v] : h_tc) {
+          AddTo<Matrix62>(&b, c, -lin.a * v * lin.ray_time.transpose() / h_tt);
+        }
+        AddTo<Matrix62>(&b, lin.source_camera, lin.a * lin.source.transpose());
+        AddTo<Matrix62>(&b, lin.target_camera, lin.a * lin.target.transpose());
+        // Every residual has both observations (EstimatePoseUncertainty checks).
         for (const auto& [c, block] : b) {
-          if (lin.source_observation >= 0) {
-            AddTo(&out.noise_of_observation[lin.source_observation], c, block * lin.source_noise);
-          }
-          if (lin.target_observation >= 0) {
-            AddTo(&out.noise_of_observation[lin.target_observation], c, -block);
-          }
+          AddTo<Matrix62>(&out.noise_of_observation[lin.source_observation], c,
+                          block * lin.source_noise);
+          AddTo<Matrix62>(&out.noise_of_observation[lin.target_observation], c, -block);
         }
       }
     }
@@ -280,7 +278,7 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
     const Eigen::Matrix<double, 6, 6> covariance =
         variance * AM.middleRows<6>(6 * c) * A.middleRows<6>(6 * c).transpose();
     u.rotation_deg =
-        std::sqrt(std::max(0.0, covariance.topLeftCorner<3, 3>().trace())) * 180.0 / M_PI;
+        DegreesFromRadians(std::sqrt(std::max(0.0, covariance.topLeftCorner<3, 3>().trace())));
     u.centre = std::sqrt(std::max(0.0, covariance.bottomRightCorner<3, 3>().trace()));
     rotations.push_back(u.rotation_deg);
     centres.push_back(u.centre);

@@ -55,14 +55,6 @@ inline void AddScaledOuter(double* __restrict block, const double* __restrict a,
   }
 }
 
-// Ceres' ArctanLoss(a) scaled by w: ρ(s) and ρ'(s).
-struct ArctanLoss {
-  double scale;
-  double weight;
-  double Value(double s) const { return weight * scale * std::atan2(s, scale); }
-  double Derivative(double s) const { return weight * scale * scale / (s * s + scale * scale); }
-};
-
 // The pose prior of one image (refine/pose_prior_cost.h) in the local parameters (φ, δO):
 // r = (sR·Log(R_priorᵀ R), sp·(O - O_prior)) with Jacobian blocks A = sR·Jr⁻¹(θ)·Rᵀ for φ and
 // sp·I for δO (R ← Exp(φ)·R gives Log(R_priorᵀ Exp(φ) R) ≈ θ + Jr⁻¹(θ)·Rᵀφ).
@@ -363,7 +355,7 @@ double SquaredResidual(const RayTimeLmProblem& problem, const State& state,
 
 double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px2, int num_threads,
             const ReducedCameraSystem& system) {
-  const ArctanLoss loss{scale_px2, problem.match_loss_weight};
+  const ScaledArctanLoss loss{scale_px2, problem.match_loss_weight};
   std::vector<double> chunk_sums(kNumChunks, 0.0);
   ForEachChunk(num_threads, [&](int chunk) {
     double sum = 0.0;
@@ -392,7 +384,7 @@ struct LinearizedResidual {
   double weight = 0.0;
 };
 
-void Linearize(const RayTimeLmProblem& problem, const State& state, const ArctanLoss& loss,
+void Linearize(const RayTimeLmProblem& problem, const State& state, const ScaledArctanLoss& loss,
                const RayTimeLmResidual& r, LinearizedResidual* out) {
   CrossProjectionKernel(state.rotation[r.source_image].data(), state.centre[r.source_image].data(),
                         state.ray_times[r.ray_time], state.rotation[r.target_image].data(),
@@ -435,10 +427,11 @@ class Solver {
 
  private:
   // Builds the damped reduced camera system at the current point (radius μ: damping D/μ).
-  void BuildReducedSystem(const ArctanLoss& loss, double radius);
+  void BuildReducedSystem(const ScaledArctanLoss& loss, double radius);
   // From the cameras' step, the ray times' step (back-substitution) and the model's predicted
   // cost decrease -(gᵀδ + ½ δᵀJᵀJδ), at the point BuildReducedSystem linearized.
-  double BackSubstitute(const ArctanLoss& loss, double radius, const Eigen::VectorXd& camera_step,
+  double BackSubstitute(const ScaledArctanLoss& loss, double radius,
+                        const Eigen::VectorXd& camera_step,
                         std::vector<double>* ray_time_step) const;
 
   const RayTimeLmProblem& problem_;
@@ -458,7 +451,7 @@ class Solver {
   bool pattern_analyzed_ = false;
 };
 
-void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
+void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
   const int num_variables = system_.num_variables();
   std::vector<ReducedCameraSystem::Partial>& partials = system_.partials();
   ForEachChunk(num_threads_, [&](int chunk) {
@@ -570,7 +563,7 @@ void Solver::BuildReducedSystem(const ArctanLoss& loss, double radius) {
   }
 }
 
-double Solver::BackSubstitute(const ArctanLoss& loss, double radius,
+double Solver::BackSubstitute(const ScaledArctanLoss& loss, double radius,
                               const Eigen::VectorXd& camera_step,
                               std::vector<double>* ray_time_step) const {
   ray_time_step->resize(state_.ray_times.size());
@@ -632,7 +625,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
                                    GncProgress* progress) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
-  const ArctanLoss loss{scale_px2, problem_.match_loss_weight};
+  const ScaledArctanLoss loss{scale_px2, problem_.match_loss_weight};
   GncStageSummary summary;
   summary.loss_scale_px2 = scale_px2;
   auto timed_cost = [&](const State& state) {

@@ -22,6 +22,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <vector>
 
 #include "core/geometry.h"
@@ -30,6 +31,15 @@
 #include "refine/refine_types.h"
 
 namespace raytime {
+
+// The match term's loss: Ceres' ArctanLoss(a) scaled by w (RayTimeProblem's), ρ(s) and ρ'(s) of
+// s = |r|². The solver and the uncertainty at its solution (pose_uncertainty.h) weigh with it.
+struct ScaledArctanLoss {
+  double scale;   // a, px²
+  double weight;  // w = 2/S
+  double Value(double s) const { return weight * scale * std::atan2(s, scale); }
+  double Derivative(double s) const { return weight * scale * scale / (s * s + scale * scale); }
+};
 
 // One cross-projection residual r = π_target(O_s + t·R_s·d) - û (paper eqs. rij, rji).
 struct RayTimeLmResidual {

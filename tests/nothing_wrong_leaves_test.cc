@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/atomic_file.h"
 #include "formats/colmap_model.h"
 #include "formats/strecha.h"
 #include "tests/raytime_command.h"
@@ -204,12 +205,9 @@ TEST_F(NothingWrongLeavesTest, AFailedRunMovesAnEarlierRunsExportsAside) {
   EXPECT_TRUE(fs::exists(workdir / "stale" / "refined_transforms.json"));
   EXPECT_EQ(summary["stale_outputs_moved"], json::array({"refined", "refined_transforms.json"}));
   // The run's page is written on failure too, and says so with the error.
-  {
-    std::ifstream in(workdir / "report.html");
-    const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    EXPECT_NE(page.find("Status: <b>failed</b>"), std::string::npos);
-    EXPECT_NE(page.find("convention"), std::string::npos);
-  }
+  const std::string page = ReadTextFile((workdir / "report.html").string());
+  EXPECT_NE(page.find("Status: <b>failed</b>"), std::string::npos);
+  EXPECT_NE(page.find("convention"), std::string::npos);
   // Back to the working options: the export is written again (not skipped as unchanged).
   ASSERT_EQ(RunRaytime(Demo(workdir.string())).exit_code, 0);
   EXPECT_TRUE(fs::exists(workdir / "refined_transforms.json"));

@@ -11,10 +11,10 @@
 
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "core/atomic_file.h"
 #include "tests/raytime_command.h"
 
 namespace fs = std::filesystem;
@@ -29,11 +29,6 @@ using raytime::RunRaytimeStdout;
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
   return json::parse(in);
-}
-
-std::string ReadText(const fs::path& path) {
-  std::ifstream in(path);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 std::vector<std::string> StageStatuses(const json& summary) {
@@ -94,7 +89,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   }
   // The run's page (pipelines/run_report.h): the verdict, every image in the camera table with a
   // link from the top view, no fetch from the network (it opens offline).
-  const std::string page = ReadText(fs::path(run_dir) / "report.html");
+  const std::string page = raytime::ReadTextFile((fs::path(run_dir) / "report.html").string());
   EXPECT_NE(page.find("Status: <b>ok</b>"), std::string::npos);
   EXPECT_NE(page.find("decision <b>accepted</b>"), std::string::npos);
   for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
