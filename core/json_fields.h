@@ -14,12 +14,17 @@
 
 namespace raytime {
 
+// A number that may be "not reported": null when not finite.
+inline nlohmann::json NullIfNonFinite(double value) {
+  return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
 template <class Record>
 nlohmann::json FieldsToJson(const Record& record) {
   nlohmann::json json = nlohmann::json::object();
   Record::VisitFields(record, [&](const char* key, const auto& value) {
     if constexpr (std::is_floating_point_v<std::decay_t<decltype(value)>>) {
-      json[key] = std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
+      json[key] = NullIfNonFinite(value);
     } else {
       json[key] = value;
     }

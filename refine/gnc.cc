@@ -2,6 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include "core/timing.h"
 
 namespace raytime {
@@ -19,6 +22,18 @@ void GncProgress::Report(int iteration, double cost) {
                   stage_, num_stages_, scale_px2_, iteration, cost, SecondsSince(start_)));
 }
 
+std::vector<int> ResidualHistogram(const std::vector<double>& norms_px) {
+  const std::vector<double>& edges = ResidualHistogramEdgesPx();
+  std::vector<int> counts(edges.size() + 1, 0);
+  for (const double norm : norms_px) {
+    // Non-finite norms (a point behind a camera) fall in the last bin with the largest.
+    const auto bin =
+        std::isnan(norm) ? edges.end() : std::upper_bound(edges.begin(), edges.end(), norm);
+    ++counts[bin - edges.begin()];
+  }
+  return counts;
+}
+
 std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& settings) {
   std::vector<GncStageSummary> stages;
   const int num_stages = static_cast<int>(settings.scales.size());
@@ -26,6 +41,10 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
     const double scale = settings.scales[s];
     GncProgress progress(s + 1, num_stages, scale);
     GncStageSummary stage = backend->SolveStage(scale, settings, &progress);
+    if (settings.residual_norms) {
+      backend->Publish();
+      stage.residual_histogram = ResidualHistogram(settings.residual_norms());
+    }
     spdlog::info(
         fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
                     "{:.2f} s ({}, {})",

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <vector>
 
 #include "refine/refine_types.h"
@@ -18,6 +19,9 @@ struct GncSettings {
   // The back-end's threads: the ray-time LM gives the same bits on any count; Ceres is
   // deterministic on 1 (RefineOptions::deterministic).
   int num_threads = 1;
+  // The residual norms (pixels) at the back-end's current parameters, read after each stage for
+  // its residual_histogram; empty: no histogram.
+  std::function<std::vector<double>()> residual_norms;
 };
 
 // A long solve (hundreds of cameras, millions of residuals: minutes per stage) says it is alive:
@@ -45,6 +49,9 @@ class GncBackend {
                                      GncProgress* progress) = 0;
   // For the stage's log line ("ray-time LM", "Ceres").
   virtual const char* Name() const = 0;
+  // Writes the current parameters into the problem the back-end solves, where the caller (and
+  // GncSettings::residual_norms) reads them; a back-end that solves in place has nothing to do.
+  virtual void Publish() {}
 };
 
 // Solves every stage of settings.scales in order with one log line per stage; stops after a stage

@@ -757,16 +757,19 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
 class RayTimeLmStageBackend : public GncBackend {
  public:
   RayTimeLmStageBackend(RayTimeLmProblem* problem, int num_threads)
-      : solver_(problem, num_threads) {}
+      : problem_(problem), solver_(problem, num_threads) {}
   GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
                              GncProgress* progress) override {
     return solver_.SolveStage(scale_px2, settings.max_iterations, settings.function_tolerance,
                               progress);
   }
   const char* Name() const override { return "ray-time LM"; }
-  void Store(RayTimeLmProblem* problem) const { solver_.Store(problem); }
+  // The solver reads only the problem's sizes after it starts: storing into it mid-schedule is
+  // safe.
+  void Publish() override { solver_.Store(problem_); }
 
  private:
+  RayTimeLmProblem* problem_;
   Solver solver_;
 };
 
@@ -819,7 +822,7 @@ std::vector<GncStageSummary> SolveGncRayTimeLm(RayTimeLmProblem* problem,
                                                const GncSettings& settings) {
   RayTimeLmStageBackend backend(problem, settings.num_threads);
   std::vector<GncStageSummary> stages = SolveGnc(&backend, settings);
-  backend.Store(problem);
+  backend.Publish();
   return stages;
 }
 

@@ -135,7 +135,7 @@ void AddUpPasses(RefineSummary* summary) {
 // The posterior guardrails (§3.6, §4.3 and beyond the paper) and the decision they make.
 void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
                      const std::vector<Rigid3>& prior, const PassState& state,
-                     const std::optional<RefineInput>& pruned, RefineSummary* summary) {
+                     const std::vector<PairResidual>& pair_residuals, RefineSummary* summary) {
   // Against the original prior: these return it.
   if (summary->guardrails.solver_failed) summary->guardrails.fired.push_back("solver_failure");
   if (options.trust_region) {
@@ -154,8 +154,8 @@ void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
   // Against the solve's own matches (prior-independent), flag only.
   if (options.inconsistent_pairs_test) {
     summary->guardrails.inconsistent_pairs = CheckInconsistentPairs(
-        SolvedPairResiduals(pruned ? *pruned : input, state), options.inconsistent_pair_px,
-        options.inconsistent_pair_median_multiple, options.max_inconsistent_pair_fraction);
+        pair_residuals, options.inconsistent_pair_px, options.inconsistent_pair_median_multiple,
+        options.max_inconsistent_pair_fraction);
     if (summary->guardrails.inconsistent_pairs.fired) {
       summary->guardrails.fired.push_back("inconsistent_pairs");
     }
@@ -297,7 +297,9 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
         summary.uncertainty.sigma_px, summary.uncertainty.median_rotation_deg,
         summary.uncertainty.median_centre, summary.uncertainty.seconds));
   }
-  ApplyGuardrails(input, options, prior, state, pruned, &summary);
+  output->diagnostics.pairs = SolvedPairResiduals(pruned ? *pruned : input, state);
+  output->diagnostics.image_residual_median_px = state.image_residual_median_px;
+  ApplyGuardrails(input, options, prior, state, output->diagnostics.pairs, &summary);
 
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);

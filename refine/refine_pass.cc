@@ -6,6 +6,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <unordered_map>
 
@@ -196,6 +197,10 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   gnc.max_iterations = options.max_iterations;
   gnc.function_tolerance = options.function_tolerance;
   if (lm_problem) {
+    gnc.residual_norms = [&] {
+      return ResidualNorms(input, layout, lm_problem->world_from_cam, state->cameras,
+                           lm_problem->ray_times);
+    };
     gnc.num_threads = options.Threads();
     pass.stages = SolveGncRayTimeLm(&*lm_problem, gnc);
     // The eliminated group is every ray time (§3.4), by construction.
@@ -204,6 +209,12 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     solved_ray_times = std::move(lm_problem->ray_times);
     lm_problem.reset();
   } else {
+    gnc.residual_norms = [&] {
+      CameraBlocks cameras = state->cameras;
+      cameras.cameras = ceres_problem->Intrinsics();
+      return ResidualNorms(input, layout, ceres_problem->WorldFromCam(), cameras,
+                           ceres_problem->ray_times());
+    };
     gnc.num_threads = options.deterministic ? 1 : options.Threads();
     pass.stages = SolveGncWithCeres(&*ceres_problem, gnc, &pass.elimination_group_size);
     state->world_from_cam = ceres_problem->WorldFromCam();
@@ -222,6 +233,15 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   // The polish moves cameras and ray times by one similarity: the residuals are the solve's.
   std::vector<double> norms =
       ResidualNorms(input, layout, state->world_from_cam, state->cameras, solved_ray_times);
+  std::vector<std::vector<double>> by_image(input.prior_world_from_cam.size());
+  for (size_t r = 0; r < norms.size(); ++r) {
+    by_image[layout.observations[layout.residuals[r].target].image].push_back(norms[r]);
+  }
+  state->image_residual_median_px.clear();
+  for (const auto& image_norms : by_image) {
+    state->image_residual_median_px.push_back(
+        Median(image_norms, std::numeric_limits<double>::quiet_NaN()));
+  }
   double loss_sum = 0.0;
   for (const double norm : norms) {
     loss_sum += options.loss_scale_px2 * std::atan(norm * norm / options.loss_scale_px2);

@@ -65,6 +65,28 @@ struct SolvedObservations {
   Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
 };
 
+// One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
+// of the symmetric epipolar distance restricted to positive ray times (the cross-projection
+// residual minimized over the ray time) at the solved poses and intrinsics.
+struct PairResidual {
+  int image1 = 0;  // indices into RefineInput's images
+  int image2 = 0;
+  int num_matches = 0;     // used matches (after the cap)
+  double median_px = 0.0;  // pixels, root mean square of the two directions per match
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairResidual, image1, image2, num_matches, median_px)
+
+// How the returned solve fits the matches, per image and per image pair (the run page's camera
+// table and pair-consistency matrix): too large for the summary, written beside the poses.
+struct SolveDiagnostics {
+  // Every pair with used matches in the last pass, at the solve (input order; the pairs the
+  // pair removal took are in RefineSummary::pair_removal, not here).
+  std::vector<PairResidual> pairs;
+  // Per image: the median norm of the cross-projection residuals landing in it (paper eqs. rij,
+  // rji: π_image(X) − û), pixels, NaN for an image no residual reaches.
+  std::vector<double> image_residual_median_px;
+};
+
 struct RefineOutput {
   std::vector<Rigid3> world_from_cam;  // the solution, or the prior when a guardrail fired
   // Per camera of the input: refined when self-calibrating (with intrinsics_sharing 'shared',
@@ -76,9 +98,22 @@ struct RefineOutput {
   std::vector<CameraIntrinsics> solved_cameras;
   // At solved_world_from_cam and solved_cameras (so not the returned poses when a guardrail fired).
   SolvedObservations solved_observations;
+  SolveDiagnostics diagnostics;  // at the solve, as solved_observations
 };
 
-// One Ceres solve of the GNC schedule (§3.5).
+// The bins of a GNC stage's residual histogram (GncStageSummary::residual_histogram): norms of the
+// cross-projection residuals in pixels, in 1-2-5 steps; bin 0 holds the norms below the first
+// edge, bin k those in [edge k-1, edge k), the last those from the last edge up.
+inline const std::vector<double>& ResidualHistogramEdgesPx() {
+  static const std::vector<double> edges = {0.05, 0.1, 0.2, 0.5, 1,   2,   5,
+                                            10,   20,  50,  100, 200, 500, 1000};
+  return edges;
+}
+
+// Counts of `norms_px` in the bins of ResidualHistogramEdgesPx() (edges + 1 bins).
+std::vector<int> ResidualHistogram(const std::vector<double>& norms_px);
+
+// One solve of the GNC schedule (§3.5).
 struct GncStageSummary {
   double loss_scale_px2 = 0.0;
   int iterations = 0;  // successful + unsuccessful steps
@@ -92,11 +127,14 @@ struct GncStageSummary {
   int jacobian_evaluations = 0;
   std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
   std::string message;
+  // The residual norms at the stage's solution binned by ResidualHistogramEdgesPx() (how the
+  // annealing pulls residuals in: the run page draws one histogram per stage).
+  std::vector<int> residual_histogram;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GncStageSummary, loss_scale_px2, iterations, successful_steps,
                                    initial_cost, final_cost, seconds, jacobian_seconds,
                                    residual_seconds, linear_solver_seconds, jacobian_evaluations,
-                                   termination, message)
+                                   termination, message, residual_histogram)
 
 struct RayTimeInitSummary {
   std::string mode;              // "auto" or "constant"
@@ -177,17 +215,6 @@ struct WanderVerdict {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(WanderVerdict, enabled, fired, median_displacement, expected,
                                    threshold)
-
-// One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
-// of the symmetric epipolar distance restricted to positive ray times (the cross-projection
-// residual minimized over the ray time) at the solved poses and intrinsics.
-struct PairResidual {
-  int image1 = 0;  // indices into RefineInput's images
-  int image2 = 0;
-  int num_matches = 0;     // used matches (after the cap)
-  double median_px = 0.0;  // pixels, root mean square of the two directions per match
-};
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairResidual, image1, image2, num_matches, median_px)
 
 // Inconsistent-pairs test (beyond the paper; cf. its §4.11 "Failure analysis"): the fraction of
 // image pairs whose matches the solution does not explain. Flag only: the solution is returned.
@@ -328,11 +355,13 @@ struct RefineSummary {
   RefineGuardrails guardrails;
   // How well the last pass's solution determines each camera (refine/pose_uncertainty.h).
   PoseUncertaintySummary uncertainty;
+  // The bins of every GNC stage's residual_histogram (ResidualHistogramEdgesPx()).
+  std::vector<double> residual_histogram_edges_px = ResidualHistogramEdgesPx();
 
   nlohmann::json ToJson() const;  // the fields by name
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineSummary, passes, cameras, total_iterations, initial_cost,
                                    final_cost, timings, orientation_prior, pair_removal, decision,
-                                   guardrails, uncertainty)
+                                   guardrails, uncertainty, residual_histogram_edges_px)
 
 }  // namespace raytime

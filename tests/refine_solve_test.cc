@@ -634,6 +634,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].stages[].jacobian_evaluations",
       "passes[].stages[].termination",
       "passes[].stages[].message",
+      "passes[].stages[].residual_histogram",
       "total_iterations",
       "initial_cost",
       "final_cost",
@@ -708,6 +709,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "uncertainty.cameras[].rotation_deg",
       "uncertainty.cameras[].centre",
       "uncertainty.seconds",
+      "residual_histogram_edges_px",
   };
   EXPECT_EQ(keys, expected);
   // Values come from the fields of the same name.
@@ -717,6 +719,61 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
             summary.guardrails.inconsistent_pairs.num_inconsistent);
   EXPECT_EQ(json["passes"][0]["stages"].size(), summary.passes[0].stages.size());
   EXPECT_EQ(json["passes"][0]["stages"][0]["iterations"], summary.passes[0].stages[0].iterations);
+}
+
+// The run page's residual histograms (issue 32): each norm in the bin its edges say, a
+// non-finite one with the largest, and a real solve's stages each counting every residual once.
+TEST(RefineSolveTest, ResidualHistogramsBinEveryResidualOfEveryStage) {
+  const std::vector<double> edges = ResidualHistogramEdgesPx();
+  ASSERT_EQ(edges.front(), 0.05);
+  ASSERT_EQ(edges.back(), 1000.0);
+  const std::vector<int> counts = ResidualHistogram(
+      {0.01, 0.05, 0.07, 1.0, 999.0, 1000.0, 5000.0, std::numeric_limits<double>::quiet_NaN()});
+  std::vector<int> expected(edges.size() + 1, 0);
+  expected[0] = 1;                 // below 0.05
+  expected[1] = 2;                 // [0.05, 0.1)
+  expected[5] = 1;                 // [1, 2)
+  expected[edges.size() - 1] = 1;  // [500, 1000)
+  expected[edges.size()] = 3;      // 1000 and up, NaN
+  EXPECT_EQ(counts, expected);
+
+  SyntheticSceneOptions scene_options = SmallNoisyScene();
+  scene_options.num_cameras = 4;
+  scene_options.num_points = 60;
+  const SyntheticScene scene = MakeSyntheticScene(scene_options);
+  for (const char* solver : {"ray_time_lm", "ceres"}) {
+    RefineOptions options;
+    options.solver = solver;
+    options.num_threads = 1;
+    RefineOutput output;
+    const RefineSummary summary = RefinePoses(scene.input, options, &output);
+    for (const RefinePassSummary& pass : summary.passes) {
+      ASSERT_FALSE(pass.stages.empty());
+      for (const GncStageSummary& stage : pass.stages) {
+        ASSERT_EQ(stage.residual_histogram.size(), edges.size() + 1) << solver;
+        int total = 0;
+        for (const int count : stage.residual_histogram) total += count;
+        EXPECT_EQ(total, pass.num_residuals) << solver << " " << pass.name;
+      }
+      // The annealing pulls residuals in: no more of them above 1 px after the last stage than
+      // after the first (the scene's noise is well below a pixel).
+      const auto above_one_px = [&](const GncStageSummary& stage) {
+        int n = 0;
+        for (size_t b = 5; b < stage.residual_histogram.size(); ++b)
+          n += stage.residual_histogram[b];
+        return n;
+      };
+      EXPECT_LE(above_one_px(pass.stages.back()), above_one_px(pass.stages.front()))
+          << solver << " " << pass.name;
+    }
+    // Per image, the median residual landing in it: finite for every image of this scene.
+    ASSERT_EQ(output.diagnostics.image_residual_median_px.size(), size_t{4});
+    for (const double median : output.diagnostics.image_residual_median_px) {
+      EXPECT_TRUE(std::isfinite(median));
+      EXPECT_LT(median, 5.0);
+    }
+    EXPECT_EQ(output.diagnostics.pairs.size(), 6u) << solver;  // 4 cameras, every pair matched
+  }
 }
 
 }  // namespace
