@@ -141,8 +141,8 @@ class BootstrapStage : public StageWithOptions<BootstrapStageOptions> {
     }
     writer.Commit();
 
-    nlohmann::json summary = SummarizeBootstrap(static_cast<int>(images.images.size()),
-                                                options_.bootstrap, result);
+    nlohmann::json summary =
+        SummarizeBootstrap(static_cast<int>(images.images.size()), options_.bootstrap, result);
     summary["warnings"] = WarningsToJson(BootstrapWarnings(images, result));
     if (options_.filter_matches) summary["num_matches_pairs_written"] = written_pairs;
     return summary;

@@ -23,6 +23,7 @@
 #include "core/error.h"
 #include "core/graph.h"
 #include "core/hdf5_store.h"
+#include "core/json_fields.h"
 #include "core/warnings.h"
 #include "pipelines/stages.h"
 #include "refine/camera_blocks.h"
@@ -224,6 +225,30 @@ nlohmann::json RefinedIntrinsicsJson(const ImageSet& images, const PoseSet& refi
                    {"p2", p[kP2]}});
   }
   return out;
+}
+
+// Adds one solve's fit per image and per pair to `out` (kSolveDiagnosticsJson), by image name.
+void AddDiagnostics(const SolveDiagnostics& diagnostics, const PairRemovalSummary& removal,
+                    const std::vector<std::string>& names, nlohmann::json* out) {
+  for (const PairResidual& pair : removal.removed) {
+    (*out)["removed"].push_back({names.at(pair.image1), names.at(pair.image2), pair.num_matches,
+                                 NullIfNonFinite(pair.median_px)});
+  }
+  std::vector<int> num_pairs(names.size(), 0), num_matches(names.size(), 0);
+  for (const PairResidual& pair : diagnostics.pairs) {
+    for (const int image : {pair.image1, pair.image2}) {
+      ++num_pairs[image];
+      num_matches[image] += pair.num_matches;
+    }
+    (*out)["pairs"].push_back({names.at(pair.image1), names.at(pair.image2), pair.num_matches,
+                               NullIfNonFinite(pair.median_px)});
+  }
+  for (size_t i = 0; i < names.size() && i < diagnostics.image_residual_median_px.size(); ++i) {
+    (*out)["images"][names[i]] = {
+        {"residual_median_px", NullIfNonFinite(diagnostics.image_residual_median_px[i])},
+        {"num_pairs", num_pairs[i]},
+        {"num_matches", num_matches[i]}};
+  }
 }
 
 // Appends one solve's observations, ray times and used matches to `rays` (its images by name).
@@ -542,6 +567,10 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     FrameDoubtVerdict frame_doubts;  // of the largest component
     // Per image name, σ of its rotation and centre at the solution (refine/pose_uncertainty.h).
     nlohmann::json uncertainty = nlohmann::json::object();
+    // Every solve's fit per image and per pair, by image name (kSolveDiagnosticsJson).
+    nlohmann::json diagnostics = {{"images", nlohmann::json::object()},
+                                  {"pairs", nlohmann::json::array()},
+                                  {"removed", nlohmann::json::array()}};
     std::vector<CameraIntrinsics> cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
@@ -643,6 +672,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
             {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
             {"tolerance_px", kSharedCameraTolerancePx}}});
     }
+    AddDiagnostics(output.diagnostics, summary.pair_removal, names, &solves->diagnostics);
     solves->fired.insert(summary.guardrails.fired.begin(), summary.guardrails.fired.end());
     solves->returned_prior = solves->returned_prior || summary.guardrails.returned_prior;
     if (summary.guardrails.returned_prior) {
@@ -707,6 +737,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteJson(kDoubtedImagesJson, solves->doubted);
     writer.WriteJson(kLooseImagesJson, solves->loose);
     writer.WriteJson(kPoseUncertaintyJson, solves->uncertainty);
+    writer.WriteJson(kSolveDiagnosticsJson, solves->diagnostics);
     writer.Commit();
   }
 };

@@ -1,5 +1,7 @@
 #include "pipelines/run_report.h"
 
+#include <spdlog/spdlog.h>
+
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
@@ -7,14 +9,19 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <set>
+#include <stdexcept>
 #include <vector>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/geometry.h"
 #include "core/hdf5_store.h"
+#include "core/timing.h"
 #include "core/types.h"
+#include "pipelines/html.h"
 #include "pipelines/pair_selection.h"
+#include "pipelines/stage.h"
+#include "run_report_orbit_js.h"  // generated from pipelines/run_report_orbit.js
 
 namespace fs = std::filesystem;
 
@@ -23,152 +30,12 @@ namespace {
 
 using nlohmann::json;
 
-std::string Escape(const std::string& text) {
-  std::string out;
-  for (const char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += c;
-    }
-  }
-  return out;
-}
-
-std::string Number(const json& value, int digits = 3) {
-  if (!value.is_number()) return "–";
-  char buffer[64];
-  std::snprintf(buffer, sizeof(buffer), "%.*g", digits, value.get<double>());
-  return buffer;
-}
-
-std::string Number(double value, int digits = 3) {
-  return std::isfinite(value) ? Number(json(value), digits) : "–";
-}
-
-std::string Text(const json& object, const char* key) {
-  const auto it = object.find(key);
-  return it != object.end() && it->is_string() ? it->get<std::string>() : std::string();
-}
-
-// The refine stage the page is about: the last one that ran, with its prior and refined pose sets.
-struct RefinedRun {
-  std::string stage_id;
-  json summary;  // the stage's summary
-  std::string prior_set, refined_set;
-  PoseSet prior, refined;
-};
-
-// The pose set `name` from the HDF5 file of the stage that wrote it (summary.json's pose_sets).
-PoseSet ReadPoseSetOfRun(const std::string& workdir, const json& run, const std::string& name) {
-  const auto& sets = run.value("pose_sets", json::object());
-  const auto it = sets.find(name);
-  if (it == sets.end()) return PoseSet();
-  const fs::path file = fs::path(workdir) / (it->get<std::string>() + ".h5");
-  if (!fs::exists(file)) return PoseSet();
-  return Hdf5Reader(file.string()).ReadPoseSet(name);
-}
-
-RefinedRun FindRefinedRun(const std::string& workdir, const json& run) {
-  RefinedRun out;
-  for (const json& stage : run.value("stages", json::array())) {
-    if (Text(stage, "type") != "refine" || !stage.contains("summary")) continue;
-    out.stage_id = Text(stage, "id");
-    out.summary = stage["summary"];
-    out.refined_set = Text(out.summary, "pose_set");
-    out.prior_set = stage.value("options", json::object()).value("prior", std::string("prior"));
-  }
-  if (out.stage_id.empty()) return out;
-  out.prior = ReadPoseSetOfRun(workdir, run, out.prior_set);
-  out.refined = ReadPoseSetOfRun(workdir, run, out.refined_set);
-  return out;
-}
-
-// Per image, the warning codes that name it.
-std::map<std::string, std::set<std::string>> FlagsByImage(const json& run) {
-  std::map<std::string, std::set<std::string>> flags;
-  for (const json& warning : run.value("warnings", json::array())) {
-    for (const json& image : warning.value("images", json::array())) {
-      if (image.is_string()) flags[image.get<std::string>()].insert(Text(warning, "code"));
-    }
-  }
-  return flags;
-}
-
-std::string VerdictSection(const json& run, const RefinedRun& refined) {
-  const std::string status = Text(run, "status");
-  std::string html = "<section id=\"verdict\"><h2>Verdict</h2><p class=\"status " + Escape(status) +
-                     "\">Status: <b>" + Escape(status) + "</b>";
-  if (run.contains("seconds")) html += " in " + Number(run["seconds"]) + " s";
-  html += "</p>";
-  if (!Text(run, "error").empty())
-    html += "<p class=\"error\">" + Escape(Text(run, "error")) + "</p>";
-  if (!refined.stage_id.empty()) {
-    const json& s = refined.summary;
-    html +=
-        "<p>" + Escape(refined.stage_id) + ": decision <b>" + Escape(Text(s, "decision")) + "</b>";
-    const json fired = s.value("guardrails", json::object()).value("fired", json::array());
-    html += fired.empty() ? ", no guardrail fired" : ", guardrails fired: " + Escape(fired.dump());
-    const json u = s.value("uncertainty", json::object());
-    if (u.value("computed", false)) {
-      html += "; keypoint noise " + Number(u["sigma_px"]) + " px, median σ " +
-              Number(u["median_rotation_deg"]) + "° rotation, " + Number(u["median_centre"]) +
-              " centre";
-    }
-    html += "</p>";
-  }
-  const json warnings = run.value("warnings", json::array());
-  html += "<h3>Warnings (" + std::to_string(warnings.size()) + ")</h3>";
-  if (warnings.empty()) html += "<p>None.</p>";
-  html += "<ul>";
-  for (const json& warning : warnings) {
-    html += "<li><code>" + Escape(Text(warning, "code")) + "</code> " +
-            Escape(Text(warning, "message"));
-    const json images = warning.value("images", json::array());
-    if (!images.empty()) {
-      html += "<br>Images:";
-      for (const json& image : images) {
-        if (image.is_string()) {
-          html += " <a href=\"#cam-" + Escape(image.get<std::string>()) + "\">" +
-                  Escape(image.get<std::string>()) + "</a>";
-        }
-      }
-    }
-    html += "</li>";
-  }
-  html += "</ul></section>";
-  return html;
-}
-
-std::string StagesSection(const json& run) {
-  std::string html =
-      "<section id=\"stages\"><h2>Stages</h2><table><tr><th>stage</th><th>type</th>"
-      "<th>status</th><th>seconds</th></tr>";
-  for (const json& stage : run.value("stages", json::array())) {
-    html += "<tr><td>" + Escape(Text(stage, "id")) + "</td><td>" + Escape(Text(stage, "type")) +
-            "</td><td>" + Escape(Text(stage, "status")) + "</td><td>" +
-            Number(stage.value("seconds", json()), 3) + "</td></tr>";
-  }
-  return html + "</table></section>";
-}
-
-// A colour from green (no correction) to red (the largest), by the share of the largest.
-std::string CorrectionColour(double share) {
-  const int red = static_cast<int>(std::lround(40 + 200 * std::clamp(share, 0.0, 1.0)));
-  const int green = static_cast<int>(std::lround(170 - 130 * std::clamp(share, 0.0, 1.0)));
-  return "rgb(" + std::to_string(red) + "," + std::to_string(green) + ",60)";
-}
+// Thumbnails: 160 px wide, JPEG quality 65: about 5 kB each (the 457-frame desk: 3 MB of page).
+constexpr int kThumbnailWidth = 160;
+// A warning naming many images shows this many of them as thumbnails (all of them as links).
+constexpr size_t kThumbnailsPerWarning = 12;
+// A camera's panel lists its worst pairs, this many (all of them are in the matrix).
+constexpr size_t kPairsPerPanel = 12;
 
 // The frame the views share: the refined centres' mean and principal directions (columns,
 // ascending spread), and each camera's centre correction with the largest of them.
@@ -177,34 +44,248 @@ struct CentreFrame {
   Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
   std::map<std::string, double> correction;  // refined cameras with a prior pose
   double largest = 0.0;
+
+  double Share(const std::string& name) const {
+    const auto it = correction.find(name);
+    return it == correction.end() || largest <= 0 ? 0.0 : it->second / largest;
+  }
 };
 
-CentreFrame CentreFrameOf(const RefinedRun& refined) {
+// What the page is made of: the run's summary, the refine stage the page is about (the last one
+// that ran) with its prior, refined and (aligned onto the refined) reference pose sets, its fit per
+// image and pair, and the images.
+struct RunPage {
+  std::string workdir;
+  json run;
+  std::string stage_id;
+  json summary = json::object();  // the refine stage's
+  std::string prior_set, refined_set, truth_set;
+  PoseSet prior, refined;
+  PoseSet truth;  // Sim(3)-aligned onto the refined centres; empty when there is none
+  json diagnostics = json::object();  // kSolveDiagnosticsJson
+  ImageSet images;
+  std::vector<std::string> names;  // prior ∪ refined, in capture order
+  std::map<std::string, std::set<std::string>> flags;
+  std::map<std::string, std::string> thumbnails;  // data URIs
   CentreFrame frame;
-  const auto& solved = refined.refined.world_from_cam;
+};
+
+fs::path StageFileOf(const RunPage& page, const std::string& pose_set) {
+  const auto& sets = JsonObject(page.run, "pose_sets");
+  const auto it = sets.find(pose_set);
+  if (it == sets.end() || !it->is_string()) return fs::path();
+  const fs::path file = fs::path(page.workdir) / (it->get<std::string>() + ".h5");
+  return fs::exists(file) ? file : fs::path();
+}
+
+PoseSet ReadPoseSetOfRun(const RunPage& page, const std::string& name) {
+  const fs::path file = StageFileOf(page, name);
+  return file.empty() ? PoseSet() : Hdf5Reader(file.string()).ReadPoseSet(name);
+}
+
+// The reference pose set moved onto the refined centres (Sim(3) on the common names): drawn
+// beside them, not measured (the metrics section has the errors).
+PoseSet AlignedTruth(const PoseSet& truth, const PoseSet& refined) {
+  std::vector<Eigen::Vector3d> source, target;
+  for (const auto& [name, pose] : truth.world_from_cam) {
+    const auto it = refined.world_from_cam.find(name);
+    if (it == refined.world_from_cam.end()) continue;
+    source.push_back(pose.translation);
+    target.push_back(it->second.translation);
+  }
+  PoseSet aligned;
+  if (source.size() < 3) return aligned;
+  try {
+    const Sim3 refined_from_truth = FitAlignment(source, target, AlignmentKind::kSim3);
+    for (const auto& [name, pose] : truth.world_from_cam) {
+      aligned.world_from_cam[name] = refined_from_truth.TransformPose(pose);
+    }
+  } catch (const std::invalid_argument&) {
+    // Collinear centres: no alignment, nothing drawn.
+  }
+  return aligned;
+}
+
+CentreFrame CentreFrameOf(const PoseSet& prior, const PoseSet& refined) {
+  CentreFrame frame;
+  const auto& solved = refined.world_from_cam;
   for (const auto& [name, pose] : solved) frame.mean += pose.translation;
   frame.mean /= static_cast<double>(std::max<size_t>(solved.size(), 1));
   Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
   for (const auto& [name, pose] : solved) {
     const Eigen::Vector3d d = pose.translation - frame.mean;
     scatter += d * d.transpose();
-    const auto prior = refined.prior.world_from_cam.find(name);
-    if (prior == refined.prior.world_from_cam.end()) continue;
-    const double correction = (prior->second.translation - pose.translation).norm();
+    const auto it = prior.world_from_cam.find(name);
+    if (it == prior.world_from_cam.end()) continue;
+    const double correction = (it->second.translation - pose.translation).norm();
     frame.correction[name] = correction;
     frame.largest = std::max(frame.largest, correction);
   }
   frame.axes = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(scatter).eigenvectors();
+  // A right-handed frame, so the orbit view is not a mirror image.
+  if (frame.axes.determinant() < 0) frame.axes.col(0) *= -1.0;
   return frame;
+}
+
+std::map<std::string, std::set<std::string>> FlagsByImage(const json& run) {
+  std::map<std::string, std::set<std::string>> flags;
+  for (const json& warning : JsonArray(run, "warnings")) {
+    for (const json& image : JsonArray(warning, "images")) {
+      if (image.is_string()) flags[image.get<std::string>()].insert(JsonText(warning, "code"));
+    }
+  }
+  return flags;
+}
+
+// The dataset's images (their folder and cameras), from the first stage file that holds them.
+ImageSet ImagesOfRun(const RunPage& page) {
+  for (const json& stage : JsonArray(page.run, "stages")) {
+    const fs::path file = fs::path(page.workdir) / (JsonText(stage, "id") + ".h5");
+    if (JsonText(stage, "id").empty() || !fs::exists(file)) continue;
+    const Hdf5Reader reader(file.string());
+    if (reader.HasImages()) return reader.ReadImages();
+  }
+  return ImageSet();
+}
+
+void ReadRefineStage(RunPage* page) {
+  for (const json& stage : JsonArray(page->run, "stages")) {
+    if (JsonText(stage, "type") == "refine" && !JsonObject(stage, "summary").empty()) {
+      page->stage_id = JsonText(stage, "id");
+      page->summary = JsonObject(stage, "summary");
+      page->refined_set = JsonText(page->summary, "pose_set");
+      page->prior_set = JsonText(JsonObject(stage, "options"), "prior", "prior");
+    }
+    if (JsonText(stage, "type") == "evaluate") {
+      page->truth_set = JsonText(JsonObject(stage, "options"), "reference", "ground_truth");
+    }
+  }
+  if (page->stage_id.empty()) return;
+  page->prior = ReadPoseSetOfRun(*page, page->prior_set);
+  page->refined = ReadPoseSetOfRun(*page, page->refined_set);
+  if (!page->truth_set.empty()) {
+    page->truth = AlignedTruth(ReadPoseSetOfRun(*page, page->truth_set), page->refined);
+  }
+  const fs::path file = StageFileOf(*page, page->refined_set);
+  if (!file.empty()) {
+    const Hdf5Reader reader(file.string());
+    if (reader.HasJson(kSolveDiagnosticsJson))
+      page->diagnostics = reader.ReadJson(kSolveDiagnosticsJson);
+  }
+  page->frame = CentreFrameOf(page->prior, page->refined);
+}
+
+RunPage ReadRunPage(const std::string& workdir, const json& run) {
+  RunPage page;
+  page.workdir = workdir;
+  page.run = run;
+  ReadRefineStage(&page);
+  page.images = ImagesOfRun(page);
+  page.flags = FlagsByImage(run);
+  std::set<std::string> unique;
+  for (const auto& [name, pose] : page.prior.world_from_cam) unique.insert(name);
+  for (const auto& [name, pose] : page.refined.world_from_cam) unique.insert(name);
+  // Capture order: a video's "2.jpg" before "10.jpg".
+  page.names.assign(unique.begin(), unique.end());
+  std::sort(page.names.begin(), page.names.end(), NaturalNameLess);
+  if (!page.images.image_root.empty()) {
+    for (const std::string& name : page.names) {
+      page.thumbnails[name] =
+          ThumbnailDataUri((fs::path(page.images.image_root) / name).string(), kThumbnailWidth);
+    }
+  }
+  return page;
+}
+
+std::string CameraLink(const std::string& name) {
+  return "<a href=\"#cam-" + HtmlEscape(name) + "\">" + HtmlEscape(name) + "</a>";
+}
+
+std::string Thumbnail(const RunPage& page, const std::string& name, int display_width) {
+  const auto it = page.thumbnails.find(name);
+  if (it == page.thumbnails.end() || it->second.empty()) return "";
+  return "<a href=\"#cam-" + HtmlEscape(name) + "\"><img class=\"thumb\" src=\"" + it->second +
+         "\" width=\"" + std::to_string(display_width) + "\" alt=\"" + HtmlEscape(name) +
+         "\" title=\"" + HtmlEscape(name) + "\"></a>";
+}
+
+std::string VerdictSection(const RunPage& page) {
+  const json& run = page.run;
+  const std::string status = JsonText(run, "status");
+  std::string html = "<section id=\"verdict\"><h2>Verdict</h2><p class=\"status " +
+                     HtmlEscape(status) + "\">Status: <b>" + HtmlEscape(status) + "</b>";
+  if (run.contains("seconds")) html += " in " + HtmlNumber(run["seconds"]) + " s";
+  html += "</p>";
+  if (!JsonText(run, "error").empty())
+    html += "<p class=\"error\">" + HtmlEscape(JsonText(run, "error")) + "</p>";
+  if (!page.stage_id.empty()) {
+    const json& s = page.summary;
+    html += "<p>" + HtmlEscape(page.stage_id) + ": decision <b>" +
+            HtmlEscape(JsonText(s, "decision")) + "</b>";
+    const json fired = JsonArray(JsonObject(s, "guardrails"), "fired");
+    html +=
+        fired.empty() ? ", no guardrail fired" : ", guardrails fired: " + HtmlEscape(fired.dump());
+    const json u = JsonObject(s, "uncertainty");
+    if (JsonAt(u, "computed") == true) {
+      html += "; keypoint noise " + HtmlNumber(u["sigma_px"]) + " px, median σ " +
+              HtmlNumber(u["median_rotation_deg"]) + "° rotation, " +
+              HtmlNumber(u["median_centre"]) + " centre";
+    }
+    html += "</p>";
+  }
+  const json warnings = JsonArray(run, "warnings");
+  html += "<h3>Warnings (" + std::to_string(warnings.size()) + ")</h3>";
+  if (warnings.empty()) html += "<p>None.</p>";
+  html += "<ul>";
+  for (const json& warning : warnings) {
+    html += "<li><code>" + HtmlEscape(JsonText(warning, "code")) + "</code> " +
+            HtmlEscape(JsonText(warning, "message"));
+    const json images = JsonArray(warning, "images");
+    if (!images.empty()) {
+      html += "<br>Images:";
+      std::string thumbs;
+      size_t shown = 0;
+      for (const json& image : images) {
+        if (!image.is_string()) continue;
+        html += " " + CameraLink(image.get<std::string>());
+        if (shown++ < kThumbnailsPerWarning)
+          thumbs += Thumbnail(page, image.get<std::string>(), 96);
+      }
+      if (!thumbs.empty()) html += "<br>" + thumbs;
+    }
+    html += "</li>";
+  }
+  return html + "</ul></section>";
+}
+
+std::string StagesSection(const json& run) {
+  std::string html =
+      "<section id=\"stages\"><h2>Stages</h2><table><tr><th>stage</th><th>type</th>"
+      "<th>status</th><th>seconds</th></tr>";
+  for (const json& stage : JsonArray(run, "stages")) {
+    html += "<tr><td>" + HtmlEscape(JsonText(stage, "id")) + "</td><td>" +
+            HtmlEscape(JsonText(stage, "type")) + "</td><td>" +
+            HtmlEscape(JsonText(stage, "status")) + "</td><td>" +
+            HtmlNumber(JsonAt(stage, "seconds"), 3) + "</td></tr>";
+  }
+  return html + "</table></section>";
+}
+
+// A colour from green (share 0) to red (share 1).
+std::string ShareColour(double share) {
+  const double s = std::isfinite(share) ? std::clamp(share, 0.0, 1.0) : 1.0;
+  const int red = static_cast<int>(std::lround(40 + 200 * s));
+  const int green = static_cast<int>(std::lround(170 - 130 * s));
+  return "rgb(" + std::to_string(red) + "," + std::to_string(green) + ",60)";
 }
 
 // One view of the centres: across, the main direction; up, the principal direction
 // `vertical_axis` (1: the second, a top view; 0: the least, a side view), at one scale, the height
-// following the spread. Prior grey, refined coloured by its centre correction with the correction
-// drawn; each refined camera links to its table row.
-std::string CamerasSvg(const RefinedRun& refined, const CentreFrame& frame, const std::string& view,
-                       int vertical_axis) {
-  const auto& solved = refined.refined.world_from_cam;
+// following the spread. Prior grey, reference blue, refined coloured by its centre correction with
+// the correction drawn; each refined camera opens its panel.
+std::string CamerasSvg(const RunPage& page, const std::string& view, int vertical_axis) {
+  const CentreFrame& frame = page.frame;
+  const auto& solved = page.refined.world_from_cam;
   const Eigen::Vector3d u = frame.axes.col(2);
   const Eigen::Vector3d v = frame.axes.col(vertical_axis);
   const auto project = [&](const Eigen::Vector3d& x) {
@@ -213,9 +294,9 @@ std::string CamerasSvg(const RefinedRun& refined, const CentreFrame& frame, cons
   std::vector<Eigen::Vector2d> points;
   for (const auto& [name, pose] : solved) {
     points.push_back(project(pose.translation));
-    const auto prior = refined.prior.world_from_cam.find(name);
-    if (prior != refined.prior.world_from_cam.end()) {
-      points.push_back(project(prior->second.translation));
+    for (const PoseSet* other : {&page.prior, &page.truth}) {
+      const auto it = other->world_from_cam.find(name);
+      if (it != other->world_from_cam.end()) points.push_back(project(it->second.translation));
     }
   }
   Eigen::Vector2d lo = points.front(), hi = points.front();
@@ -223,117 +304,424 @@ std::string CamerasSvg(const RefinedRun& refined, const CentreFrame& frame, cons
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   }
-  const double width = 640.0, margin = 20.0;
+  const double width = 560.0, margin = 20.0;
   const double extent = std::max(hi.x() - lo.x(), 1e-12);
   const double scale = (width - 2 * margin) / extent;
   const double height = std::max(160.0, (hi.y() - lo.y()) * scale + 2 * margin);
-  const auto to_svg = [&](const Eigen::Vector2d& p) {
-    return Eigen::Vector2d(margin + (p.x() - lo.x()) * scale,
-                           height - margin - (p.y() - lo.y()) * scale);
+  const auto at = [&](const Eigen::Vector3d& x) {
+    const Eigen::Vector2d p = project(x);
+    const Eigen::Vector2d s(margin + (p.x() - lo.x()) * scale,
+                            height - margin - (p.y() - lo.y()) * scale);
+    return "cx=\"" + HtmlNumber(s.x(), 6) + "\" cy=\"" + HtmlNumber(s.y(), 6) + "\"";
+  };
+  const auto line = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    std::string from = at(a), to = at(b);
+    from.replace(0, 2, "x1").replace(from.find("cy"), 2, "y1");
+    to.replace(0, 2, "x2").replace(to.find("cy"), 2, "y2");
+    return "<line " + from + " " + to;
   };
   std::string svg = "<svg id=\"cameras-" + view +
-                    "\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" + Number(width, 4) +
-                    "\" height=\"" + Number(height, 4) + "\" role=\"img\"><title>Camera centres, " +
-                    view + " view: prior grey, refined coloured by correction</title>";
+                    "\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" + HtmlNumber(width, 4) +
+                    "\" height=\"" + HtmlNumber(height, 4) +
+                    "\" role=\"img\"><title>Camera centres, " + view +
+                    " view: prior grey, reference blue, refined coloured by correction</title>";
   for (const auto& [name, pose] : solved) {
-    const Eigen::Vector2d r = to_svg(project(pose.translation));
-    const auto prior = refined.prior.world_from_cam.find(name);
-    double share = 0.0;
-    if (prior != refined.prior.world_from_cam.end()) {
-      const Eigen::Vector2d p = to_svg(project(prior->second.translation));
-      share = frame.largest > 0 ? frame.correction.at(name) / frame.largest : 0.0;
-      svg += "<line x1=\"" + Number(p.x(), 6) + "\" y1=\"" + Number(p.y(), 6) + "\" x2=\"" +
-             Number(r.x(), 6) + "\" y2=\"" + Number(r.y(), 6) + "\" stroke=\"" +
-             CorrectionColour(share) + "\"/><circle cx=\"" + Number(p.x(), 6) + "\" cy=\"" +
-             Number(p.y(), 6) + "\" r=\"3\" fill=\"#999\"/>";
+    const auto truth = page.truth.world_from_cam.find(name);
+    if (truth != page.truth.world_from_cam.end()) {
+      svg += "<circle " + at(truth->second.translation) + " r=\"2.5\" fill=\"#36c\"/>";
     }
-    svg += "<a href=\"#cam-" + Escape(name) + "\"><circle class=\"camera\" cx=\"" +
-           Number(r.x(), 6) + "\" cy=\"" + Number(r.y(), 6) + "\" r=\"5\" fill=\"" +
-           CorrectionColour(share) + "\"><title>" + Escape(name) + "</title></circle></a>";
+    const auto prior = page.prior.world_from_cam.find(name);
+    const std::string colour = ShareColour(frame.Share(name));
+    if (prior != page.prior.world_from_cam.end()) {
+      svg += line(prior->second.translation, pose.translation) + " stroke=\"" + colour +
+             "\"/><circle " + at(prior->second.translation) + " r=\"3\" fill=\"#999\"/>";
+    }
+    svg += "<a href=\"#cam-" + HtmlEscape(name) + "\"><circle class=\"camera\" data-name=\"" +
+           HtmlEscape(name) + "\" " + at(pose.translation) + " r=\"5\" fill=\"" + colour +
+           "\"><title>" + HtmlEscape(name) + "</title></circle></a>";
   }
   return svg + "</svg>";
 }
 
-std::string CamerasViews(const RefinedRun& refined) {
-  if (refined.refined.world_from_cam.size() < 2) {
-    return "<p>Fewer than two refined cameras: no view.</p>";
-  }
-  const CentreFrame frame = CentreFrameOf(refined);
-  return CamerasSvg(refined, frame, "top", 1) + " " + CamerasSvg(refined, frame, "side", 0);
+std::string JsonVector(const Eigen::Vector3d& x) {
+  return "[" + HtmlNumber(x.x(), 7) + "," + HtmlNumber(x.y(), 7) + "," + HtmlNumber(x.z(), 7) + "]";
 }
 
-std::string CamerasSection(const RefinedRun& refined, const json& run) {
-  if (refined.stage_id.empty())
+std::string JsonMatrix(const Eigen::Matrix3d& m) {
+  std::string out = "[";
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out += (r + c == 0 ? "" : ",") + HtmlNumber(m(r, c), 6);
+  }
+  return out + "]";
+}
+
+// The orbit view's data: per camera its refined, prior and reference centre and orientation in the
+// centres' principal frame (rotated so that the least direction is up), and its frustum's half
+// extents (w / 2f, h / 2f).
+std::string OrbitData(const RunPage& page) {
+  const CentreFrame& frame = page.frame;
+  Eigen::Matrix3d to_frame;  // rows: main, second, least direction
+  to_frame.row(0) = frame.axes.col(2).transpose();
+  to_frame.row(1) = frame.axes.col(1).transpose();
+  to_frame.row(2) = frame.axes.col(0).transpose();
+  if (to_frame.determinant() < 0) to_frame.row(1) *= -1.0;
+  const auto centre = [&](const Rigid3& pose) {
+    return JsonVector(to_frame * (pose.translation - frame.mean));
+  };
+  const auto rotation = [&](const Rigid3& pose) {
+    return JsonMatrix(to_frame * pose.rotation.toRotationMatrix());
+  };
+  std::string out = "{\"cameras\":[";
+  bool first = true;
+  for (const auto& [name, pose] : page.refined.world_from_cam) {
+    Eigen::Vector2d half(0.5, 0.375);
+    const int index = page.images.Find(name);
+    if (index >= 0) {
+      const ImageInfo& info = page.images.images[index];
+      const CameraIntrinsics& camera = page.images.cameras.at(info.camera_index);
+      if (camera.fx() > 0 && camera.fy() > 0) {
+        half = Eigen::Vector2d(camera.width / (2 * camera.fx()), camera.height / (2 * camera.fy()));
+      }
+    }
+    out += std::string(first ? "" : ",") + "{\"n\":" + json(name).dump() +
+           ",\"c\":" + centre(pose) + ",\"r\":" + rotation(pose) + ",\"k\":[" +
+           HtmlNumber(half.x(), 4) + "," + HtmlNumber(half.y(), 4) + "],\"colour\":\"" +
+           ShareColour(frame.Share(name)) + "\"";
+    const auto prior = page.prior.world_from_cam.find(name);
+    if (prior != page.prior.world_from_cam.end()) {
+      out += ",\"p\":" + centre(prior->second) + ",\"pr\":" + rotation(prior->second);
+    }
+    const auto truth = page.truth.world_from_cam.find(name);
+    if (truth != page.truth.world_from_cam.end()) {
+      out += ",\"g\":" + centre(truth->second) + ",\"gr\":" + rotation(truth->second);
+    }
+    out += "}";
+    first = false;
+  }
+  return out + "]}";
+}
+
+std::string OrbitView(const RunPage& page) {
+  std::string html =
+      "<h3>Orbit view</h3><p>The cameras as frusta: refined coloured by correction, prior grey, "
+      "reference blue. Drag to turn, wheel to zoom, click a camera to open it. <label><input "
+      "type=\"checkbox\" id=\"orbit-prior\" checked> prior</label>";
+  if (!page.truth.world_from_cam.empty()) {
+    html += " <label><input type=\"checkbox\" id=\"orbit-truth\" checked> reference (" +
+            HtmlEscape(page.truth_set) + ", Sim(3)-aligned)</label>";
+  }
+  // "</" cannot occur in the data: names are JSON-escaped and "</script" would need a slash
+  // after "<", which json.dump() writes as is, so it is escaped here.
+  std::string data = OrbitData(page);
+  for (size_t at = data.find("</"); at != std::string::npos; at = data.find("</", at + 3)) {
+    data.replace(at, 2, "<\\/");
+  }
+  return html +
+         "</p><canvas id=\"orbit\" width=\"720\" height=\"480\"></canvas>"
+         "<script id=\"orbit-data\" type=\"application/json\">" +
+         data + "</script><script>" + kRunReportOrbitJs + "</script>";
+}
+
+std::string CamerasSection(const RunPage& page) {
+  if (page.stage_id.empty())
     return "<section id=\"cameras\"><h2>Cameras</h2><p>No refine stage ran.</p></section>";
-  std::string html = "<section id=\"cameras\"><h2>Cameras: " + Escape(refined.prior_set) + " → " +
-                     Escape(refined.refined_set) +
-                     "</h2><p>Top view (the centres' two main directions) and side view (the "
-                     "main and the least direction): prior grey, refined coloured green to red by "
-                     "the size of its correction, the correction drawn; a camera links to its "
-                     "row.</p>" +
-                     CamerasViews(refined);
-  const json sigma =
-      refined.summary.value("uncertainty", json::object()).value("cameras", json::object());
-  const auto flags = FlagsByImage(run);
-  html +=
-      "<table id=\"camera-table\"><tr><th>image</th><th>rotation correction (°)</th>"
-      "<th>centre correction</th><th>σ rotation (°)</th><th>σ centre</th><th>flags</th></tr>";
-  std::set<std::string> unique;
-  for (const auto& [name, pose] : refined.prior.world_from_cam) unique.insert(name);
-  for (const auto& [name, pose] : refined.refined.world_from_cam) unique.insert(name);
-  // Capture order: a video's "2.jpg" before "10.jpg".
-  std::vector<std::string> names(unique.begin(), unique.end());
-  std::sort(names.begin(), names.end(), NaturalNameLess);
-  for (const auto& name : names) {
-    const auto prior = refined.prior.world_from_cam.find(name);
-    const auto solved = refined.refined.world_from_cam.find(name);
-    std::string rotation = "–", centre = "–";
-    if (prior != refined.prior.world_from_cam.end() &&
-        solved != refined.refined.world_from_cam.end()) {
-      rotation = Number(
-          DegreesFromRadians(RotationDistance(prior->second.rotation, solved->second.rotation)));
-      centre = Number((prior->second.translation - solved->second.translation).norm());
-    }
-    const json s = sigma.is_object() && sigma.contains(name) ? sigma[name] : json::object();
-    std::string flag_text;
-    const auto it = flags.find(name);
-    if (it != flags.end()) {
-      for (const auto& code : it->second) flag_text += (flag_text.empty() ? "" : ", ") + code;
-    }
-    if (solved == refined.refined.world_from_cam.end()) {
-      flag_text += std::string(flag_text.empty() ? "" : ", ") + "not refined";
-    }
-    html += "<tr id=\"cam-" + Escape(name) + "\"><td>" + Escape(name) + "</td><td>" + rotation +
-            "</td><td>" + centre + "</td><td>" + Number(s.value("rotation_deg", json())) +
-            "</td><td>" + Number(s.value("centre", json())) + "</td><td>" + Escape(flag_text) +
-            "</td></tr>";
+  std::string html = "<section id=\"cameras\"><h2>Cameras: " + HtmlEscape(page.prior_set) + " → " +
+                     HtmlEscape(page.refined_set) + "</h2>";
+  if (page.refined.world_from_cam.size() < 2) {
+    return html + "<p>Fewer than two refined cameras: no view.</p></section>";
+  }
+  return html +
+         "<p>Top view (the centres' two main directions) and side view (the main and the least "
+         "direction): prior grey, refined coloured green to red by the size of its correction, "
+         "the correction drawn" +
+         (page.truth.world_from_cam.empty() ? std::string()
+                                            : ", the reference blue (Sim(3)-aligned)") +
+         "; click a camera to open it.</p>" + CamerasSvg(page, "top", 1) + " " +
+         CamerasSvg(page, "side", 0) + OrbitView(page) + "</section>";
+}
+
+// A camera's numbers, as table cells: rotation and centre correction, σ, residual median, pairs,
+// matches, flags.
+struct CameraNumbers {
+  std::string rotation = "–", centre = "–", sigma_rotation, sigma_centre, residual, pairs, matches;
+  std::string flags;
+};
+
+CameraNumbers NumbersOf(const RunPage& page, const std::string& name) {
+  CameraNumbers n;
+  const auto prior = page.prior.world_from_cam.find(name);
+  const auto solved = page.refined.world_from_cam.find(name);
+  if (prior != page.prior.world_from_cam.end() && solved != page.refined.world_from_cam.end()) {
+    n.rotation = HtmlNumber(
+        DegreesFromRadians(RotationDistance(prior->second.rotation, solved->second.rotation)));
+    n.centre = HtmlNumber((prior->second.translation - solved->second.translation).norm());
+  }
+  const json sigma = JsonObject(JsonObject(page.summary, "uncertainty"), "cameras");
+  const json s = JsonObject(sigma, name.c_str());
+  n.sigma_rotation = HtmlNumber(JsonAt(s, "rotation_deg"));
+  n.sigma_centre = HtmlNumber(JsonAt(s, "centre"));
+  const json images = JsonObject(page.diagnostics, "images");
+  const json d = JsonObject(images, name.c_str());
+  n.residual = HtmlNumber(JsonAt(d, "residual_median_px"));
+  n.pairs = HtmlNumber(JsonAt(d, "num_pairs"), 9);
+  n.matches = HtmlNumber(JsonAt(d, "num_matches"), 9);
+  const auto it = page.flags.find(name);
+  if (it != page.flags.end()) {
+    for (const auto& code : it->second) n.flags += (n.flags.empty() ? "" : ", ") + code;
+  }
+  if (solved == page.refined.world_from_cam.end()) {
+    n.flags += std::string(n.flags.empty() ? "" : ", ") + "not refined";
+  }
+  return n;
+}
+
+std::string CameraTable(const RunPage& page) {
+  if (page.stage_id.empty()) return "";
+  std::string html =
+      "<section id=\"camera-section\"><h2>Per camera</h2><table id=\"camera-table\"><tr>"
+      "<th>image</th><th>rotation correction (°)</th><th>centre correction</th>"
+      "<th>σ rotation (°)</th><th>σ centre</th><th>residual median (px)</th><th>pairs</th>"
+      "<th>matches</th><th>flags</th></tr>";
+  for (const std::string& name : page.names) {
+    const CameraNumbers n = NumbersOf(page, name);
+    html += "<tr id=\"row-" + HtmlEscape(name) + "\"><td>" + CameraLink(name) + "</td><td>" +
+            n.rotation + "</td><td>" + n.centre + "</td><td>" + n.sigma_rotation + "</td><td>" +
+            n.sigma_centre + "</td><td>" + n.residual + "</td><td>" + n.pairs + "</td><td>" +
+            n.matches + "</td><td>" + HtmlEscape(n.flags) + "</td></tr>";
   }
   return html + "</table></section>";
 }
 
-std::string MetricsSection(const json& run) {
-  const json metrics = run.value("metrics", json::object());
-  std::string rows;
-  for (const auto& [pose_set, by_alignment] : metrics.items()) {
-    if (!by_alignment.is_object()) continue;
-    for (const auto& [alignment, errors] : by_alignment.items()) {
-      if (!errors.is_object() || !errors.contains("mean_rotation_deg")) continue;
-      rows += "<tr><td>" + Escape(pose_set) + "</td><td>" + Escape(alignment) + "</td><td>" +
-              Number(errors["mean_rotation_deg"]) + "</td><td>" +
-              Number(errors.value("mean_centre_m", json())) + "</td><td>" +
-              Number(errors.value("num_frames", json()), 6) + "</td></tr>";
+// One GNC stage's residual histogram: a bar per bin of the summary's edges, heights as the share
+// of the stage's residuals.
+std::string HistogramSvg(const json& stage, const std::vector<double>& edges,
+                         const std::string& label) {
+  std::vector<int> counts;
+  for (const json& count : JsonArray(stage, "residual_histogram")) {
+    counts.push_back(count.is_number_integer() ? count.get<int>() : 0);
+  }
+  if (counts.size() != edges.size() + 1) return "";
+  double total = 0.0;
+  for (const int count : counts) total += count;
+  if (total <= 0) return "";
+  const double bar = 14.0, height = 90.0, top = 18.0, width = bar * counts.size() + 24;
+  std::string svg = "<svg class=\"histogram\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" +
+                    HtmlNumber(width, 4) + "\" height=\"" + HtmlNumber(top + height + 16, 4) +
+                    "\"><text x=\"4\" y=\"13\" font-size=\"11\">" + HtmlEscape(label) + "</text>";
+  for (size_t b = 0; b < counts.size(); ++b) {
+    const double h = height * counts[b] / total;
+    const std::string range =
+        (b == 0              ? "< " + HtmlNumber(edges[0])
+         : b == edges.size() ? "≥ " + HtmlNumber(edges.back())
+                             : HtmlNumber(edges[b - 1]) + "–" + HtmlNumber(edges[b])) +
+        " px: " + std::to_string(counts[b]);
+    svg += "<rect x=\"" + HtmlNumber(5 + bar * b, 5) + "\" y=\"" + HtmlNumber(top + height - h, 5) +
+           "\" width=\"" + HtmlNumber(bar - 2, 3) + "\" height=\"" + HtmlNumber(h, 5) +
+           "\" fill=\"#58a\"><title>" + range + "</title></rect>";
+  }
+  // Axis labels under the 0.1, 1, 10, 100 px edges (bin b starts at edge b − 1).
+  for (size_t e = 0; e < edges.size(); ++e) {
+    const double decade = std::log10(edges[e]);
+    if (std::abs(decade - std::round(decade)) > 1e-9) continue;
+    svg += "<text x=\"" + HtmlNumber(5 + bar * (e + 1) - 3, 5) + "\" y=\"" +
+           HtmlNumber(top + height + 12, 5) + "\" font-size=\"9\">" + HtmlNumber(edges[e]) +
+           "</text>";
+  }
+  return svg + "</svg>";
+}
+
+std::string ResidualsSection(const RunPage& page) {
+  std::vector<double> edges;
+  for (const json& edge : JsonArray(page.summary, "residual_histogram_edges_px")) {
+    if (edge.is_number()) edges.push_back(edge.get<double>());
+  }
+  std::string charts;
+  for (const json& pass : JsonArray(page.summary, "passes")) {
+    for (const json& stage : JsonArray(pass, "stages")) {
+      charts += HistogramSvg(
+          stage, edges,
+          JsonText(pass, "name") + ", a = " + HtmlNumber(JsonAt(stage, "loss_scale_px2")) + " px²");
     }
   }
-  if (rows.empty()) return "";
-  return "<section id=\"metrics\"><h2>Against the ground truth</h2><table><tr><th>pose set</th>"
-         "<th>alignment</th><th>mean rotation error (°)</th><th>mean centre error</th>"
-         "<th>frames</th></tr>" +
-         rows + "</table></section>";
+  if (charts.empty()) return "";
+  return "<section id=\"residuals\"><h2>Residuals per GNC stage</h2><p>Norms of the "
+         "cross-projection residuals at the end of each stage (share of the residuals per bin, "
+         "pixels on a log axis): the annealing should move the mass left and leave the "
+         "outliers on the right.</p>" +
+         charts + "</section>";
+}
+
+// The pair-consistency matrix: images × images in capture order, a cell per pair with used
+// matches coloured by its median residual against the inconsistent-pair threshold, the pairs the
+// solve left unexplained outlined, the pairs the removal took black.
+std::string PairMatrixSection(const RunPage& page) {
+  const json pairs = JsonArray(page.diagnostics, "pairs");
+  if (pairs.empty() || page.names.size() < 2) return "";
+  std::map<std::string, size_t> index;
+  for (size_t i = 0; i < page.names.size(); ++i) index[page.names[i]] = i;
+  const json verdict = JsonObject(JsonObject(page.summary, "guardrails"), "inconsistent_pairs");
+  const json given = JsonAt(verdict, "pair_threshold_px");
+  const double threshold = given.is_number() && given.get<double>() > 0 ? given.get<double>() : 4.0;
+  const size_t n = page.names.size();
+  const double cell = std::max(1.0, 560.0 / static_cast<double>(n));
+  const double side = cell * static_cast<double>(n);
+  std::string svg = "<svg id=\"pair-matrix\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" +
+                    HtmlNumber(side + 2, 6) + "\" height=\"" + HtmlNumber(side + 2, 6) +
+                    "\"><rect x=\"1\" y=\"1\" width=\"" + HtmlNumber(side, 6) + "\" height=\"" +
+                    HtmlNumber(side, 6) + "\" fill=\"#f4f4f4\"/>";
+  const auto rect = [&](size_t row, size_t column, const std::string& fill,
+                        const std::string& title) {
+    return "<rect x=\"" + HtmlNumber(1 + cell * column, 6) + "\" y=\"" +
+           HtmlNumber(1 + cell * row, 6) + "\" width=\"" + HtmlNumber(cell, 4) + "\" height=\"" +
+           HtmlNumber(cell, 4) + "\" fill=\"" + fill + "\"><title>" + title + "</title></rect>";
+  };
+  const auto cells = [&](const std::string& a, const std::string& b, const std::string& fill,
+                         const std::string& title) {
+    const auto i = index.find(a), j = index.find(b);
+    if (i == index.end() || j == index.end()) return std::string();
+    return rect(i->second, j->second, fill, title) + rect(j->second, i->second, fill, title);
+  };
+  const auto name = [](const json& image) {
+    return image.is_string() ? image.get<std::string>() : std::string();
+  };
+  int drawn = 0;
+  for (const json& pair : pairs) {
+    if (!pair.is_array() || pair.size() != 4) continue;
+    const double median = pair[3].is_number() ? pair[3].get<double>() : NAN;
+    // Log colour scale: 0.1 px and below green, the threshold and above red.
+    const double share =
+        std::log(std::max(median, 0.1) / 0.1) / std::log(std::max(threshold, 0.2) / 0.1);
+    const std::string title = HtmlEscape(name(pair[0])) + " – " + HtmlEscape(name(pair[1])) +
+                              ": median " + HtmlNumber(median) + " px, " + HtmlNumber(pair[2], 9) +
+                              " matches" + (median > threshold ? " (unexplained)" : "");
+    svg += cells(name(pair[0]), name(pair[1]), ShareColour(share), title);
+    ++drawn;
+  }
+  int removed = 0;
+  for (const json& pair : JsonArray(page.diagnostics, "removed")) {
+    if (!pair.is_array() || pair.size() != 4) continue;
+    svg += cells(name(pair[0]), name(pair[1]), "#000",
+                 HtmlEscape(name(pair[0])) + " – " + HtmlEscape(name(pair[1])) +
+                     ": removed by the pair removal (median " + HtmlNumber(pair[3]) + " px)");
+    ++removed;
+  }
+  return "<section id=\"pairs\"><h2>Pair consistency</h2><p>Images × images in capture order; a "
+         "cell per pair the solve used, coloured by the median of its matches' residuals at the "
+         "solution from green (0.1 px and below) to red (the inconsistent-pair threshold, " +
+         HtmlNumber(threshold) + " px, and above); black: removed by the wrong-pair removal. " +
+         std::to_string(drawn) + " pairs, " + std::to_string(removed) +
+         " removed. Hover a cell for its pair.</p>" + svg + "</svg></section>";
+}
+
+// A camera's panel, shown when it is the page's target (a click on it anywhere): its image, its
+// numbers and its worst pairs.
+std::string CameraPanels(const RunPage& page) {
+  std::map<std::string, std::vector<std::pair<double, std::string>>> pairs_of;
+  for (const json& pair : JsonArray(page.diagnostics, "pairs")) {
+    if (!pair.is_array() || pair.size() != 4 || !pair[0].is_string() || !pair[1].is_string())
+      continue;
+    const double median = pair[3].is_number() ? pair[3].get<double>() : INFINITY;
+    const std::string a = pair[0], b = pair[1];
+    const std::string text = HtmlNumber(median) + " px, " + HtmlNumber(pair[2], 9) + " matches";
+    pairs_of[a].emplace_back(median, CameraLink(b) + " " + text);
+    pairs_of[b].emplace_back(median, CameraLink(a) + " " + text);
+  }
+  std::string html;
+  for (const std::string& name : page.names) {
+    const CameraNumbers n = NumbersOf(page, name);
+    html += "<aside class=\"panel\" id=\"cam-" + HtmlEscape(name) +
+            "\"><a class=\"close\" href=\"#camera-section\">close ✕</a><h3>" + HtmlEscape(name) +
+            "</h3>";
+    const auto thumbnail = page.thumbnails.find(name);
+    html += thumbnail != page.thumbnails.end() && !thumbnail->second.empty()
+                ? "<img src=\"" + thumbnail->second + "\" width=\"" +
+                      std::to_string(kThumbnailWidth) + "\" alt=\"" + HtmlEscape(name) + "\">"
+                : "<p>(image not found)</p>";
+    const auto unit = [](const std::string& number, const char* unit_text) {
+      return number == "–" ? number : number + unit_text;
+    };
+    html += "<table><tr><td>rotation correction</td><td>" + unit(n.rotation, "°") +
+            "</td></tr><tr><td>centre correction</td><td>" + n.centre +
+            "</td></tr><tr><td>σ rotation</td><td>" + unit(n.sigma_rotation, "°") +
+            "</td></tr><tr><td>σ centre</td><td>" + n.sigma_centre +
+            "</td></tr><tr><td>residual median</td><td>" + unit(n.residual, " px") +
+            "</td></tr><tr><td>pairs / matches</td><td>" + n.pairs + " / " + n.matches +
+            "</td></tr><tr><td>flags</td><td>" + HtmlEscape(n.flags.empty() ? "none" : n.flags) +
+            "</td></tr></table><p><a href=\"#row-" + HtmlEscape(name) + "\">its row</a></p>";
+    auto& list = pairs_of[name];
+    std::sort(list.begin(), list.end(),
+              [](const auto& a, const auto& b) { return a.first > b.first; });
+    if (!list.empty()) {
+      html += "<p>Worst pairs (median residual):</p><ol>";
+      for (size_t k = 0; k < std::min(kPairsPerPanel, list.size()); ++k) {
+        html += "<li>" + list[k].second + "</li>";
+      }
+      html += "</ol>";
+      if (list.size() > kPairsPerPanel) {
+        html += "<p>and " + std::to_string(list.size() - kPairsPerPanel) +
+                " more (all in the pair matrix)</p>";
+      }
+    }
+    html += "</aside>";
+  }
+  return html;
+}
+
+std::string MetricsSection(const json& run) {
+  const json metrics = JsonObject(run, "metrics");
+  std::string rows, splat_rows;
+  for (const auto& [pose_set, by_key] : metrics.items()) {
+    if (!by_key.is_object()) continue;
+    for (const auto& [key, entry] : by_key.items()) {
+      if (!entry.is_object()) continue;
+      if (entry.contains("mean_rotation_deg")) {
+        rows += "<tr><td>" + HtmlEscape(pose_set) + "</td><td>" + HtmlEscape(key) + "</td><td>" +
+                HtmlNumber(entry["mean_rotation_deg"]) + "</td><td>" +
+                HtmlNumber(JsonAt(entry, "mean_centre_m")) + "</td><td>" +
+                HtmlNumber(JsonAt(entry, "num_frames"), 6) + "</td></tr>";
+      } else if (entry.contains("psnr")) {
+        // metrics.<splat stage>.<pose set>
+        splat_rows += "<tr><td>" + HtmlEscape(key) + "</td><td>" + HtmlEscape(pose_set) +
+                      "</td><td>" + HtmlEscape(JsonText(entry, "trainer")) + "</td><td>" +
+                      HtmlEscape(JsonText(entry, "status")) + "</td><td>" +
+                      HtmlNumber(JsonAt(entry, "psnr"), 4) + "</td><td>" +
+                      HtmlNumber(JsonAt(entry, "ssim")) + "</td><td>" +
+                      HtmlNumber(JsonAt(entry, "raytime_psnr"), 4) + "</td><td>" +
+                      HtmlNumber(JsonAt(entry, "raytime_ssim")) + "</td><td>" +
+                      HtmlNumber(JsonAt(entry, "seconds")) + "</td></tr>";
+      }
+    }
+  }
+  std::string html;
+  if (!rows.empty()) {
+    html +=
+        "<section id=\"metrics\"><h2>Against the ground truth</h2><table><tr><th>pose set</th>"
+        "<th>alignment</th><th>mean rotation error (°)</th><th>mean centre error</th>"
+        "<th>frames</th></tr>" +
+        rows + "</table></section>";
+  }
+  if (!splat_rows.empty()) {
+    html +=
+        "<section id=\"splat\"><h2>Splats (held-out views)</h2><table><tr><th>pose set</th>"
+        "<th>stage</th><th>trainer</th><th>status</th><th>PSNR (dB)</th><th>SSIM</th>"
+        "<th>raytime PSNR (dB)</th><th>raytime SSIM</th><th>seconds</th></tr>" +
+        splat_rows + "</table></section>";
+  }
+  return html;
+}
+
+const char* RunPageStyle() {
+  return ".panel{display:none;position:fixed;top:0;right:0;width:22em;max-height:100vh;"
+         "overflow:auto;background:#fff;border-left:2px solid #888;padding:0.5em 1em;"
+         "box-shadow:-4px 0 8px rgba(0,0,0,.2)}.panel:target{display:block}"
+         ".panel .close{float:right}.panel table td{text-align:left}img.thumb{margin:2px}"
+         "tr:target{background:#ffd}.histogram{margin:2px}";
 }
 
 }  // namespace
 
 std::string WriteRunReport(const std::string& workdir) {
+  const auto start = std::chrono::steady_clock::now();
   const std::string summary_path = (fs::path(workdir) / "summary.json").string();
   if (!fs::exists(summary_path)) {
     ThrowInput(summary_path, 0,
@@ -341,21 +729,20 @@ std::string WriteRunReport(const std::string& workdir) {
   }
   const json run = json::parse(ReadTextFile(summary_path), nullptr, false);
   if (run.is_discarded() || !run.is_object()) ThrowInput(summary_path, 0, "not a run summary");
-  const RefinedRun refined = FindRefinedRun(workdir, run);
-  const std::string title = "raytime run " + Text(run, "name") + " (" + Text(run, "status") + ")";
-  std::string html =
-      "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + Escape(title) +
-      "</title><style>body{font-family:sans-serif;margin:2em;max-width:72em}"
-      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:2px 6px;"
-      "text-align:right}td:first-child{text-align:left}.status.ok{color:#070}"
-      ".status.ok_with_warnings{color:#a60}.status.failed,.status.interrupted,.error{color:#b00}"
-      "tr:target{background:#ffd}svg{border:1px solid #ddd}</style></head><body><h1>" +
-      Escape(title) + "</h1><p>Work directory <code>" + Escape(workdir) +
-      "</code>, pipeline <code>" + Escape(Text(run, "pipeline")) + "</code>, raytime " +
-      Escape(Text(run, "raytime_version")) + "</p>" + VerdictSection(run, refined) +
-      CamerasSection(refined, run) + MetricsSection(run) + StagesSection(run) + "</body></html>\n";
+  const RunPage page = ReadRunPage(workdir, run);
+  const std::string title =
+      "raytime run " + JsonText(run, "name") + " (" + JsonText(run, "status") + ")";
+  const std::string html =
+      "<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + HtmlEscape(title) +
+      "</title><style>" + PageStyle() + RunPageStyle() + "</style></head><body><h1>" +
+      HtmlEscape(title) + "</h1><p>Work directory <code>" + HtmlEscape(workdir) +
+      "</code>, pipeline <code>" + HtmlEscape(JsonText(run, "pipeline")) + "</code>, raytime " +
+      HtmlEscape(JsonText(run, "raytime_version")) + "</p>" + VerdictSection(page) +
+      CamerasSection(page) + CameraTable(page) + ResidualsSection(page) + PairMatrixSection(page) +
+      MetricsSection(run) + StagesSection(run) + CameraPanels(page) + "</body></html>\n";
   const std::string path = (fs::path(workdir) / "report.html").string();
   WriteTextFileAtomically(path, html);
+  spdlog::debug(fmt::format("report: {} kB in {:.2f} s", html.size() / 1024, SecondsSince(start)));
   return path;
 }
 

@@ -1,12 +1,17 @@
 // WORKDIR/report.html: one self-contained page per run (issue 32 "See the run"), from the run's
-// summary.json and the pose sets it names, so a person sees before training whether to trust the
-// poses: the verdict first (status, each refine stage's decision, every warning with the images it
-// names, time per stage), then the cameras before and after (a top view of the prior's and the
-// refined centres with each correction drawn, coloured by size; a camera links to its row), a
-// table per camera (its correction, its σ from the solve, the warnings naming it) and the errors
-// against ground truth when there is one. Plain HTML and inline SVG: no script, no network fetch,
-// opens offline. Written by the pipeline at the end of every run, also a failed one, and by
-// `raytime report --run WORKDIR`.
+// summary.json, the pose sets it names, the refine stage's fit per image and pair
+// (kSolveDiagnosticsJson) and the images, so a person sees before training whether to trust the
+// poses: the verdict first (status, the refine decision, every warning with the images it names
+// as thumbnails), then the cameras before and after (top and side views of the centres and an
+// orbit view of the frusta, prior grey, reference blue, refined coloured by its correction), a
+// table per camera (correction, σ from the solve, residual median, pairs, matches, flags), a
+// residual histogram per GNC stage, the pair-consistency matrix, the errors against ground truth
+// and the splat metrics when there are any, time per stage. A click on a camera anywhere opens its
+// panel: its image, its numbers, its worst pairs (CSS :target, no script needed). The orbit view
+// is the one script (run_report_orbit.js, inlined); images are inlined as data URIs; nothing is
+// fetched: the file opens offline on its own. Written by the pipeline at the end of every run,
+// also a failed one, and by `raytime report --run WORKDIR`. tests/browser/check_run_page.py
+// opens and clicks it in headless Chromium.
 #pragma once
 
 #include <string>

@@ -41,6 +41,12 @@ inline constexpr const char* kLooseImagesJson = "loose_images";
 // JSON document beside a refined pose set: per image name, σ of its rotation (degrees) and centre
 // (prior length units) at the solution (refine/pose_uncertainty.h). Written by refine.
 inline constexpr const char* kPoseUncertaintyJson = "pose_uncertainty";
+// JSON document beside a refined pose set: how each solve fits its matches at the solution
+// (refine's SolveDiagnostics): "images" {name: {residual_median_px, num_pairs, num_matches}} and
+// "pairs" [[name1, name2, num_matches, median_px], ...] (the pairs each solve used) and "removed"
+// (the same for the pairs the wrong-pair removal took, with their measure when removed). Written by
+// refine, read by the run page.
+inline constexpr const char* kSolveDiagnosticsJson = "solve_diagnostics";
 // JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";

@@ -1,7 +1,12 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages raytime builds and runs with. Idempotent: skips apt when every
-# package is already installed.
+# package is already installed. --test adds what only the test suite needs: Debian's chromium, in
+# which the run page is opened and clicked (tests/browser/check_run_page.py).
 set -euo pipefail
+test_packages=()
+if [ "${1:-}" = "--test" ]; then
+  test_packages=(chromium)
+fi
 packages=(
   build-essential cmake ninja-build pkg-config
   libeigen3-dev libceres-dev libsuitesparse-dev libtbb-dev libopencv-dev libopengv-dev
@@ -10,6 +15,7 @@ packages=(
   colmap
   clang-14 libclang-rt-14-dev
   python3-matplotlib python3-numpy
+  ${test_packages[@]+"${test_packages[@]}"}
 )
 missing=()
 for p in "${packages[@]}"; do

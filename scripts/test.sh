@@ -1,19 +1,20 @@
 #!/usr/bin/env bash
-# Test suite: install dependencies; a Release build runs the tests that drive the binary, COLMAP
-# and a one-node Slurm cluster (labels integration, colmap, slurm); the unit tests and fuzz corpus
+# Test suite: install dependencies (with chromium, for the run page's browser test); a Release build
+# runs the tests that drive the binary, COLMAP, headless Chromium and a one-node Slurm cluster
+# (labels integration, colmap, slurm); the unit tests and fuzz corpus
 # replays are built and run once, with AddressSanitizer + UndefinedBehaviorSanitizer (building
 # them at -O3 as well was a sixth of CI).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc)
-scripts/install_deps.sh
+scripts/install_deps.sh --test
 # Without the benchmarks (RAYTIME_BUILD_BENCH; development builds compile them).
 scripts/build.sh build -DRAYTIME_BUILD_UNIT_TESTS=OFF -DRAYTIME_BUILD_BENCH=OFF
 echo "test.sh: release build done at ${SECONDS} s"
 # The Slurm backend's test (label slurm) on a one-node cluster on this machine; it must run here
 # (RAYTIME_REQUIRE_SLURM), where elsewhere it is skipped without a cluster.
 scripts/slurm_local.sh start
-(cd build && RAYTIME_REQUIRE_SLURM=1 ctest --output-on-failure -j "$jobs")
+(cd build && RAYTIME_REQUIRE_SLURM=1 RAYTIME_REQUIRE_BROWSER=1 ctest --output-on-failure -j "$jobs")
 echo "test.sh: tests done at ${SECONDS} s"
 # clang: compiles the instrumented code about twice as fast as gcc, and its UBSan checks pointer
 # overflow, which gcc's lacks (scripts/fuzz.sh uses it too). -g1: line tables only, enough for the

@@ -87,17 +87,43 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
     EXPECT_LT(sigma["rotation_deg"].get<double>(), 0.05) << image;
     EXPECT_GT(sigma["centre"].get<double>(), 0.0) << image;
   }
-  // The run's page (pipelines/run_report.h): the verdict, every image in the camera table with a
-  // link from the top view, no fetch from the network (it opens offline).
+  // The run's page (pipelines/run_report.h): the verdict, every image in the camera table and
+  // with a panel (its image inlined) that the views link to, a residual histogram per GNC stage,
+  // the pair matrix with every used pair, no fetch from the network (it opens offline; the browser
+  // test run_page_in_browser clicks it).
   const std::string page = raytime::ReadTextFile((fs::path(run_dir) / "report.html").string());
   EXPECT_NE(page.find("Status: <b>ok</b>"), std::string::npos);
   EXPECT_NE(page.find("decision <b>accepted</b>"), std::string::npos);
   for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
-    EXPECT_NE(page.find("<tr id=\"cam-" + image + "\">"), std::string::npos) << image;
-    EXPECT_NE(page.find("<a href=\"#cam-" + image + "\">"), std::string::npos) << image;
+    EXPECT_NE(page.find("<tr id=\"row-" + image + "\">"), std::string::npos) << image;
+    EXPECT_NE(page.find("<aside class=\"panel\" id=\"cam-" + image +
+                        "\"><a class=\"close\" href=\"#camera-section\">close ✕</a><h3>" + image +
+                        "</h3><img src=\"data:image/jpeg;base64,"),
+              std::string::npos)
+        << image;
+    EXPECT_NE(page.find("<a href=\"#cam-" + image + "\"><circle class=\"camera\""),
+              std::string::npos)
+        << image;
   }
+  const auto count = [&](const std::string& needle) {
+    size_t n = 0;
+    for (size_t at = page.find(needle); at != std::string::npos; at = page.find(needle, at + 1))
+      ++n;
+    return n;
+  };
+  size_t num_stages = 0;
+  const json run_summary = ReadJson(fs::path(run_dir) / "summary.json");
+  for (const json& stage : run_summary["stages"]) {
+    if (stage["type"] != "refine") continue;
+    for (const json& pass : stage["summary"]["passes"]) num_stages += pass["stages"].size();
+  }
+  EXPECT_EQ(count("<svg class=\"histogram\""), num_stages);
+  // 51 verified pairs in the sample (each drawn in both triangles), none removed.
+  EXPECT_NE(page.find("51 pairs, 0 removed"), std::string::npos);
+  EXPECT_EQ(count("<rect x=") - count("<svg class=\"histogram\"") * 15, 1 + 2 * 51u);
   EXPECT_EQ(page.find("src=\"http"), std::string::npos);
-  EXPECT_EQ(page.find("<script"), std::string::npos);
+  EXPECT_EQ(page.find("<script src"), std::string::npos);
+  EXPECT_EQ(page.find("<link"), std::string::npos);
   // And in each transforms.json frame.
   const json transforms = ReadJson(fs::path(run_dir) / "refined_transforms.json");
   ASSERT_EQ(transforms["frames"].size(), 11u);
