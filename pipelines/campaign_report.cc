@@ -668,6 +668,7 @@ CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
     run.scene = scene_names.at(scene_value(row));
     run.level_deg = report.level_swept ? ParseLevel(*level, row_name, options.level_key) : 0.0;
     levels.insert(run.level_deg);
+    report.runs.push_back({row.run, run.scene, run.level_deg, row.status});
     for (const auto& [key, value] : row.swept) {
       if (key != options.scene_key && key != options.level_key) pooled_values[key].insert(value);
     }

@@ -84,6 +84,14 @@ struct CampaignCell {
   SceneSuccessCount scene_success;
 };
 
+// Where each run of the sweep sits in the report (the campaign page's per-scene drill-down).
+struct CampaignRun {
+  std::string run;  // the sweep's run label
+  std::string scene;
+  double level_deg = 0.0;
+  std::string status;
+};
+
 struct FailedRun {
   std::string run;  // the sweep's run label
   std::string scene;
@@ -126,6 +134,7 @@ struct CampaignReport {
   std::vector<std::pair<std::string, int>> pooled_keys;
   std::vector<CampaignCell> cells;     // per scene, then pooled over scenes
   std::vector<FailedRun> failed_runs;  // status != "ok": counted, never scored
+  std::vector<CampaignRun> runs;       // every row, in the sweep's order
   // Table 4 cells of the successful runs' splat stages: per scene, then kAllScenes; by stage,
   // trainer, level, then pose source in report order (prior first, ground_truth last).
   std::vector<SplatCell> splat_cells;

@@ -6,6 +6,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <map>
+#include <nlohmann/json.hpp>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -13,6 +15,9 @@
 #include "core/process.h"
 #include "evaluate/pose_errors.h"
 #include "formats/dataset.h"
+#include "pipelines/campaign_page.h"
+#include "pipelines/html.h"
+#include "pipelines/run_report.h"
 #include "pipelines/sweep_row.h"
 
 namespace fs = std::filesystem;
@@ -91,6 +96,34 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   return 0;
 }
 
+// Per run label of the sweep (WORKDIR/runs.json), the link from `out_dir` to its page; a run that
+// finished before runs wrote pages gets one written now (a page that cannot be is left out).
+std::map<std::string, std::string> RunPageLinks(const std::string& sweep_dir,
+                                                const std::string& out_dir) {
+  std::map<std::string, std::string> links;
+  const fs::path list_path = fs::path(sweep_dir) / "runs.json";
+  if (!fs::exists(list_path)) return links;
+  const nlohmann::json list =
+      nlohmann::json::parse(ReadTextFile(list_path.string()), nullptr, false);
+  if (!list.is_array()) return links;
+  for (const nlohmann::json& run : list) {
+    const std::string label = JsonText(run, "label"), dir = JsonText(run, "dir");
+    if (label.empty() || dir.empty()) continue;
+    const fs::path page = fs::path(dir) / "report.html";
+    if (!fs::exists(page) && fs::exists(fs::path(dir) / "summary.json")) {
+      try {
+        WriteRunReport(dir);
+      } catch (const std::exception& e) {
+        spdlog::warn(fmt::format("report: no page for run {}: {}", label, e.what()));
+      }
+    }
+    if (fs::exists(page)) {
+      links[label] = fs::relative(fs::absolute(page), fs::absolute(out_dir)).generic_string();
+    }
+  }
+  return links;
+}
+
 int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
                      const CampaignReportOptions& options) {
   const std::string sweep_path = (fs::path(sweep_dir) / "sweep.json").string();
@@ -112,6 +145,10 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
   const std::string cells_path = (fs::path(out_dir) / "report_cells.csv").string();
   WriteTextFileAtomically(markdown_path, CampaignReportMarkdown(report, sweep_path));
   WriteTextFileAtomically(cells_path, CampaignCellsCsv(report));
+  const std::string page_path = (fs::path(out_dir) / "report.html").string();
+  WriteTextFileAtomically(
+      page_path, CampaignReportHtml(report, rows, RunPageLinks(sweep_dir, out_dir), sweep_path));
+  spdlog::info(fmt::format("report: the campaign page {}", page_path));
   spdlog::info(
       fmt::format("report: {} runs ({} failed), {} scene(s), {} level(s), {} arm(s): {}, {}",
                   report.total_runs, report.failed_runs.size(), report.scenes.size(),

@@ -92,6 +92,30 @@ TEST_F(ReportCommandTest, ReportsCountsCellsAndPlotsOfASweep) {
   EXPECT_NE(cells.find("\n(all),4,prior,prior,2,2,0,0,"), std::string::npos) << cells;
   EXPECT_NE(cells.find("\nfountain-P11,4,prior,prior,0,2,0,0,"), std::string::npos) << cells;
 
+  // The campaign page (pipelines/campaign_page.h): the same cells, a success and an error plot
+  // per scene and pooled, the arm toggles, every run listed under its scene with a link to its own
+  // page that resolves to a file (written now for runs that have a summary), the failed ones too.
+  const std::string page = ReadFile(out / "report.html");
+  EXPECT_NE(page.find("8 runs (4 ok, 4 failed)"), std::string::npos);
+  EXPECT_NE(page.find("<td>0°</td><td style=\"background:rgba(44,160,44,0.5)\">2/2 ("),
+            std::string::npos);
+  size_t plots = 0;
+  for (size_t at = page.find("<svg class=\"plot\""); at != std::string::npos;
+       at = page.find("<svg class=\"plot\"", at + 1))
+    ++plots;
+  EXPECT_GE(plots, 3u);  // success plots of the pooled cells and both scenes, error plots beside
+  EXPECT_NE(page.find("class=\"arm-toggle\" data-arm=\"prior\""), std::string::npos);
+  size_t links = 0;
+  for (size_t at = page.find("<a href=\""); at != std::string::npos;
+       at = page.find("<a href=\"", at + 1)) {
+    const size_t begin = at + 9, end = page.find('"', begin);
+    const fs::path target = out / page.substr(begin, end - begin);
+    EXPECT_TRUE(fs::exists(target)) << target;
+    ++links;
+  }
+  EXPECT_EQ(links, 8u);  // every run, failed ones included: each wrote a summary and a page
+  EXPECT_NE(page.find("root=no-such-scene,level_deg=4,seed=1"), std::string::npos);
+
   if (!MatplotlibInstalled()) GTEST_SKIP() << "no matplotlib for /usr/bin/python3: no plots";
   for (const char* plot : {"success_vs_level", "median_error_vs_level"}) {
     for (const char* extension : {".png", ".svg"}) {
