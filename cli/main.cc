@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <iostream>
 
+#include "cli/progress_log_sink.h"
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
@@ -301,7 +302,10 @@ int Main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
-  spdlog::set_default_logger(spdlog::stderr_color_mt("raytime"));
+  // Through ProgressLogSink: a progress bar on a terminal is erased and redrawn around each line.
+  spdlog::set_default_logger(std::make_shared<spdlog::logger>(
+      "raytime",
+      std::make_shared<ProgressLogSink>(std::make_shared<spdlog::sinks::stderr_color_sink_mt>())));
   spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
   if (quiet) spdlog::set_level(spdlog::level::warn);
 

@@ -13,6 +13,7 @@
 #include "core/error.h"
 #include "core/interrupt.h"
 #include "core/process.h"
+#include "core/progress.h"
 #include "core/timing.h"
 
 namespace fs = std::filesystem;
@@ -92,6 +93,24 @@ std::string Absolute(const std::string& path) {
   return fs::absolute(fs::path(path)).lexically_normal().string();
 }
 
+// The last non-empty line of the trainer's log so far (progress bars often end a line with '\r':
+// the text after the last one), "" when there is none.
+std::string LastLogLine(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) return std::string();
+  const std::streamoff size = in.tellg();
+  const std::streamoff tail = std::min<std::streamoff>(size, 4096);
+  std::string text(static_cast<size_t>(tail), '\0');
+  in.seekg(size - tail);
+  in.read(text.data(), tail);
+  for (char& c : text) {
+    if (c == '\r') c = '\n';
+  }
+  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
+  const size_t newline = text.rfind('\n');
+  return newline == std::string::npos ? text : text.substr(newline + 1);
+}
+
 // Runs the command to its end or its timeout; fills the process fields of `summary`.
 void RunCommand(const SplatTrainerOptions& options, const SplatJob& job, SplatRunSummary* summary) {
   {
@@ -116,7 +135,17 @@ void RunCommand(const SplatTrainerOptions& options, const SplatJob& job, SplatRu
 
   ProcessStatus status;
   bool ended = false;
-  if (options.timeout_s > 0.0) {
+  // On a terminal, a line with the time trained and the log's last line (the trainer's own step
+  // and loss, whatever its format), checked once a second; elsewhere one wait.
+  ProgressBar bar("splat: training, s", 0);
+  if (bar.drawing()) {
+    while (!ended) {
+      const double left = options.timeout_s > 0.0 ? options.timeout_s - SecondsSince(start) : 1.0;
+      if (left <= 0.0) break;
+      ended = WaitProcessFor(pid, std::min(1.0, left), &status);
+      bar.Update(static_cast<int>(SecondsSince(start)), LastLogLine(job.log_path));
+    }
+  } else if (options.timeout_s > 0.0) {
     ended = WaitProcessFor(pid, options.timeout_s, &status);
   } else {
     status = WaitProcess(pid);

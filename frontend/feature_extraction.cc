@@ -17,6 +17,7 @@
 #include <tuple>
 
 #include "core/error.h"
+#include "core/progress.h"
 #include "core/timing.h"
 #include "frontend/image_reading.h"
 
@@ -189,6 +190,7 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
   const int num_images = static_cast<int>(images.images.size());
   features->assign(num_images, ImageFeatures());
   std::atomic<int> done{0}, upsampled{0};
+  ProgressBar bar("features", num_images);
   tbb::parallel_for(0, num_images, [&](int i) {
     const auto image_start = std::chrono::steady_clock::now();
     const ImageInfo& info = images.images[i];
@@ -208,9 +210,16 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
     }
     (*features)[i] = ExtractSift(gray, options);
     if (EffectiveFirstOctave(gray.cols, gray.rows, options) < 0) ++upsampled;
-    spdlog::info(fmt::format("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images,
-                             info.name, (*features)[i].keypoints.rows(),
-                             SecondsSince(image_start)));
+    // On a terminal the bar shows the count; the per-image lines stay in the debug log.
+    const std::string line =
+        fmt::format("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images, info.name,
+                    (*features)[i].keypoints.rows(), SecondsSince(image_start));
+    if (bar.drawing()) {
+      spdlog::debug(line);
+      bar.Update(done.load(), info.name);
+    } else {
+      spdlog::info(line);
+    }
   });
 
   FeatureExtractionSummary summary;

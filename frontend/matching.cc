@@ -11,6 +11,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/options.h"
+#include "core/progress.h"
 #include "core/timing.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/two_view_geometry.h"
@@ -217,6 +218,7 @@ MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageF
   std::mutex log_mutex;
   spdlog::info(fmt::format("matches: {} pairs of {} images ({}, {} kernel)", num_pairs, num_images,
                            options.pairs, MatchKernelName(kernel)));
+  ProgressBar bar("matches", num_pairs);
   tbb::parallel_for(0, num_pairs, [&](int p) {
     const auto [i, j] = candidates[p];
     const CameraIntrinsics& camera1 = images.cameras.at(images.images[i].camera_index);
@@ -228,7 +230,8 @@ MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageF
     MatchPair(input, options, kernel, estimator, &results[p], &stats[p]);
     if (stats[p].kept) ++kept;
     const int finished = ++done;
-    if (finished % block == 0 || finished == num_pairs) {
+    bar.Update(finished, std::to_string(kept.load()) + " verified");
+    if (!bar.drawing() && (finished % block == 0 || finished == num_pairs)) {
       std::lock_guard<std::mutex> lock(log_mutex);
       spdlog::info(fmt::format("matches: {}/{} pairs, {} verified, {:.1f} s", finished, num_pairs,
                                kept.load(), SecondsSince(start)));

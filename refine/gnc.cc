@@ -10,9 +10,18 @@
 namespace raytime {
 
 GncProgress::GncProgress(int stage, int num_stages, double scale_px2)
-    : stage_(stage), num_stages_(num_stages), scale_px2_(scale_px2) {}
+    : stage_(stage),
+      num_stages_(num_stages),
+      scale_px2_(scale_px2),
+      bar_(fmt::format("refine: GNC stage {}/{} a = {:g} px², iteration", stage, num_stages,
+                       scale_px2),
+           0) {}
 
 void GncProgress::Report(int iteration, double cost) {
+  if (bar_.drawing()) {
+    bar_.Update(iteration, fmt::format("cost {:.6g}", cost));
+    return;
+  }
   constexpr std::chrono::seconds kProgressInterval{15};
   const auto now = std::chrono::steady_clock::now();
   if (now - last_ < kProgressInterval) return;
@@ -39,8 +48,12 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
   const int num_stages = static_cast<int>(settings.scales.size());
   for (int s = 0; s < num_stages; ++s) {
     const double scale = settings.scales[s];
-    GncProgress progress(s + 1, num_stages, scale);
-    GncStageSummary stage = backend->SolveStage(scale, settings, &progress);
+    GncStageSummary stage;
+    {
+      // Its progress line ends with the stage, before the stage's log line.
+      GncProgress progress(s + 1, num_stages, scale);
+      stage = backend->SolveStage(scale, settings, &progress);
+    }
     if (settings.residual_norms) {
       backend->Publish();
       stage.residual_histogram = ResidualHistogram(settings.residual_norms());

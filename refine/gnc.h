@@ -8,6 +8,7 @@
 #include <functional>
 #include <vector>
 
+#include "core/progress.h"
 #include "refine/refine_types.h"
 
 namespace raytime {
@@ -25,7 +26,8 @@ struct GncSettings {
 };
 
 // A long solve (hundreds of cameras, millions of residuals: minutes per stage) says it is alive:
-// at most one log line every 15 s. It only reads the solve, so results do not depend on it.
+// on a terminal a progress line (stage, iteration, cost; core/progress.h), else at most one log
+// line every 15 s. It only reads the solve, so results do not depend on it.
 class GncProgress {
  public:
   GncProgress(int stage, int num_stages, double scale_px2);
@@ -38,6 +40,7 @@ class GncProgress {
   double scale_px2_;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
   std::chrono::steady_clock::time_point last_ = start_;
+  ProgressBar bar_;
 };
 
 class GncBackend {
