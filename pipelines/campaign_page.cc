@@ -155,7 +155,7 @@ std::string Legend(const CampaignReport& report) {
 }
 
 // Table 5's shape: levels × arms, "k/n (median°)", shaded by the success rate.
-std::string SuccessTable(const CampaignReport& report, const std::string& scene) {
+std::string SuccessCellsTable(const CampaignReport& report, const std::string& scene) {
   std::string html = "<table class=\"cells\"><tr><th>level</th>";
   for (const std::string& arm : report.arms) html += "<th>" + HtmlEscape(arm) + "</th>";
   html += "<th>failed runs</th></tr>";
@@ -288,7 +288,7 @@ std::string CampaignReportHtml(const CampaignReport& report, const std::vector<S
       "</h2>";
   for (const std::string& scene : scenes) {
     html += "<h3>" + HtmlEscape(scene == CampaignReport::kAllScenes ? "All scenes" : scene) +
-            "</h3>" + SuccessTable(report, scene);
+            "</h3>" + SuccessCellsTable(report, scene);
   }
   html += "</section>" + SplatSection(report) +
           "<section id=\"runs\"><h2>Runs per scene</h2><p>Each arm's mean rotation error after "
