@@ -26,7 +26,9 @@
 
 namespace raytime {
 
-inline const std::vector<std::string> kSplatTrainers = {"gsplat", "inria", "nerfstudio"};
+// OpenSplat writes no metrics of its own: raytime renders and scores its .ply (splat_trainer.h).
+inline const std::vector<std::string> kSplatTrainers = {"gsplat", "inria", "nerfstudio",
+                                                        "opensplat"};
 
 // A trainer's own numbers for its held-out views; NaN / -1 where it does not report one.
 struct TrainerMetrics {

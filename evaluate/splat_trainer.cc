@@ -2,26 +2,71 @@
 
 #include <signal.h>
 
+#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/interrupt.h"
 #include "core/process.h"
 #include "core/progress.h"
 #include "core/timing.h"
+#include "evaluate/held_out_render.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
 
-const std::vector<std::string> kPlaceholders = {"data_dir", "result_dir", "pose_set"};
+const std::vector<std::string> kPlaceholders = {"data_dir", "result_dir", "pose_set", "train_dir",
+                                                "steps",    "downscale",  "seed",     "binary"};
+
+// Where a run's train-only view of the export goes (RESULT/train_view, held_out_render.h).
+std::string TrainViewDir(const std::string& result_dir) {
+  return (fs::path(result_dir) / "train_view").string();
+}
+
+// The splats OpenSplat's default command writes (-o).
+std::string OpenSplatPly(const std::string& result_dir) {
+  return (fs::path(result_dir) / "splat.ply").string();
+}
+
+std::string NumberText(double value) {
+  std::ostringstream text;
+  text << value;
+  return text.str();
+}
+
+// `name` looked up on PATH as a shell would (a name with a '/' is taken as it is); "" when absent.
+std::string FindExecutable(const std::string& name) {
+  if (name.find('/') != std::string::npos) return fs::exists(name) ? name : std::string();
+  const char* path = std::getenv("PATH");
+  std::istringstream dirs(path == nullptr ? "" : path);
+  std::string dir;
+  while (std::getline(dirs, dir, ':')) {
+    const fs::path candidate = fs::path(dir.empty() ? "." : dir) / name;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
+  }
+  return std::string();
+}
+
+// OpenSplat's build as scripts/install_opensplat.sh records it: BIN/../share/opensplat/commit
+// beside BIN/opensplat; "" when the binary was installed otherwise.
+std::string OpenSplatCommit(const std::string& binary) {
+  const std::string found = FindExecutable(binary.empty() ? "opensplat" : binary);
+  if (found.empty()) return std::string();
+  std::ifstream in(fs::path(found).parent_path().parent_path() / "share" / "opensplat" / "commit");
+  std::string commit;
+  std::getline(in, commit);
+  return commit;
+}
 
 // Seconds a stopped trainer gets to end on SIGTERM before its group is killed.
 constexpr double kStopGrace_s = 10.0;
@@ -183,6 +228,31 @@ void RunCommand(const SplatTrainerOptions& options, const SplatJob& job, SplatRu
   }
 }
 
+// OpenSplat leaves RESULT/splat.ply and no metrics: raytime's own render of every held-out view is
+// the score (RESULT/renders, RESULT/gt), at the trained resolution.
+void ScoreOpenSplat(const SplatTrainerOptions& options, SplatRunSummary* summary) {
+  const std::string ply = OpenSplatPly(summary->result_dir);
+  if (!fs::exists(ply)) {
+    summary->status = "failed";
+    summary->error = "the command succeeded but wrote no " + ply;
+    return;
+  }
+  summary->metrics_file = ply;
+  summary->step = options.steps;
+  try {
+    HeldOutRenderOptions render;
+    render.downscale = options.downscale;
+    const HeldOutScore score =
+        RenderAndScoreHeldOutViews(ply, summary->data_dir, summary->result_dir, render);
+    summary->raytime_images = score.num_images;
+    summary->raytime_psnr = score.psnr;
+    summary->raytime_ssim = score.ssim;
+  } catch (const InputError& e) {
+    summary->status = "failed";
+    summary->error = std::string("its splats could not be rendered and scored: ") + e.what();
+  }
+}
+
 }  // namespace
 
 void SplatTrainerOptions::CheckRelations(const Requirement& require) const {
@@ -209,6 +279,12 @@ std::string DefaultSplatCommand(const std::string& trainer) {
     return "python train.py -s {data_dir} -m {result_dir} --eval && python render.py -m "
            "{result_dir} && python metrics.py -m {result_dir}";
   }
+  if (trainer == "opensplat") {
+    // The train-only view (the held-out frames never reach it) with the export's images;
+    // --keep-crs: the .ply in the export's frame, where raytime renders the held-out cameras.
+    return "{binary} {train_dir} --colmap-image-path {data_dir}/images -o {result_dir}/splat.ply "
+           "--keep-crs -n {steps} -d {downscale}";
+  }
   if (trainer == "nerfstudio") {
     // A fixed experiment name and timestamp put config.yml where ns-eval can be told; tensorboard
     // instead of the default visualizer so training ends without a viewer or a login.
@@ -217,7 +293,7 @@ std::string DefaultSplatCommand(const std::string& trainer) {
            "{result_dir}/raytime/splatfacto/run/config.yml --output-path {result_dir}/eval.json "
            "--render-output-path {result_dir}/eval_renders";
   }
-  throw InputError("unknown trainer '" + trainer + "' (gsplat, inria, nerfstudio)");
+  throw InputError("unknown trainer '" + trainer + "' (gsplat, inria, nerfstudio, opensplat)");
 }
 
 std::string ExpandSplatCommand(const SplatTrainerOptions& options, const SplatJob& job) {
@@ -226,7 +302,12 @@ std::string ExpandSplatCommand(const SplatTrainerOptions& options, const SplatJo
   const std::map<std::string, std::string> values = {
       {"data_dir", ShellWord(Absolute(job.data_dir))},
       {"result_dir", ShellWord(Absolute(job.result_dir))},
-      {"pose_set", ShellWord(job.pose_set)}};
+      {"pose_set", ShellWord(job.pose_set)},
+      {"train_dir", ShellWord(TrainViewDir(Absolute(job.result_dir)))},
+      {"steps", std::to_string(options.steps)},
+      {"downscale", NumberText(options.downscale)},
+      {"seed", std::to_string(options.seed)},
+      {"binary", ShellWord(options.binary.empty() ? std::string("opensplat") : options.binary)}};
   std::string expanded;
   size_t pos = 0;
   while (pos < command.size()) {
@@ -266,7 +347,24 @@ SplatRunSummary RunSplatTrainer(const SplatTrainerOptions& options, const SplatJ
     fs::remove_all(summary.result_dir);
     fs::create_directories(summary.result_dir);
     if (!job.log_path.empty()) fs::create_directories(fs::path(job.log_path).parent_path());
+    const std::string command =
+        options.command.empty() ? DefaultSplatCommand(options.trainer) : options.command;
+    if (command.find("{train_dir}") != std::string::npos) {
+      try {
+        WriteTrainOnlyView(summary.data_dir, TrainViewDir(summary.result_dir));
+      } catch (const InputError& e) {
+        summary.status = "failed";
+        summary.error = std::string("no train-only view of the export: ") + e.what();
+        return summary;
+      }
+    }
     RunCommand(options, job, &summary);
+  }
+  if (options.trainer == "opensplat") {
+    summary.trainer_version = OpenSplatCommit(options.binary);
+    if (summary.ok()) ScoreOpenSplat(options, &summary);
+    if (!summary.ok()) summary.log_tail = LogTail(job.log_path);
+    return summary;
   }
 
   if (summary.ok()) {

@@ -1,11 +1,15 @@
 // The 3DGS trainer hook (SPEC §7; paper §4.5, Table 4): an external trainer (gsplat, the Inria
-// reference code, nerfstudio's splatfacto) run by a shell command on one trainer-ready export of a
-// pose set, its held-out metrics read back (evaluate/splat_metrics.h) and its held-out renders
-// scored by raytime itself (evaluate/image_metrics.h).
+// reference code, nerfstudio's splatfacto, OpenSplat) run by a shell command on one trainer-ready
+// export of a pose set, its held-out metrics read back (evaluate/splat_metrics.h) and its held-out
+// renders scored by raytime itself (evaluate/image_metrics.h). OpenSplat (issue 33) trains on a
+// train-only view of the export and writes only its .ply: raytime renders the held-out cameras
+// from it (evaluate/held_out_render.h) and scores those.
 //
 // The command is a template: {data_dir} (the export, WORKDIR/3dgs/<pose set>), {result_dir} (the
-// trainer's output folder, emptied first) and {pose_set} are replaced by their values, absolute
-// and shell-quoted where needed (write them unquoted). It runs under /bin/sh in its own process
+// trainer's output folder, emptied first), {pose_set}, {train_dir} (RESULT/train_view: the
+// export's model without its held-out images, written when the command uses it), {steps},
+// {downscale}, {seed} and {binary} are replaced by their values, absolute and shell-quoted where
+// needed (write them unquoted). It runs under /bin/sh in its own process
 // group, with stdout and stderr in a log file; a timeout or an interruption stops the whole group
 // (a trainer's data-loader workers included). A non-zero exit, a timeout or a metrics file that
 // is missing or does not read is a failed run, reported with the log's last lines, never a
@@ -32,19 +36,41 @@ struct SplatTrainerOptions {
   std::string working_dir;
   // Seconds before the trainer is stopped and the run counted as failed; 0: no limit.
   double timeout_s = 0.0;
+  // Training steps ({steps}; OpenSplat's -n). 30000: the paper's protocol (§4.5); a CPU protocol
+  // takes far fewer (configs/splat_benchmark.yaml).
+  int steps = 30000;
+  // Image downscale factor ({downscale}; OpenSplat's -d), and the size raytime renders the
+  // held-out views at (photo size / downscale).
+  double downscale = 1.0;
+  // {seed}, for commands whose trainer takes one (OpenSplat 1.1.5 has no seed option: its runs
+  // differ only by their thread scheduling).
+  int seed = 0;
+  // {binary}: the trainer's executable in the default command (opensplat: found on PATH when
+  // empty; scripts/install_opensplat.sh puts it there).
+  std::string binary;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("trainer", trainer,
-      "3DGS trainer whose output layout and metrics files are read (gsplat, inria, nerfstudio)",
+      "3DGS trainer whose output layout and metrics files are read (gsplat, inria, nerfstudio; "
+      "opensplat: trained on the training frames, scored by raytime's own render)",
       OneOf(kSplatTrainers));
     v("command", command,
-      "Shell command per pose set; {data_dir}, {result_dir}, {pose_set} are replaced (unquoted); "
-      "empty: the trainer's usual command (README, 'Train 3DGS on the result')");
+      "Shell command per pose set; {data_dir}, {result_dir}, {pose_set}, {train_dir}, {steps}, "
+      "{downscale}, {seed}, {binary} are replaced (unquoted); empty: the trainer's usual command "
+      "(README, 'Train 3DGS on the result')");
     v("working_dir", working_dir,
       "Directory the command runs in, e.g. the trainer's checkout (empty: raytime's)");
     v("timeout_s", timeout_s, "Stop a trainer after this many seconds, a failure (0: no limit)",
       NonNegative());
+    v("steps", steps, "Training steps, the command's {steps} (opensplat: -n)", Positive());
+    v("downscale", downscale,
+      "Image downscale factor, the command's {downscale} (opensplat: -d); held-out views are "
+      "rendered at the photos' size over it",
+      AtLeast(1.0));
+    v("seed", seed, "The command's {seed}, for trainers that take one", NonNegative());
+    v("binary", binary,
+      "The trainer's executable in the default command, {binary} (empty: 'opensplat' on PATH)");
   }
   // A "{name}" that is not a placeholder is a typo (shell "${name}" is left alone).
   void CheckRelations(const Requirement& require) const;
@@ -81,6 +107,9 @@ struct SplatRunSummary {
   int signal = 0;
   bool timed_out = false;
   std::string log_tail;  // the log's last lines when the run failed
+  // The trainer's build: OpenSplat's commit (scripts/install_opensplat.sh records it beside the
+  // binary), "" when unknown.
+  std::string trainer_version;
   // The trainer's own numbers (NaN when absent; JSON null).
   std::string metrics_file;
   int64_t step = -1;
@@ -99,9 +128,9 @@ struct SplatRunSummary {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(SplatRunSummary, pose_set, trainer, status, error, reused,
                                    command, data_dir, result_dir, log_path, seconds, exit_code,
-                                   signal, timed_out, log_tail, metrics_file, step, psnr, ssim,
-                                   lpips, num_gaussians, raytime_images, raytime_psnr, raytime_ssim,
-                                   raytime_note)
+                                   signal, timed_out, log_tail, trainer_version, metrics_file, step,
+                                   psnr, ssim, lpips, num_gaussians, raytime_images, raytime_psnr,
+                                   raytime_ssim, raytime_note)
 
 // Runs the trainer on one export (or, with reuse_result, only reads its earlier result) and
 // scores it. A failed trainer is a summary with status "failed", not an exception; InputError

@@ -107,8 +107,8 @@ class SplatStage : public StageWithOptions<SplatStageOptions> {
  public:
   std::string type() const override { return "splat"; }
   std::string description() const override {
-    return "Train 3DGS (gsplat, Inria, nerfstudio) per pose set on its export; read held-out "
-           "PSNR/SSIM/LPIPS";
+    return "Train 3DGS (gsplat, Inria, nerfstudio, OpenSplat) per pose set on its export; read "
+           "or render and score the held-out views (PSNR/SSIM/LPIPS)";
   }
   // The exports are written by `export` from these pose sets: a new pose set or new images
   // change the key. The exports' contents are checked per pose set (Fingerprint).

@@ -1,0 +1,105 @@
+#include "evaluate/held_out_render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+
+#include "core/error.h"
+#include "formats/colmap_model.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+
+std::vector<std::string> HeldOutNames(const std::string& data_dir) {
+  const fs::path path = fs::path(data_dir) / "test.txt";
+  std::ifstream in(path);
+  if (!in) ThrowInput(path.string(), 0, "no held-out list (the 3dgs export writes test.txt)");
+  std::vector<std::string> names;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!line.empty()) names.push_back(line);
+  }
+  return names;
+}
+
+int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir) {
+  const std::vector<std::string> held_out = HeldOutNames(data_dir);
+  const std::set<std::string> test(held_out.begin(), held_out.end());
+  ColmapModel model = ReadColmapModel((fs::path(data_dir) / "sparse" / "0").string());
+  for (auto it = model.images.begin(); it != model.images.end();) {
+    it = test.count(it->second.name) ? model.images.erase(it) : std::next(it);
+  }
+  if (model.images.empty()) {
+    ThrowInput((fs::path(data_dir) / "train.txt").string(), 0,
+               "the export holds no training image: nothing to train on");
+  }
+  const fs::path sparse = fs::path(view_dir) / "sparse" / "0";
+  fs::create_directories(sparse);
+  WriteColmapModelBinary(model, sparse.string());
+  return static_cast<int>(model.images.size());
+}
+
+HeldOutScore RenderAndScoreHeldOutViews(const std::string& ply, const std::string& data_dir,
+                                        const std::string& out_dir,
+                                        const HeldOutRenderOptions& options) {
+  if (!(options.downscale >= 1.0)) {
+    throw std::invalid_argument("RenderAndScoreHeldOutViews: downscale below 1");
+  }
+  const GaussianSplats splats = ReadGaussianSplatPly(ply);
+  const fs::path model_dir = fs::path(data_dir) / "sparse" / "0";
+  const ColmapModel model = ReadColmapModel(model_dir.string());
+  ImageSet images;
+  PoseSet poses;
+  FromColmapModel(model, &images, &poses);
+  const fs::path renders = fs::path(out_dir) / "renders", gt = fs::path(out_dir) / "gt";
+  fs::create_directories(renders);
+  fs::create_directories(gt);
+  std::vector<HeldOutView> views;
+  for (const std::string& name : HeldOutNames(data_dir)) {
+    const int index = images.Find(name);
+    if (index < 0 || !poses.Has(name)) {
+      ThrowInput(model_dir.string(), 0, "held-out image '" + name + "' (test.txt) has no camera");
+    }
+    const fs::path photo_path = fs::path(data_dir) / "images" / name;
+    const cv::Mat photo = cv::imread(photo_path.string(), cv::IMREAD_COLOR);
+    if (photo.empty()) ThrowInput(photo_path.string(), 0, "cannot read the held-out photo");
+    CameraIntrinsics camera = images.cameras.at(images.images[index].camera_index);
+    const double d = options.downscale;
+    const int width = static_cast<int>(std::floor(photo.cols / d));
+    const int height = static_cast<int>(std::floor(photo.rows / d));
+    // The pixel grid shrinks about the top-left corner: in the OpenCV convention a centre at c
+    // moves to (c + 0.5) / d − 0.5.
+    camera.params[kFx] /= d;
+    camera.params[kFy] /= d;
+    camera.params[kCx] = (camera.params[kCx] + 0.5) / d - 0.5;
+    camera.params[kCy] = (camera.params[kCy] + 0.5) / d - 0.5;
+    camera.width = width;
+    camera.height = height;
+    cv::Mat reference = photo;
+    if (width != photo.cols || height != photo.rows) {
+      cv::resize(photo, reference, cv::Size(width, height), 0, 0, cv::INTER_AREA);
+    }
+    const cv::Mat render =
+        RenderGaussianSplats(splats, camera, poses.world_from_cam.at(name), options.render);
+    cv::Mat render8;
+    render.convertTo(render8, CV_8UC3, 255.0);
+    // One flat file per image, even for names in subfolders ("rgb/1.jpg" -> "rgb_1.png").
+    std::string stem = fs::path(name).replace_extension(".png").generic_string();
+    std::replace(stem.begin(), stem.end(), '/', '_');
+    if (!cv::imwrite((renders / stem).string(), render8) ||
+        !cv::imwrite((gt / stem).string(), reference)) {
+      ThrowInput(out_dir, 0, "cannot write the held-out renders");
+    }
+    views.push_back({(renders / stem).string(), (gt / stem).string()});
+  }
+  if (views.empty()) ThrowInput((fs::path(data_dir) / "test.txt").string(), 0, "no held-out image");
+  return ScoreHeldOutViews(views);
+}
+
+}  // namespace raytime

@@ -1,0 +1,57 @@
+#!/usr/bin/env bash
+# Builds and installs OpenSplat (github.com/pierotofy/OpenSplat, AGPL-3.0), the 3DGS trainer the
+# splat stage runs with `trainer: opensplat` (issue 33), from Debian 12's packages: libtorch (CPU),
+# nanoflann, cxxopts, glm. No source patch, no download besides the source itself.
+#
+#   scripts/install_opensplat.sh [SOURCE_DIR]
+#
+# SOURCE_DIR: an OpenSplat checkout to build (offline). Without it, the pinned commit below is
+# cloned (needs the network). The binary goes to $PREFIX/bin/opensplat (PREFIX: /usr/local by
+# default) and the commit it was built from to $PREFIX/share/opensplat/commit, which the splat
+# stage records in its summary. CPU build; with CUDA's nvcc on PATH and a CUDA libtorch, set
+# GPU_RUNTIME=CUDA for the GPU build (same flags otherwise). Build jobs: JOBS (default: all cores).
+set -euo pipefail
+readonly PINNED_COMMIT=15b7e80016bb25107f07956b5682231f226f62b9  # 1.1.5, 2025-11-20
+readonly REPOSITORY=https://github.com/pierotofy/OpenSplat
+PREFIX=${PREFIX:-/usr/local}
+GPU_RUNTIME=${GPU_RUNTIME:-CPU}
+JOBS=${JOBS:-$(nproc)}
+
+packages=(build-essential cmake git libtorch-dev libnanoflann-dev libcxxopts-dev libglm-dev
+          libopencv-dev)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "install_opensplat: installing ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+if [ $# -ge 1 ]; then
+  source_dir=$(cd "$1" && pwd)
+  [ -f "$source_dir/opensplat.cpp" ] || { echo "install_opensplat: $source_dir is no OpenSplat source (no opensplat.cpp)" >&2; exit 2; }
+  commit=$(git -C "$source_dir" rev-parse HEAD 2>/dev/null || echo "unknown ($source_dir, not a git checkout)")
+else
+  source_dir="$work/OpenSplat"
+  git clone -q "$REPOSITORY" "$source_dir"
+  git -C "$source_dir" checkout -q "$PINNED_COMMIT"
+  commit=$PINNED_COMMIT
+fi
+echo "install_opensplat: building $source_dir at $commit ($GPU_RUNTIME, $JOBS jobs)"
+# FETCHCONTENT_*: the project fetches its dependencies unless told to find the installed ones.
+cmake -S "$source_dir" -B "$work/build" -DGPU_RUNTIME="$GPU_RUNTIME" -DCMAKE_BUILD_TYPE=Release \
+  -DFETCHCONTENT_FULLY_DISCONNECTED=ON -DFETCHCONTENT_TRY_FIND_PACKAGE_MODE=ALWAYS \
+  -DCMAKE_PREFIX_PATH=/usr/lib/x86_64-linux-gnu/cmake > "$work/cmake.log" 2>&1 ||
+  { cat "$work/cmake.log" >&2; exit 1; }
+cmake --build "$work/build" --target opensplat -j "$JOBS"
+install -d "$PREFIX/bin" "$PREFIX/share/opensplat"
+install -m 755 "$work/build/opensplat" "$PREFIX/bin/opensplat"
+echo "$commit" > "$PREFIX/share/opensplat/commit"
+echo "install_opensplat: $PREFIX/bin/opensplat ($("$PREFIX/bin/opensplat" --version 2>&1 | head -1)), commit $commit"
