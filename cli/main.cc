@@ -259,6 +259,33 @@ struct ResizeSceneCommand {
   }
 };
 
+struct ScoreSplatCommand {
+  std::string ply, data_dir, out_dir, trainer = "opensplat";
+  double downscale = 1.0;
+  CLI::App* command = nullptr;
+
+  void Add(CLI::App& app) {
+    command = app.add_subcommand(
+        "score-splat",
+        "Render a trained 3DGS .ply at a 3dgs export's held-out cameras and score them (PSNR, "
+        "SSIM)");
+    command->add_option("--ply", ply, "The trainer's .ply (standard 3DGS fields)")->required();
+    command->add_option("--data", data_dir, "The 3dgs export (WORKDIR/3dgs/<pose set>)")
+        ->required();
+    command->add_option("--out", out_dir, "Where renders/ and gt/ are written")->required();
+    command
+        ->add_option("--trainer", trainer,
+                     "Rasterize as this trainer does (gsplat, inria, nerfstudio, opensplat)")
+        ->capture_default_str();
+    command
+        ->add_option("--downscale", downscale,
+                     "The trainer's image downscale factor: render at photo size / downscale")
+        ->check(CLI::Range(1.0, 1e6))
+        ->capture_default_str();
+  }
+  int Execute() const { return RunScoreSplatCommand(ply, data_dir, out_dir, trainer, downscale); }
+};
+
 // `raytime <stage>` for every stage type.
 struct StageCommands {
   std::map<std::string, std::unique_ptr<Stage>> stages;
@@ -299,6 +326,8 @@ int Main(int argc, char** argv) {
   report.Add(app);
   ResizeSceneCommand resize;
   resize.Add(app);
+  ScoreSplatCommand score_splat;
+  score_splat.Add(app);
 
   CLI11_PARSE(app, argc, argv);
   // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
@@ -313,6 +342,7 @@ int Main(int argc, char** argv) {
   if (evaluate_files.Parsed()) return evaluate_files.Execute();
   if (report.command->parsed()) return report.Execute();
   if (resize.command->parsed()) return resize.Execute();
+  if (score_splat.command->parsed()) return score_splat.Execute();
   return stages.Execute(app);
 }
 

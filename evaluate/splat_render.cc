@@ -31,7 +31,6 @@ constexpr float kSh3[] = {-0.5900435899266435f, 2.890611442640554f,   -0.4570457
 
 constexpr int kTile = 16;
 constexpr float kLowPassPx2 = 0.3f;      // added to the 2D covariance's diagonal
-constexpr float kMaxAlpha = 0.99f;       // one Gaussian never hides what is behind it fully
 constexpr float kMinAlpha = 1.0f / 255;  // contributions below one grey level are skipped
 constexpr float kMinTransmittance = 1e-4f;
 
@@ -273,13 +272,15 @@ struct ProjectedSplat {
   float opacity = 0.0f;
   float depth = 0.0f;
   int radius = 0;  // pixels, 3σ of the major axis
+  // clip_to_box: the pixels it may reach, [x0, x1) × [y0, y1).
+  int x0 = 0, x1 = 0, y0 = 0, y1 = 0;
 };
 
 // EWA projection of Gaussian g (3DGS's preprocess): false when it is culled (behind the near
 // plane, degenerate, or reaching no pixel).
 bool ProjectSplat(const GaussianSplats& splats, size_t g, const Eigen::Matrix3f& cam_from_world,
                   const Eigen::Vector3f& centre, const CameraIntrinsics& camera, float near,
-                  ProjectedSplat* out) {
+                  bool centred_principal_point, ProjectedSplat* out) {
   const Eigen::Vector3f t = cam_from_world * (splats.means[g] - centre);
   if (t.z() <= near) return false;
   const float fx = static_cast<float>(camera.fx()), fy = static_cast<float>(camera.fy());
@@ -306,8 +307,11 @@ bool ProjectSplat(const GaussianSplats& splats, size_t g, const Eigen::Matrix3f&
   const float mid = 0.5f * (covariance(0, 0) + covariance(1, 1));
   const float largest = mid + std::sqrt(std::max(0.1f, mid * mid - det));
   out->radius = static_cast<int>(std::ceil(3.0f * std::sqrt(largest)));
-  out->centre = Eigen::Vector2f(fx * t.x() / t.z() + static_cast<float>(camera.cx()),
-                                fy * t.y() / t.z() + static_cast<float>(camera.cy()));
+  const float cx =
+      centred_principal_point ? 0.5f * (camera.width - 1) : static_cast<float>(camera.cx());
+  const float cy =
+      centred_principal_point ? 0.5f * (camera.height - 1) : static_cast<float>(camera.cy());
+  out->centre = Eigen::Vector2f(fx * t.x() / t.z() + cx, fy * t.y() / t.z() + cy);
   if (out->centre.x() + out->radius < 0 || out->centre.y() + out->radius < 0 ||
       out->centre.x() - out->radius > camera.width - 1 ||
       out->centre.y() - out->radius > camera.height - 1) {
@@ -319,10 +323,29 @@ bool ProjectSplat(const GaussianSplats& splats, size_t g, const Eigen::Matrix3f&
           .max(0.0f);
   out->opacity = 1.0f / (1.0f + std::exp(-splats.opacity_logits[g]));
   out->depth = t.z();
+  const float box_x = 3.0f * std::sqrt(covariance(0, 0)),
+              box_y = 3.0f * std::sqrt(covariance(1, 1));
+  out->x0 = static_cast<int>(std::floor(out->centre.x() - box_x)) - 2;
+  out->x1 = static_cast<int>(std::ceil(out->centre.x() + box_x)) + 2;
+  out->y0 = static_cast<int>(std::floor(out->centre.y() - box_y)) - 2;
+  out->y1 = static_cast<int>(std::ceil(out->centre.y() + box_y)) + 2;
   return true;
 }
 
 }  // namespace
+
+SplatRenderOptions SplatRenderOptionsOf(const std::string& trainer) {
+  SplatRenderOptions options;
+  if (trainer == "inria") {
+    options.max_alpha = 0.99f;
+    options.centred_principal_point = true;
+  } else if (trainer == "opensplat") {
+    options.background = Eigen::Vector3f(0.6130f, 0.0101f, 0.3984f);
+    options.centred_principal_point = true;
+    options.clip_to_box = true;
+  }
+  return options;
+}
 
 cv::Mat RenderGaussianSplats(const GaussianSplats& splats, const CameraIntrinsics& camera,
                              const Rigid3& world_from_cam, const SplatRenderOptions& options) {
@@ -337,7 +360,7 @@ cv::Mat RenderGaussianSplats(const GaussianSplats& splats, const CameraIntrinsic
   for (size_t g = 0; g < splats.size(); ++g) {
     ProjectedSplat p;
     if (ProjectSplat(splats, g, cam_from_world, centre, camera, static_cast<float>(options.near),
-                     &p)) {
+                     options.centred_principal_point, &p)) {
       projected.push_back(p);
     }
   }
@@ -372,11 +395,12 @@ cv::Mat RenderGaussianSplats(const GaussianSplats& splats, const CameraIntrinsic
         float transmittance = 1.0f;
         for (const int k : tile_lists[tile]) {
           const ProjectedSplat& p = projected[k];
+          if (options.clip_to_box && (u < p.x0 || u >= p.x1 || v < p.y0 || v >= p.y1)) continue;
           const float dx = p.centre.x() - u, dy = p.centre.y() - v;
           const float power =
               -0.5f * (p.conic.x() * dx * dx + p.conic.z() * dy * dy) - p.conic.y() * dx * dy;
           if (power > 0.0f) continue;
-          const float alpha = std::min(kMaxAlpha, p.opacity * std::exp(power));
+          const float alpha = std::min(options.max_alpha, p.opacity * std::exp(power));
           if (alpha < kMinAlpha) continue;
           const float next = transmittance * (1.0f - alpha);
           if (next < kMinTransmittance) break;

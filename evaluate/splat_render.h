@@ -6,8 +6,10 @@
 // splatting) plus a 0.3 px² low-pass, its colour from its spherical harmonics up to the degree
 // stored (evaluated in the direction from the camera centre), its opacity a sigmoid; per 16×16
 // tile the Gaussians that reach it, front to back by depth, alpha-composited
-// (α = min(0.99, o·exp(−½ dᵀ Σ⁻¹ d)), skipped below 1/255, stopping when the transmittance falls
-// below 1e-4) over a background colour.
+// (α = min(max_alpha, o·exp(−½ dᵀ Σ⁻¹ d)), skipped below 1/255, stopping when the transmittance
+// falls below 1e-4) over a background colour. What differs between the trainers' rasterizers (the
+// α cap, the background, whether the principal point is used) is an option, so a model is
+// rendered as its trainer renders it: SplatRenderOptionsOf(trainer).
 #pragma once
 
 #include <Eigen/Core>
@@ -47,6 +49,16 @@ void WriteGaussianSplatPly(const GaussianSplats& splats, const std::string& path
 
 struct SplatRenderOptions {
   Eigen::Vector3f background = Eigen::Vector3f::Zero();  // RGB in [0, 1]
+  // The cap on one Gaussian's α: 0.999 in gsplat and OpenSplat, 0.99 in the Inria code.
+  float max_alpha = 0.999f;
+  // Project with the principal point at the image centre, (w − 1) / 2, whatever the camera's:
+  // the Inria code and OpenSplat's CPU rasterizer build their projection from the field of view
+  // alone, so a model they trained is rendered so.
+  bool centred_principal_point = false;
+  // Draw each Gaussian only inside its axis-aligned box of ±3σ (the 2D covariance's diagonal) and
+  // 2 px more, as OpenSplat's CPU rasterizer does; false: wherever its α reaches 1/255 in the tiles
+  // its 3σ radius touches (gsplat, the Inria code, OpenSplat on a GPU).
+  bool clip_to_box = false;
   // Gaussians nearer than this to the camera plane are not drawn (the rasterizers' near plane;
   // gsplat and OpenSplat: 0.01), length units of the scene.
   double near = 0.01;
@@ -59,6 +71,12 @@ struct SplatRenderOptions {
 // cx − 0.5; its distortion is not applied: render undistorted views) at `world_from_cam` (camera
 // axes x right, y down, z forward). Returns CV_32FC3 BGR in [0, 1] (channels ordered as cv::imread
 // gives a photo, so Psnr and Ssim compare them directly), `camera.width` × `camera.height`.
+// How `trainer` (kSplatTrainers) rasterizes: gsplat black background, α cap 0.999, principal point
+// used; inria black, 0.99, centred; opensplat nerfstudio's fixed background (0.6130, 0.0101,
+// 0.3984), 0.999, centred, clipped to the box (its CPU path; its CUDA path is gsplat's);
+// nerfstudio (splatfacto: gsplat) as gsplat. Unknown names get the defaults.
+SplatRenderOptions SplatRenderOptionsOf(const std::string& trainer);
+
 cv::Mat RenderGaussianSplats(const GaussianSplats& splats, const CameraIntrinsics& camera,
                              const Rigid3& world_from_cam,
                              const SplatRenderOptions& options = SplatRenderOptions());

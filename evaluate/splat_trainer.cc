@@ -242,6 +242,7 @@ void ScoreOpenSplat(const SplatTrainerOptions& options, SplatRunSummary* summary
   try {
     HeldOutRenderOptions render;
     render.downscale = options.downscale;
+    render.render = SplatRenderOptionsOf("opensplat");
     const HeldOutScore score =
         RenderAndScoreHeldOutViews(ply, summary->data_dir, summary->result_dir, render);
     summary->raytime_images = score.num_images;

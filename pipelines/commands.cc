@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -13,6 +14,8 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/process.h"
+#include "core/timing.h"
+#include "evaluate/held_out_render.h"
 #include "evaluate/pose_errors.h"
 #include "formats/dataset.h"
 #include "pipelines/campaign_page.h"
@@ -93,6 +96,23 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   for (const auto& name : errors.only_in_ground_truth) {
     std::printf("not scored: %s is missing from the estimate\n", name.c_str());
   }
+  return 0;
+}
+
+int RunScoreSplatCommand(const std::string& ply, const std::string& data_dir,
+                         const std::string& out_dir, const std::string& trainer, double downscale) {
+  HeldOutRenderOptions options;
+  options.downscale = downscale;
+  options.render = SplatRenderOptionsOf(trainer);
+  const auto start = std::chrono::steady_clock::now();
+  const HeldOutScore score = RenderAndScoreHeldOutViews(ply, data_dir, out_dir, options);
+  spdlog::info(fmt::format("score-splat: {} held-out view(s) rendered in {:.2f} s into {}/renders",
+                           score.num_images, SecondsSince(start), out_dir));
+  std::printf(
+      "%s\n",
+      nlohmann::json({{"num_images", score.num_images}, {"psnr", score.psnr}, {"ssim", score.ssim}})
+          .dump()
+          .c_str());
   return 0;
 }
 

@@ -22,4 +22,11 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
 int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
                      const CampaignReportOptions& options);
 
+// `raytime score-splat --ply P --data D --out O`: renders the held-out cameras of the 3dgs export D
+// (test.txt) from any trainer's .ply as that trainer rasterizes (SplatRenderOptionsOf), writes
+// O/renders and O/gt, prints {"num_images", "psnr", "ssim"} on stdout (issue 33). Returns the exit
+// status.
+int RunScoreSplatCommand(const std::string& ply, const std::string& data_dir,
+                         const std::string& out_dir, const std::string& trainer, double downscale);
+
 }  // namespace raytime

@@ -66,7 +66,9 @@ class OpenSplatHookTest : public ::testing::Test {
       poses.world_from_cam[name] = pose;
       images.images.push_back({name, camera.width, camera.height, 0});
       cv::Mat photo;
-      RenderGaussianSplats(splats_, camera, pose).convertTo(photo, CV_8UC3, 255.0);
+      // As OpenSplat draws them (its background, the principal point at the centre).
+      RenderGaussianSplats(splats_, camera, pose, SplatRenderOptionsOf("opensplat"))
+          .convertTo(photo, CV_8UC3, 255.0);
       cv::imwrite((data / "images" / name).string(), photo);
       (i % 4 == 0 ? test : train) << name << "\n";
     }

@@ -56,7 +56,7 @@ TEST(SplatRenderTest, OneGaussianIsItsEwaFootprintInItsColour) {
   for (int v = 0; v < 64; ++v) {
     for (int u = 0; u < 64; ++u) {
       const double r2 = std::pow(u - 31.5, 2) + std::pow(v - 31.5, 2);
-      double alpha = std::min(0.99, opacity * std::exp(-0.5 * r2 / variance));
+      double alpha = std::min(0.999, opacity * std::exp(-0.5 * r2 / variance));
       if (alpha < 1.0 / 255) alpha = 0.0;
       const cv::Vec3f bgr = image.at<cv::Vec3f>(v, u);
       for (int c = 0; c < 3; ++c) {
@@ -65,6 +65,18 @@ TEST(SplatRenderTest, OneGaussianIsItsEwaFootprintInItsColour) {
     }
   }
   EXPECT_LT(largest_error, 2e-6);
+
+  // Rasterizers that ignore the principal point (the Inria code, OpenSplat on the CPU) put it at
+  // the centre: a camera whose cx, cy are off centre renders as the centred one.
+  CameraIntrinsics off_centre = camera;
+  off_centre.params[kCx] += 3.0;
+  off_centre.params[kCy] -= 2.0;
+  SplatRenderOptions centred;
+  centred.centred_principal_point = true;
+  EXPECT_EQ(
+      cv::norm(RenderGaussianSplats(splats, off_centre, Rigid3(), centred), image, cv::NORM_INF),
+      0.0);
+  EXPECT_GT(cv::norm(RenderGaussianSplats(splats, off_centre, Rigid3()), image, cv::NORM_INF), 0.1);
 }
 
 TEST(SplatRenderTest, TheNearerGaussianHidesTheFartherWhateverTheirOrder) {
@@ -82,8 +94,8 @@ TEST(SplatRenderTest, TheNearerGaussianHidesTheFartherWhateverTheirOrder) {
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
   // At the centre: red at α1, green through (1 − α1), the background through what is left.
   const double opacity = 1.0 / (1.0 + std::exp(-6.0));
-  const double alpha_red = std::min(0.99, opacity * std::exp(-0.5 * 0.5 / (16.0 + 0.3)));
-  const double alpha_green = std::min(0.99, opacity * std::exp(-0.5 * 0.5 / (16.0 + 0.3)));
+  const double alpha_red = std::min(0.999, opacity * std::exp(-0.5 * 0.5 / (16.0 + 0.3)));
+  const double alpha_green = std::min(0.999, opacity * std::exp(-0.5 * 0.5 / (16.0 + 0.3)));
   const cv::Vec3f centre = a.at<cv::Vec3f>(23, 23);  // 0.5 px from the projection on each axis
   EXPECT_NEAR(centre[2], alpha_red, 1e-5);
   EXPECT_NEAR(centre[1], (1 - alpha_red) * alpha_green, 1e-5);
