@@ -45,13 +45,12 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir)
   return static_cast<int>(model.images.size());
 }
 
-HeldOutScore RenderAndScoreHeldOutViews(const std::string& ply, const std::string& data_dir,
+HeldOutScore RenderAndScoreHeldOutViews(const GaussianSplats& splats, const std::string& data_dir,
                                         const std::string& out_dir,
                                         const HeldOutRenderOptions& options) {
   if (!(options.downscale >= 1.0)) {
     throw std::invalid_argument("RenderAndScoreHeldOutViews: downscale below 1");
   }
-  const GaussianSplats splats = ReadGaussianSplatPly(ply);
   const fs::path model_dir = fs::path(data_dir) / "sparse" / "0";
   const ColmapModel model = ReadColmapModel(model_dir.string());
   ImageSet images;

@@ -30,10 +30,10 @@ struct HeldOutRenderOptions {
 };
 
 // Renders every held-out camera of the export DATA_DIR (test.txt, sparse/0 poses and PINHOLE
-// intrinsics, images/) from the splats in PLY, writes OUT_DIR/renders/<name>.png and the photo it
-// is scored against OUT_DIR/gt/<name>.png, and returns their PSNR / SSIM. InputError naming the
-// file for a missing or unreadable .ply, model, image or held-out camera.
-HeldOutScore RenderAndScoreHeldOutViews(const std::string& ply, const std::string& data_dir,
+// intrinsics, images/) from `splats` (ReadGaussianSplatPly), writes OUT_DIR/renders/<name>.png and
+// the photo it is scored against OUT_DIR/gt/<name>.png, and returns their PSNR / SSIM. InputError
+// naming the file for a missing or unreadable .ply, model, image or held-out camera.
+HeldOutScore RenderAndScoreHeldOutViews(const GaussianSplats& splats, const std::string& data_dir,
                                         const std::string& out_dir,
                                         const HeldOutRenderOptions& options);
 

@@ -240,6 +240,17 @@ void WriteGaussianSplatPly(const GaussianSplats& splats, const std::string& path
   WriteTextFileAtomically(path, out.str());
 }
 
+size_t CountNonFiniteGaussians(const GaussianSplats& splats) {
+  size_t count = 0;
+  for (size_t g = 0; g < splats.size(); ++g) {
+    const bool finite = splats.means[g].allFinite() && splats.log_scales[g].allFinite() &&
+                        splats.rotations[g].allFinite() &&
+                        std::isfinite(splats.opacity_logits[g]) && splats.sh[g].allFinite();
+    count += finite ? 0 : 1;
+  }
+  return count;
+}
+
 Eigen::Vector3f EvaluateSphericalHarmonics(const Eigen::VectorXf& sh, int degree,
                                            const Eigen::Vector3f& direction) {
   const auto coefficient = [&](int k) { return Eigen::Vector3f(sh.segment<3>(3 * k)); };

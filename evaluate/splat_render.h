@@ -38,6 +38,12 @@ struct GaussianSplats {
   size_t size() const { return means.size(); }
 };
 
+// Gaussians with a field that is not finite (a mean, scale, rotation, opacity or SH coefficient):
+// the renderer drops them, but a trainer that left any diverged or was broken, and its splats say
+// nothing about the poses it was given (OpenSplat built against Debian 12's packages initializes
+// scales of ~1e19 and leaves over a tenth of the Gaussians NaN after 10 steps: issue 33's note).
+size_t CountNonFiniteGaussians(const GaussianSplats& splats);
+
 // Reads a 3DGS .ply (binary little-endian or ASCII; float or double properties; other properties
 // such as normals ignored). InputError naming the file and what is wrong: not a PLY, no vertex
 // element, a missing field, an SH count that is no (d + 1)² − 1 per channel, a truncated body.

@@ -243,8 +243,18 @@ void ScoreOpenSplat(const SplatTrainerOptions& options, SplatRunSummary* summary
     HeldOutRenderOptions render;
     render.downscale = options.downscale;
     render.render = SplatRenderOptionsOf("opensplat");
+    const GaussianSplats splats = ReadGaussianSplatPly(ply);
+    const size_t broken = CountNonFiniteGaussians(splats);
+    if (broken > 0) {
+      summary->status = "failed";
+      summary->error = std::to_string(broken) + " of " + std::to_string(splats.size()) +
+                       " Gaussians in " + ply +
+                       " are not finite: the training diverged or the trainer is broken; not "
+                       "scored";
+      return;
+    }
     const HeldOutScore score =
-        RenderAndScoreHeldOutViews(ply, summary->data_dir, summary->result_dir, render);
+        RenderAndScoreHeldOutViews(splats, summary->data_dir, summary->result_dir, render);
     summary->raytime_images = score.num_images;
     summary->raytime_psnr = score.psnr;
     summary->raytime_ssim = score.ssim;

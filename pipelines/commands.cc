@@ -105,14 +105,23 @@ int RunScoreSplatCommand(const std::string& ply, const std::string& data_dir,
   options.downscale = downscale;
   options.render = SplatRenderOptionsOf(trainer);
   const auto start = std::chrono::steady_clock::now();
-  const HeldOutScore score = RenderAndScoreHeldOutViews(ply, data_dir, out_dir, options);
+  const GaussianSplats splats = ReadGaussianSplatPly(ply);
+  const size_t broken = CountNonFiniteGaussians(splats);
+  if (broken > 0) {
+    spdlog::warn(fmt::format(
+        "score-splat: {} of {} Gaussians in {} are not finite (dropped from the renders): a "
+        "diverged or broken training",
+        broken, splats.size(), ply));
+  }
+  const HeldOutScore score = RenderAndScoreHeldOutViews(splats, data_dir, out_dir, options);
   spdlog::info(fmt::format("score-splat: {} held-out view(s) rendered in {:.2f} s into {}/renders",
                            score.num_images, SecondsSince(start), out_dir));
-  std::printf(
-      "%s\n",
-      nlohmann::json({{"num_images", score.num_images}, {"psnr", score.psnr}, {"ssim", score.ssim}})
-          .dump()
-          .c_str());
+  std::printf("%s\n", nlohmann::json({{"num_images", score.num_images},
+                                      {"non_finite_gaussians", broken},
+                                      {"psnr", score.psnr},
+                                      {"ssim", score.ssim}})
+                          .dump()
+                          .c_str());
   return 0;
 }
 

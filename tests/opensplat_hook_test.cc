@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
@@ -143,6 +144,19 @@ TEST_F(OpenSplatHookTest, TrainsOnTheTrainingFramesAndIsScoredByRaytimesOwnRende
   const SplatRunSummary off = Train(moved);
   ASSERT_TRUE(off.ok()) << off.error;
   EXPECT_LT(off.raytime_psnr, summary.raytime_psnr - 15.0);
+}
+
+// A trainer that leaves Gaussians that are not finite diverged or is broken (OpenSplat built on
+// Debian 12's packages does, issue 33): a failed run, never a score.
+TEST_F(OpenSplatHookTest, SplatsWithNonFiniteGaussiansAreAFailedRunNotAScore) {
+  GaussianSplats broken = splats_;
+  broken.log_scales[3] = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+  broken.means[7].x() = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(CountNonFiniteGaussians(broken), 2u);
+  const SplatRunSummary summary = Train(broken);
+  EXPECT_FALSE(summary.ok());
+  EXPECT_NE(summary.error.find("2 of 12 Gaussians"), std::string::npos) << summary.error;
+  EXPECT_TRUE(std::isnan(summary.raytime_psnr));
 }
 
 TEST_F(OpenSplatHookTest, AMissingSplatFileIsAFailedRunNotANumber) {
