@@ -70,22 +70,24 @@ void WriteLines(const std::string& path, const std::vector<std::string>& lines) 
   WriteTextFileAtomically(path, text);
 }
 
-// Binary little-endian PLY: double x, y, z; uchar red, green, blue (read by nerfstudio's
-// ply_file_path loader, open3d).
+// Binary little-endian PLY: float x, y, z; uchar red, green, blue, as nerfstudio writes it
+// (colmap_utils.create_ply_from_colmap) and its ply_file_path readers expect: OpenSplat reads
+// x, y, z as 4-byte floats whatever the header says, so doubles here became garbage points
+// (issue 33: 1,108 of 8,551 Gaussians NaN after 10 steps).
 void WritePointsPly(const std::string& path, const std::vector<Eigen::Vector3d>& xyz,
                     const std::vector<std::array<uint8_t, 3>>& rgb) {
   std::string bytes = "ply\nformat binary_little_endian 1.0\nelement vertex " +
                       std::to_string(xyz.size()) +
-                      "\nproperty double x\nproperty double y\nproperty double z\n"
+                      "\nproperty float x\nproperty float y\nproperty float z\n"
                       "property uchar red\nproperty uchar green\nproperty uchar blue\n"
                       "end_header\n";
-  static_assert(sizeof(double) == 8, "PLY doubles are 8 bytes");
+  static_assert(sizeof(float) == 4, "PLY floats are 4 bytes");
   for (size_t i = 0; i < xyz.size(); ++i) {
     for (int k = 0; k < 3; ++k) {
-      const double v = xyz[i][k];
-      char raw[8];
-      std::memcpy(raw, &v, 8);  // x86-64 and aarch64 are little-endian, as the header says
-      bytes.append(raw, 8);
+      const float v = static_cast<float>(xyz[i][k]);
+      char raw[4];
+      std::memcpy(raw, &v, 4);  // x86-64 and aarch64 are little-endian, as the header says
+      bytes.append(raw, 4);
     }
     bytes.append(reinterpret_cast<const char*>(rgb[i].data()), 3);
   }

@@ -7,6 +7,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -402,8 +403,20 @@ TEST(TrainerExportTest, ExportsEveryPoseSetWithTheSameImagesSplitAndTracks) {
     ASSERT_EQ(transforms["frames"].size(), 4u);
     EXPECT_EQ(transforms["frames"][0]["file_path"], "images/img0.png");
     EXPECT_EQ(transforms["frames"][0]["k1"], 0.0);
+    // nerfstudio's own layout (float x y z, uchar colours): readers that take x, y, z as 4-byte
+    // floats (OpenSplat) read back the points.
     const std::string ply = ReadTextFile((out / "sparse_pc.ply").string());
-    EXPECT_EQ(ply.rfind("ply\nformat binary_little_endian 1.0\nelement vertex 12\n", 0), 0u);
+    const std::string header =
+        "ply\nformat binary_little_endian 1.0\nelement vertex 12\nproperty float x\n"
+        "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+        "property uchar blue\nend_header\n";
+    ASSERT_EQ(ply.rfind(header, 0), 0u);
+    ASSERT_EQ(ply.size(), header.size() + 12 * (3 * sizeof(float) + 3));
+    ASSERT_EQ(model.points3D.size(), 12u);
+    float first[3];
+    std::memcpy(first, ply.data() + header.size(), sizeof(first));
+    const Eigen::Vector3d xyz = model.points3D.begin()->second.xyz;
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(first[k], xyz(k), 1e-5 * (1 + std::abs(xyz(k))));
   }
 
   // Without ray times: empty points3D, no PLY, and a warning.
