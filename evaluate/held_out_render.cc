@@ -4,8 +4,10 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 #include <set>
 
 #include "core/error.h"
@@ -28,7 +30,7 @@ std::vector<std::string> HeldOutNames(const std::string& data_dir) {
   return names;
 }
 
-int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir) {
+int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed) {
   const std::vector<std::string> held_out = HeldOutNames(data_dir);
   const std::set<std::string> test(held_out.begin(), held_out.end());
   ColmapModel model = ReadColmapModel((fs::path(data_dir) / "sparse" / "0").string());
@@ -38,6 +40,26 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir)
   if (model.images.empty()) {
     ThrowInput((fs::path(data_dir) / "train.txt").string(), 0,
                "the export holds no training image: nothing to train on");
+  }
+  if (seed != 0) {
+    std::vector<uint32_t> ids;
+    for (const auto& [id, image] : model.images) ids.push_back(id);
+    std::vector<uint32_t> shuffled = ids;
+    std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(static_cast<uint32_t>(seed)));
+    std::map<uint32_t, uint32_t> new_id;
+    for (size_t k = 0; k < ids.size(); ++k) new_id[ids[k]] = shuffled[k];
+    std::map<uint32_t, ColmapImage> images;
+    for (auto& [id, image] : model.images) {
+      image.image_id = new_id.at(id);
+      images[image.image_id] = image;
+    }
+    model.images = std::move(images);
+    for (auto& [id, point] : model.points3D) {
+      for (ColmapTrackElement& element : point.track) {
+        const auto it = new_id.find(element.image_id);
+        if (it != new_id.end()) element.image_id = it->second;
+      }
+    }
   }
   const fs::path sparse = fs::path(view_dir) / "sparse" / "0";
   fs::create_directories(sparse);

@@ -17,9 +17,13 @@ std::vector<std::string> HeldOutNames(const std::string& data_dir);
 
 // Writes VIEW_DIR/sparse/0/{cameras,images,points3D}.bin: the export's model (DATA_DIR/sparse/0)
 // without its held-out images, so a trainer pointed at VIEW_DIR (with its images read from
-// DATA_DIR/images) never sees one. Returns the number of training images. InputError naming the
-// file when the export has no model or no test.txt, or holds no training image.
-int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir);
+// DATA_DIR/images) never sees one. `seed` other than 0 shuffles the images' order (their ids,
+// tracks renumbered alike): a trainer that visits cameras in file order with a fixed random state
+// (OpenSplat seeds its own generator with 42) then trains another way on the same frames, which
+// is how two "seeds" of one pose set measure the training-noise floor. Returns the number of
+// training images. InputError naming the file when the export has no model or no test.txt, or
+// holds no training image.
+int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed = 0);
 
 struct HeldOutRenderOptions {
   // The trainer's image downscale factor: views are rendered at the photos' size / downscale

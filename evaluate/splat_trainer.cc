@@ -362,7 +362,7 @@ SplatRunSummary RunSplatTrainer(const SplatTrainerOptions& options, const SplatJ
         options.command.empty() ? DefaultSplatCommand(options.trainer) : options.command;
     if (command.find("{train_dir}") != std::string::npos) {
       try {
-        WriteTrainOnlyView(summary.data_dir, TrainViewDir(summary.result_dir));
+        WriteTrainOnlyView(summary.data_dir, TrainViewDir(summary.result_dir), options.seed);
       } catch (const InputError& e) {
         summary.status = "failed";
         summary.error = std::string("no train-only view of the export: ") + e.what();

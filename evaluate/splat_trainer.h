@@ -42,8 +42,9 @@ struct SplatTrainerOptions {
   // Image downscale factor ({downscale}; OpenSplat's -d), and the size raytime renders the
   // held-out views at (photo size / downscale).
   double downscale = 1.0;
-  // {seed}, for commands whose trainer takes one (OpenSplat 1.1.5 has no seed option: its runs
-  // differ only by their thread scheduling).
+  // {seed}, for commands whose trainer takes one; also the order of the train-only view's images
+  // (WriteTrainOnlyView): OpenSplat 1.1.5 has no seed option and seeds itself with 42, so two
+  // seeds of one pose set differ by the order it visits the cameras.
   int seed = 0;
   // {binary}: the trainer's executable in the default command (opensplat: found on PATH when
   // empty; scripts/install_opensplat.sh puts it there).
@@ -68,7 +69,9 @@ struct SplatTrainerOptions {
       "Image downscale factor, the command's {downscale} (opensplat: -d); held-out views are "
       "rendered at the photos' size over it",
       AtLeast(1.0));
-    v("seed", seed, "The command's {seed}, for trainers that take one", NonNegative());
+    v("seed", seed,
+      "The command's {seed}; also shuffles the train-only view's image order (0: as exported)",
+      NonNegative());
     v("binary", binary,
       "The trainer's executable in the default command, {binary} (empty: 'opensplat' on PATH)");
   }

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -144,6 +145,25 @@ TEST_F(OpenSplatHookTest, TrainsOnTheTrainingFramesAndIsScoredByRaytimesOwnRende
   const SplatRunSummary off = Train(moved);
   ASSERT_TRUE(off.ok()) << off.error;
   EXPECT_LT(off.raytime_psnr, summary.raytime_psnr - 15.0);
+}
+
+// A seed shuffles the order a trainer meets the training frames (OpenSplat has no seed of its
+// own): the same frames and poses, in another order.
+TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesOrderNotTheFrames) {
+  const std::string data = (dir_ / "3dgs" / "refined").string();
+  const auto order = [&](int seed) {
+    const std::string view = (dir_ / ("view" + std::to_string(seed))).string();
+    EXPECT_EQ(WriteTrainOnlyView(data, view, seed), 6);
+    std::vector<std::string> names;
+    for (const auto& [id, image] : ReadColmapModel(view + "/sparse/0").images) {
+      names.push_back(image.name);
+    }
+    return names;
+  };
+  const std::vector<std::string> exported = order(0), seeded = order(5);
+  EXPECT_NE(seeded, exported);
+  EXPECT_TRUE(std::is_permutation(seeded.begin(), seeded.end(), exported.begin()));
+  EXPECT_EQ(order(5), seeded);  // the same seed, the same order
 }
 
 // A trainer that leaves Gaussians that are not finite diverged or is broken (OpenSplat built on
