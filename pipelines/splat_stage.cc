@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "core/atomic_file.h"
@@ -187,11 +188,14 @@ class SplatStage : public StageWithOptions<SplatStageOptions> {
       WriteTextFileAtomically(RecordPath(context, name).string(), record.dump(2));
 
       if (run.ok()) {
+        // OpenSplat reports no metric of its own: only raytime's render is scored.
+        const std::string trainer_metrics =
+            std::isnan(run.psnr) ? std::string("no metrics of its own")
+                                 : fmt::format("PSNR {:.2f} dB, SSIM {:.3f}, LPIPS {:.3f} ({})",
+                                               run.psnr, run.ssim, run.lpips, run.metrics_file);
         spdlog::info(fmt::format(
-            "splat: {}: PSNR {:.2f} dB, SSIM {:.3f}, LPIPS {:.3f} ({}); raytime PSNR {:.2f} dB, "
-            "SSIM {:.3f} over {} view(s){}; {:.0f} s",
-            name, run.psnr, run.ssim, run.lpips, run.metrics_file, run.raytime_psnr,
-            run.raytime_ssim, run.raytime_images,
+            "splat: {}: {}; raytime PSNR {:.2f} dB, SSIM {:.3f} over {} view(s){}; {:.0f} s", name,
+            trainer_metrics, run.raytime_psnr, run.raytime_ssim, run.raytime_images,
             run.raytime_note.empty() ? "" : " (" + run.raytime_note + ")", run.seconds));
       } else {
         ++failed;

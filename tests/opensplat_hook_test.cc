@@ -121,7 +121,7 @@ TEST_F(OpenSplatHookTest, TrainsOnTheTrainingFramesAndIsScoredByRaytimesOwnRende
   const fs::path result = dir_ / "splat" / "refined";
   EXPECT_EQ(args, (result / "train_view").string() + " --colmap-image-path " +
                       (dir_ / "3dgs" / "refined" / "images").string() + " -o " +
-                      (result / "splat.ply").string() + " --keep-crs -n 700 -d 1");
+                      (result / "splat.ply").string() + " --keep-crs -n 700 -d 1 --num-downscales 0");
   // Its model holds the six training frames only.
   const ColmapModel view = ReadColmapModel((result / "train_view" / "sparse" / "0").string());
   ASSERT_EQ(view.images.size(), 6u);
