@@ -88,6 +88,8 @@ std::string Base64(const std::vector<unsigned char>& bytes) {
 std::string ThumbnailDataUri(const std::string& path, int width) {
   cv::Mat image = cv::imread(path, cv::IMREAD_REDUCED_COLOR_4);
   if (image.empty() || width <= 0) return std::string();
+  // A small image (a render at a quarter of the photo's size) is read whole instead.
+  if (image.cols < width) image = cv::imread(path, cv::IMREAD_COLOR);
   if (image.cols > width) {
     const int height = std::max(
         1, static_cast<int>(std::lround(static_cast<double>(image.rows) * width / image.cols)));

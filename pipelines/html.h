@@ -25,7 +25,7 @@ std::string JsonText(const nlohmann::json& json, const char* key,
 
 // The image at `path` scaled to `width` pixels wide, as a JPEG data URI ("" when it cannot be
 // read: the page says so instead of failing). Decoded at a quarter of its size first (a JPEG's
-// DCT scaling: a 1920×1440 frame in a few milliseconds).
+// DCT scaling: a 1920×1440 frame in a few milliseconds), whole when that is narrower than `width`.
 std::string ThumbnailDataUri(const std::string& path, int width);
 
 // The CSS every raytime page shares (tables, status colours).

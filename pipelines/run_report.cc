@@ -710,6 +710,50 @@ std::string MetricsSection(const json& run) {
   return html;
 }
 
+// Each splat stage's held-out renders beside the photos they were scored against (RESULT/renders
+// and RESULT/gt, written when raytime rendered the trainer's splats: trainer opensplat), one row
+// per held-out view, one column per pose set.
+std::string SplatRendersSection(const json& run) {
+  std::string html;
+  for (const json& stage : JsonArray(run, "stages")) {
+    if (JsonText(stage, "type") != "splat") continue;
+    std::vector<std::pair<std::string, fs::path>> sets;  // pose set, result folder
+    std::set<std::string> views;
+    for (const json& record : JsonArray(JsonObject(stage, "summary"), "pose_sets")) {
+      const fs::path renders = fs::path(JsonText(record, "result_dir")) / "renders";
+      if (JsonText(record, "status") != "ok" || !fs::is_directory(renders)) continue;
+      sets.emplace_back(JsonText(record, "pose_set"), renders.parent_path());
+      for (const auto& entry : fs::directory_iterator(renders)) {
+        views.insert(entry.path().filename().string());
+      }
+    }
+    if (sets.empty()) continue;
+    html += "<section class=\"splat-renders\"><h2>" + HtmlEscape(JsonText(stage, "id")) +
+            ": held-out views</h2><p>The photo, then each pose set's splats rendered by raytime at "
+            "that camera (what its PSNR scores).</p><table><tr><th>view</th><th>photo</th>";
+    for (const auto& [name, dir] : sets) html += "<th>" + HtmlEscape(name) + "</th>";
+    html += "</tr>";
+    for (const std::string& view : views) {
+      html += "<tr><td>" + HtmlEscape(view) + "</td><td>";
+      const std::string photo =
+          ThumbnailDataUri((sets.front().second / "gt" / view).string(), kThumbnailWidth);
+      if (!photo.empty()) html += "<img src=\"" + photo + "\" alt=\"photo\">";
+      html += "</td>";
+      for (const auto& [name, dir] : sets) {
+        const std::string render =
+            ThumbnailDataUri((dir / "renders" / view).string(), kThumbnailWidth);
+        html += "<td>" +
+                (render.empty() ? std::string("–")
+                                : "<img src=\"" + render + "\" alt=\"" + HtmlEscape(name) + "\">") +
+                "</td>";
+      }
+      html += "</tr>";
+    }
+    html += "</table></section>";
+  }
+  return html;
+}
+
 const char* RunPageStyle() {
   return ".panel{display:none;position:fixed;top:0;right:0;width:22em;max-height:100vh;"
          "overflow:auto;background:#fff;border-left:2px solid #888;padding:0.5em 1em;"
@@ -739,7 +783,8 @@ std::string WriteRunReport(const std::string& workdir) {
       "</code>, pipeline <code>" + HtmlEscape(JsonText(run, "pipeline")) + "</code>, raytime " +
       HtmlEscape(JsonText(run, "raytime_version")) + "</p>" + VerdictSection(page) +
       CamerasSection(page) + CameraTable(page) + ResidualsSection(page) + PairMatrixSection(page) +
-      MetricsSection(run) + StagesSection(run) + CameraPanels(page) + "</body></html>\n";
+      MetricsSection(run) + SplatRendersSection(run) + StagesSection(run) + CameraPanels(page) +
+      "</body></html>\n";
   const std::string path = (fs::path(workdir) / "report.html").string();
   WriteTextFileAtomically(path, html);
   spdlog::debug(fmt::format("report: {} kB in {:.2f} s", html.size() / 1024, SecondsSince(start)));
