@@ -25,7 +25,7 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
-constexpr float kSh0 = 0.28209479177387814f;
+constexpr float kShDc = 0.28209479177387814f;
 
 class OpenSplatHookTest : public ::testing::Test {
  protected:
@@ -42,7 +42,7 @@ class OpenSplatHookTest : public ::testing::Test {
       splats_.rotations.emplace_back(1, 0, 0, 0);
       splats_.opacity_logits.push_back(3.0f);
       const Eigen::Vector3f rgb(0.2f + 0.06f * g, 0.9f - 0.05f * g, 0.5f);
-      splats_.sh.push_back((rgb.array() - 0.5f) / kSh0);
+      splats_.sh.push_back((rgb.array() - 0.5f) / kShDc);
     }
     // Eight cameras on a circle looking at the origin; the export's photos are their renders.
     ImageSet images;
