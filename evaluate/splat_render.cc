@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -243,7 +244,11 @@ void WriteGaussianSplatPly(const GaussianSplats& splats, const std::string& path
 size_t CountNonFiniteGaussians(const GaussianSplats& splats) {
   size_t count = 0;
   for (size_t g = 0; g < splats.size(); ++g) {
-    const bool finite = splats.means[g].allFinite() && splats.log_scales[g].allFinite() &&
+    const bool size_zero_or_finite =
+        (splats.log_scales[g].array().isFinite() ||
+         splats.log_scales[g].array() == -std::numeric_limits<float>::infinity())
+            .all();
+    const bool finite = splats.means[g].allFinite() && size_zero_or_finite &&
                         splats.rotations[g].allFinite() &&
                         std::isfinite(splats.opacity_logits[g]) && splats.sh[g].allFinite();
     count += finite ? 0 : 1;

@@ -40,8 +40,10 @@ struct GaussianSplats {
 
 // Gaussians with a field that is not finite (a mean, scale, rotation, opacity or SH coefficient):
 // the renderer drops them, but a trainer that left any diverged or was broken, and its splats say
-// nothing about the poses it was given (OpenSplat built against Debian 12's packages initializes
-// scales of ~1e19 and leaves over a tenth of the Gaussians NaN after 10 steps: issue 33's note).
+// nothing about the poses it was given (OpenSplat started from garbage points read from a double
+// PLY and left over a tenth of the Gaussians NaN after 10 steps: issue 33's note). A log scale of
+// −∞ is not counted: a Gaussian of size 0 (OpenSplat starts one where three neighbours coincide),
+// which rasterizers draw as their 0.3 px² low-pass, as RenderGaussianSplats does.
 size_t CountNonFiniteGaussians(const GaussianSplats& splats);
 
 // Reads a 3DGS .ply (binary little-endian or ASCII; float or double properties; other properties

@@ -121,7 +121,8 @@ TEST_F(OpenSplatHookTest, TrainsOnTheTrainingFramesAndIsScoredByRaytimesOwnRende
   const fs::path result = dir_ / "splat" / "refined";
   EXPECT_EQ(args, (result / "train_view").string() + " --colmap-image-path " +
                       (dir_ / "3dgs" / "refined" / "images").string() + " -o " +
-                      (result / "splat.ply").string() + " --keep-crs -n 700 -d 1 --num-downscales 0");
+                      (result / "splat.ply").string() +
+                      " --keep-crs -n 700 -d 1 --num-downscales 0");
   // Its model holds the six training frames only.
   const ColmapModel view = ReadColmapModel((result / "train_view" / "sparse" / "0").string());
   ASSERT_EQ(view.images.size(), 6u);
@@ -173,6 +174,12 @@ TEST_F(OpenSplatHookTest, SplatsWithNonFiniteGaussiansAreAFailedRunNotAScore) {
   broken.log_scales[3] = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
   broken.means[7].x() = std::numeric_limits<float>::infinity();
   EXPECT_EQ(CountNonFiniteGaussians(broken), 2u);
+  // A Gaussian of size 0 (log scale −∞) is no failure: drawn as the 0.3 px² low-pass.
+  broken.log_scales[5] = Eigen::Vector3f::Constant(-std::numeric_limits<float>::infinity());
+  EXPECT_EQ(CountNonFiniteGaussians(broken), 2u);
+  broken.log_scales[5].x() = std::numeric_limits<float>::infinity();
+  EXPECT_EQ(CountNonFiniteGaussians(broken), 3u);
+  broken.log_scales[5].x() = -std::numeric_limits<float>::infinity();
   const SplatRunSummary summary = Train(broken);
   EXPECT_FALSE(summary.ok());
   EXPECT_NE(summary.error.find("2 of 12 Gaussians"), std::string::npos) << summary.error;

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -120,6 +121,19 @@ TEST(SplatRenderTest, AnElongatedGaussianTurnedAboutTheViewAxisTurnsItsFootprint
   cv::Mat transposed;
   cv::transpose(along_x, transposed);
   EXPECT_LT(cv::norm(along_y, transposed, cv::NORM_INF), 1e-5);
+}
+
+// A Gaussian of size 0 (log scale −∞: OpenSplat starts one where three neighbours coincide) is
+// drawn as the low-pass alone, variance 0.3 px².
+TEST(SplatRenderTest, AGaussianOfSizeZeroIsTheLowPassFootprint) {
+  GaussianSplats splats;
+  AddSplat(&splats, Eigen::Vector3f(0, 0, 5), 1.0f, 1.0f, Eigen::Vector3f(1, 1, 1));
+  splats.log_scales[0] = Eigen::Vector3f::Constant(-std::numeric_limits<float>::infinity());
+  EXPECT_EQ(CountNonFiniteGaussians(splats), 0u);
+  const cv::Mat image = RenderGaussianSplats(splats, Pinhole(64, 100.0), Rigid3());
+  const double opacity = 1.0 / (1.0 + std::exp(-1.0));
+  EXPECT_NEAR(image.at<cv::Vec3f>(31, 31)[0], opacity * std::exp(-0.5 * 0.5 / 0.3), 1e-6);
+  EXPECT_EQ(image.at<cv::Vec3f>(31, 35)[0], 0.0f);  // 3.5 px away: below 1/255
 }
 
 TEST(SplatRenderTest, AGaussianBehindTheCameraOrOutOfViewIsNotDrawn) {
