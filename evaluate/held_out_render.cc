@@ -30,7 +30,42 @@ std::vector<std::string> HeldOutNames(const std::string& data_dir) {
   return names;
 }
 
-int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed) {
+namespace {
+
+// `count` points uniform in the ball around the cameras of `model` (see WriteTrainOnlyView), with
+// random colours; no tracks (a trainer reads positions and colours only).
+std::map<uint64_t, ColmapPoint3D> RandomBallPoints(const ColmapModel& model, int count, int seed) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> centres;
+  for (const auto& [id, image] : model.images) {
+    centres.push_back(image.cam_from_world.Inverse().translation);
+    centre += centres.back();
+  }
+  centre /= static_cast<double>(centres.size());
+  double spread = 0.0;
+  for (const Eigen::Vector3d& c : centres) spread = std::max(spread, (c - centre).norm());
+  const double radius = 3.0 * std::max(spread, 1e-6);
+  std::mt19937 random(static_cast<uint32_t>(seed) * 2654435761u + 1u);
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> uniform;
+  std::uniform_int_distribution<int> colour(0, 255);
+  std::map<uint64_t, ColmapPoint3D> points;
+  for (int k = 0; k < count; ++k) {
+    ColmapPoint3D point;
+    point.point3D_id = static_cast<uint64_t>(k) + 1;
+    Eigen::Vector3d direction(normal(random), normal(random), normal(random));
+    direction.normalize();
+    point.xyz = centre + radius * std::cbrt(uniform(random)) * direction;
+    for (int c = 0; c < 3; ++c) point.rgb[c] = static_cast<uint8_t>(colour(random));
+    points[point.point3D_id] = point;
+  }
+  return points;
+}
+
+}  // namespace
+
+int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed,
+                       int random_points) {
   const std::vector<std::string> held_out = HeldOutNames(data_dir);
   const std::set<std::string> test(held_out.begin(), held_out.end());
   ColmapModel model = ReadColmapModel((fs::path(data_dir) / "sparse" / "0").string());
@@ -59,6 +94,12 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir,
         const auto it = new_id.find(element.image_id);
         if (it != new_id.end()) element.image_id = it->second;
       }
+    }
+  }
+  if (random_points > 0) {
+    model.points3D = RandomBallPoints(model, random_points, seed);
+    for (auto& [id, image] : model.images) {
+      std::fill(image.point3D_ids.begin(), image.point3D_ids.end(), kInvalidPoint3DId);
     }
   }
   const fs::path sparse = fs::path(view_dir) / "sparse" / "0";

@@ -21,9 +21,14 @@ std::vector<std::string> HeldOutNames(const std::string& data_dir);
 // tracks renumbered alike): a trainer that visits cameras in file order with a fixed random state
 // (OpenSplat seeds its own generator with 42) then trains another way on the same frames, which
 // is how two "seeds" of one pose set measure the training-noise floor. Returns the number of
-// training images. InputError naming the file when the export has no model or no test.txt, or
-// holds no training image.
-int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed = 0);
+// training images. `random_points` > 0 replaces the export's points by that many drawn uniformly in
+// a ball around the training cameras (centre: their mean; radius: 3 × their largest distance from
+// it, the extent of gsplat's random initialization) with random colours, from `seed`: the paper's
+// initialization that favours no pose source (§4.5; the export's points are each pose set's own
+// tracks). InputError naming the file when the export has no model or no test.txt, or holds no
+// training image.
+int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed = 0,
+                       int random_points = 0);
 
 struct HeldOutRenderOptions {
   // The trainer's image downscale factor: views are rendered at the photos' size / downscale

@@ -365,7 +365,8 @@ SplatRunSummary RunSplatTrainer(const SplatTrainerOptions& options, const SplatJ
         options.command.empty() ? DefaultSplatCommand(options.trainer) : options.command;
     if (command.find("{train_dir}") != std::string::npos) {
       try {
-        WriteTrainOnlyView(summary.data_dir, TrainViewDir(summary.result_dir), options.seed);
+        WriteTrainOnlyView(summary.data_dir, TrainViewDir(summary.result_dir), options.seed,
+                           options.random_init_points);
       } catch (const InputError& e) {
         summary.status = "failed";
         summary.error = std::string("no train-only view of the export: ") + e.what();

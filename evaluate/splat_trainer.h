@@ -46,6 +46,10 @@ struct SplatTrainerOptions {
   // (WriteTrainOnlyView): OpenSplat 1.1.5 has no seed option and seeds itself with 42, so two
   // seeds of one pose set differ by the order it visits the cameras.
   int seed = 0;
+  // The train-only view's initial points: 0 the export's (each pose set's own tracks); N > 0, N
+  // random points in a ball around the training cameras: one draw per seed, placed by each pose
+  // set's own cameras (the paper's random initialization, §4.5: no pose source favoured).
+  int random_init_points = 0;
   // {binary}: the trainer's executable in the default command (opensplat: found on PATH when
   // empty; scripts/install_opensplat.sh puts it there).
   std::string binary;
@@ -71,6 +75,10 @@ struct SplatTrainerOptions {
       AtLeast(1.0));
     v("seed", seed,
       "The command's {seed}; also shuffles the train-only view's image order (0: as exported)",
+      NonNegative());
+    v("random_init_points", random_init_points,
+      "Initial points of the train-only view: 0 the export's, N random ones in a ball around the "
+      "training cameras (the paper's random initialization)",
       NonNegative());
     v("binary", binary,
       "The trainer's executable in the default command, {binary} (empty: 'opensplat' on PATH)");

@@ -167,6 +167,31 @@ TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesOrderNotTheFrames) {
   EXPECT_EQ(order(5), seeded);  // the same seed, the same order
 }
 
+// The paper's random initialization: N points in a ball around the training cameras (radius 3 ×
+// their spread) in place of the export's, the same for the same seed.
+TEST_F(OpenSplatHookTest, RandomInitialPointsFillABallAroundTheTrainingCameras) {
+  const std::string data = (dir_ / "3dgs" / "refined").string();
+  const std::string view = (dir_ / "random_view").string();
+  ASSERT_EQ(WriteTrainOnlyView(data, view, 3, 500), 6);
+  const ColmapModel model = ReadColmapModel(view + "/sparse/0");
+  ASSERT_EQ(model.points3D.size(), 500u);
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& [id, image] : model.images) centre += image.cam_from_world.Inverse().translation;
+  centre /= 6.0;
+  double spread = 0.0, farthest = 0.0;
+  for (const auto& [id, image] : model.images) {
+    spread = std::max(spread, (image.cam_from_world.Inverse().translation - centre).norm());
+  }
+  for (const auto& [id, point] : model.points3D) {
+    farthest = std::max(farthest, (point.xyz - centre).norm());
+  }
+  EXPECT_LE(farthest, 3.0 * spread * (1 + 1e-9));
+  EXPECT_GT(farthest, 2.5 * spread);  // 500 uniform points reach the outer shell
+  const ColmapModel again = (WriteTrainOnlyView(data, (dir_ / "again").string(), 3, 500),
+                             ReadColmapModel((dir_ / "again" / "sparse" / "0").string()));
+  EXPECT_EQ(again.points3D.begin()->second.xyz, model.points3D.begin()->second.xyz);
+}
+
 // A trainer that leaves Gaussians that are not finite diverged or is broken (OpenSplat built on
 // Debian 12's packages does, issue 33): a failed run, never a score.
 TEST_F(OpenSplatHookTest, SplatsWithNonFiniteGaussiansAreAFailedRunNotAScore) {
