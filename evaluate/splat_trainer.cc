@@ -105,15 +105,15 @@ std::vector<std::string> BracedNames(const std::string& text) {
   return names;
 }
 
-// The last kTailLines lines of the log (at most kTailChars), for a failure's summary.
-std::string LogTail(const std::string& path) {
+// The non-empty lines of the last `max_bytes` of the log. Progress bars redraw one line with
+// carriage returns: each redraw counts as a line.
+std::vector<std::string> LogLines(const std::string& path, std::streamoff max_bytes) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
+  if (!in) return {};
   in.seekg(0, std::ios::end);
   const std::streamoff size = in.tellg();
-  in.seekg(std::max<std::streamoff>(0, size - 64 * 1024));
+  in.seekg(std::max<std::streamoff>(0, size - max_bytes));
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  // Progress bars redraw one line with carriage returns: each redraw counts as a line.
   std::vector<std::string> lines;
   std::string line;
   for (const char c : text) {
@@ -125,6 +125,12 @@ std::string LogTail(const std::string& path) {
     line.clear();
   }
   if (!line.empty()) lines.push_back(line);
+  return lines;
+}
+
+// The last kTailLines lines of the log (at most kTailChars), for a failure's summary.
+std::string LogTail(const std::string& path) {
+  const std::vector<std::string> lines = LogLines(path, 64 * 1024);
   std::string tail;
   for (size_t i = lines.size() > kTailLines ? lines.size() - kTailLines : 0; i < lines.size();
        ++i) {
@@ -138,22 +144,15 @@ std::string Absolute(const std::string& path) {
   return fs::absolute(fs::path(path)).lexically_normal().string();
 }
 
-// The last non-empty line of the trainer's log so far (progress bars often end a line with '\r':
-// the text after the last one), "" when there is none.
+// The last line of the trainer's log so far that is not blank, trailing spaces trimmed (the
+// progress line's detail); "" when there is none.
 std::string LastLogLine(const std::string& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) return std::string();
-  const std::streamoff size = in.tellg();
-  const std::streamoff tail = std::min<std::streamoff>(size, 4096);
-  std::string text(static_cast<size_t>(tail), '\0');
-  in.seekg(size - tail);
-  in.read(text.data(), tail);
-  for (char& c : text) {
-    if (c == '\r') c = '\n';
+  std::vector<std::string> lines = LogLines(path, 4096);
+  for (auto line = lines.rbegin(); line != lines.rend(); ++line) {
+    line->erase(line->find_last_not_of(' ') + 1);
+    if (!line->empty()) return *line;
   }
-  while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
-  const size_t newline = text.rfind('\n');
-  return newline == std::string::npos ? text : text.substr(newline + 1);
+  return std::string();
 }
 
 // Runs the command to its end or its timeout; fills the process fields of `summary`.
