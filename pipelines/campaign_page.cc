@@ -180,17 +180,16 @@ std::string SuccessCellsTable(const CampaignReport& report, const std::string& s
 std::string SplatSection(const CampaignReport& report) {
   if (report.splat_cells.empty()) return "";
   std::string html =
-      "<section id=\"splat\"><h2>Downstream 3DGS (Table 4)</h2><table><tr><th>stage</th>"
-      "<th>trainer</th><th>level</th><th>scene</th><th>pose source</th><th>PSNR (dB)</th>"
-      "<th>SSIM</th><th>LPIPS</th><th>raytime PSNR</th><th>raytime SSIM</th><th>trainings</th>"
-      "<th>failed</th></tr>";
+      "<section id=\"splat\"><h2>Downstream 3DGS (Table 4)</h2><table>" +
+      HtmlRow({"stage", "trainer", "level", "scene", "pose source", "PSNR (dB)", "SSIM", "LPIPS",
+               "raytime PSNR", "raytime SSIM", "trainings", "failed"},
+              "th");
   for (const SplatCell& c : report.splat_cells) {
-    html += "<tr><td>" + HtmlEscape(c.stage_id) + "</td><td>" + HtmlEscape(c.trainer) +
-            "</td><td>" + LevelLabel(report, c.level_deg) + "</td><td>" + HtmlEscape(c.scene) +
-            "</td><td>" + HtmlEscape(c.pose_set) + "</td><td>" + HtmlNumber(c.psnr, 4) +
-            "</td><td>" + HtmlNumber(c.ssim) + "</td><td>" + HtmlNumber(c.lpips) + "</td><td>" +
-            HtmlNumber(c.raytime_psnr, 4) + "</td><td>" + HtmlNumber(c.raytime_ssim) + "</td><td>" +
-            std::to_string(c.trainings) + "</td><td>" + std::to_string(c.failed) + "</td></tr>";
+    html += HtmlRow({HtmlEscape(c.stage_id), HtmlEscape(c.trainer), LevelLabel(report, c.level_deg),
+                     HtmlEscape(c.scene), HtmlEscape(c.pose_set), HtmlNumber(c.psnr, 4),
+                     HtmlNumber(c.ssim), HtmlNumber(c.lpips), HtmlNumber(c.raytime_psnr, 4),
+                     HtmlNumber(c.raytime_ssim), std::to_string(c.trainings),
+                     std::to_string(c.failed)});
   }
   return html + "</table></section>";
 }

@@ -43,6 +43,13 @@ std::string HtmlNumber(const nlohmann::json& value, int digits) {
   return value.is_number() ? HtmlNumber(value.get<double>(), digits) : "–";
 }
 
+std::string HtmlRow(const std::vector<std::string>& cells, const char* tag, const std::string& id) {
+  std::string row = id.empty() ? "<tr>" : "<tr id=\"" + HtmlEscape(id) + "\">";
+  const std::string open = std::string("<") + tag + ">", close = std::string("</") + tag + ">";
+  for (const std::string& cell : cells) row += open + cell + close;
+  return row + "</tr>";
+}
+
 const nlohmann::json& JsonAt(const nlohmann::json& json, const char* key) {
   static const nlohmann::json kNull;
   if (!json.is_object()) return kNull;

@@ -4,6 +4,7 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 namespace raytime {
 
@@ -13,6 +14,11 @@ std::string HtmlEscape(const std::string& text);
 // `value` with `digits` significant digits; "–" for a value that is not a finite number.
 std::string HtmlNumber(double value, int digits = 3);
 std::string HtmlNumber(const nlohmann::json& value, int digits = 3);
+
+// One table row: each of `cells` (HTML already) in a `tag` element ("td", or "th" for a header
+// row), the row's id attribute `id` when it is not empty.
+std::string HtmlRow(const std::vector<std::string>& cells, const char* tag = "td",
+                    const std::string& id = std::string());
 
 // Members of JSON that other runs wrote (summaries, older versions), read without throwing: the
 // member under `key`, or null / an empty object / an empty array / `otherwise` when `json` is no

@@ -259,14 +259,12 @@ std::string VerdictSection(const RunPage& page) {
 }
 
 std::string StagesSection(const json& run) {
-  std::string html =
-      "<section id=\"stages\"><h2>Stages</h2><table><tr><th>stage</th><th>type</th>"
-      "<th>status</th><th>seconds</th></tr>";
+  std::string html = "<section id=\"stages\"><h2>Stages</h2><table>" +
+                     HtmlRow({"stage", "type", "status", "seconds"}, "th");
   for (const json& stage : JsonArray(run, "stages")) {
-    html += "<tr><td>" + HtmlEscape(JsonText(stage, "id")) + "</td><td>" +
-            HtmlEscape(JsonText(stage, "type")) + "</td><td>" +
-            HtmlEscape(JsonText(stage, "status")) + "</td><td>" +
-            HtmlNumber(JsonAt(stage, "seconds"), 3) + "</td></tr>";
+    html +=
+        HtmlRow({HtmlEscape(JsonText(stage, "id")), HtmlEscape(JsonText(stage, "type")),
+                 HtmlEscape(JsonText(stage, "status")), HtmlNumber(JsonAt(stage, "seconds"), 3)});
   }
   return html + "</table></section>";
 }
@@ -478,16 +476,15 @@ CameraNumbers NumbersOf(const RunPage& page, const std::string& name) {
 std::string CameraTable(const RunPage& page) {
   if (page.stage_id.empty()) return "";
   std::string html =
-      "<section id=\"camera-section\"><h2>Per camera</h2><table id=\"camera-table\"><tr>"
-      "<th>image</th><th>rotation correction (°)</th><th>centre correction</th>"
-      "<th>σ rotation (°)</th><th>σ centre</th><th>residual median (px)</th><th>pairs</th>"
-      "<th>matches</th><th>flags</th></tr>";
+      "<section id=\"camera-section\"><h2>Per camera</h2><table id=\"camera-table\">" +
+      HtmlRow({"image", "rotation correction (°)", "centre correction", "σ rotation (°)",
+               "σ centre", "residual median (px)", "pairs", "matches", "flags"},
+              "th");
   for (const std::string& name : page.names) {
     const CameraNumbers n = NumbersOf(page, name);
-    html += "<tr id=\"row-" + HtmlEscape(name) + "\"><td>" + CameraLink(name) + "</td><td>" +
-            n.rotation + "</td><td>" + n.centre + "</td><td>" + n.sigma_rotation + "</td><td>" +
-            n.sigma_centre + "</td><td>" + n.residual + "</td><td>" + n.pairs + "</td><td>" +
-            n.matches + "</td><td>" + HtmlEscape(n.flags) + "</td></tr>";
+    html += HtmlRow({CameraLink(name), n.rotation, n.centre, n.sigma_rotation, n.sigma_centre,
+                     n.residual, n.pairs, n.matches, HtmlEscape(n.flags)},
+                    "td", "row-" + name);
   }
   return html + "</table></section>";
 }
@@ -640,14 +637,14 @@ std::string CameraPanels(const RunPage& page) {
     const auto unit = [](const std::string& number, const char* unit_text) {
       return number == "–" ? number : number + unit_text;
     };
-    html += "<table><tr><td>rotation correction</td><td>" + unit(n.rotation, "°") +
-            "</td></tr><tr><td>centre correction</td><td>" + n.centre +
-            "</td></tr><tr><td>σ rotation</td><td>" + unit(n.sigma_rotation, "°") +
-            "</td></tr><tr><td>σ centre</td><td>" + n.sigma_centre +
-            "</td></tr><tr><td>residual median</td><td>" + unit(n.residual, " px") +
-            "</td></tr><tr><td>pairs / matches</td><td>" + n.pairs + " / " + n.matches +
-            "</td></tr><tr><td>flags</td><td>" + HtmlEscape(n.flags.empty() ? "none" : n.flags) +
-            "</td></tr></table><p><a href=\"#row-" + HtmlEscape(name) + "\">its row</a></p>";
+    html += "<table>" + HtmlRow({"rotation correction", unit(n.rotation, "°")}) +
+            HtmlRow({"centre correction", n.centre}) +
+            HtmlRow({"σ rotation", unit(n.sigma_rotation, "°")}) +
+            HtmlRow({"σ centre", n.sigma_centre}) +
+            HtmlRow({"residual median", unit(n.residual, " px")}) +
+            HtmlRow({"pairs / matches", n.pairs + " / " + n.matches}) +
+            HtmlRow({"flags", HtmlEscape(n.flags.empty() ? "none" : n.flags)}) +
+            "</table><p><a href=\"#row-" + HtmlEscape(name) + "\">its row</a></p>";
     auto& list = pairs_of[name];
     std::sort(list.begin(), list.end(),
               [](const auto& a, const auto& b) { return a.first > b.first; });
@@ -670,42 +667,38 @@ std::string CameraPanels(const RunPage& page) {
 std::string MetricsSection(const json& run) {
   const json metrics = JsonObject(run, "metrics");
   std::string rows, splat_rows;
-  for (const auto& [pose_set, by_key] : metrics.items()) {
+  // metrics.<pose set>.<alignment> from evaluate, metrics.<splat stage>.<pose set> from splat.
+  for (const auto& [group, by_key] : metrics.items()) {
     if (!by_key.is_object()) continue;
     for (const auto& [key, entry] : by_key.items()) {
       if (!entry.is_object()) continue;
       if (entry.contains("mean_rotation_deg")) {
-        rows += "<tr><td>" + HtmlEscape(pose_set) + "</td><td>" + HtmlEscape(key) + "</td><td>" +
-                HtmlNumber(entry["mean_rotation_deg"]) + "</td><td>" +
-                HtmlNumber(JsonAt(entry, "mean_centre_m")) + "</td><td>" +
-                HtmlNumber(JsonAt(entry, "num_frames"), 6) + "</td></tr>";
+        rows += HtmlRow({HtmlEscape(group), HtmlEscape(key), HtmlNumber(entry["mean_rotation_deg"]),
+                         HtmlNumber(JsonAt(entry, "mean_centre_m")),
+                         HtmlNumber(JsonAt(entry, "num_frames"), 6)});
       } else if (entry.contains("psnr")) {
-        // metrics.<splat stage>.<pose set>
-        splat_rows += "<tr><td>" + HtmlEscape(key) + "</td><td>" + HtmlEscape(pose_set) +
-                      "</td><td>" + HtmlEscape(JsonText(entry, "trainer")) + "</td><td>" +
-                      HtmlEscape(JsonText(entry, "status")) + "</td><td>" +
-                      HtmlNumber(JsonAt(entry, "psnr"), 4) + "</td><td>" +
-                      HtmlNumber(JsonAt(entry, "ssim")) + "</td><td>" +
-                      HtmlNumber(JsonAt(entry, "raytime_psnr"), 4) + "</td><td>" +
-                      HtmlNumber(JsonAt(entry, "raytime_ssim")) + "</td><td>" +
-                      HtmlNumber(JsonAt(entry, "seconds")) + "</td></tr>";
+        splat_rows += HtmlRow(
+            {HtmlEscape(key), HtmlEscape(group), HtmlEscape(JsonText(entry, "trainer")),
+             HtmlEscape(JsonText(entry, "status")), HtmlNumber(JsonAt(entry, "psnr"), 4),
+             HtmlNumber(JsonAt(entry, "ssim")), HtmlNumber(JsonAt(entry, "raytime_psnr"), 4),
+             HtmlNumber(JsonAt(entry, "raytime_ssim")), HtmlNumber(JsonAt(entry, "seconds"))});
       }
     }
   }
   std::string html;
   if (!rows.empty()) {
     html +=
-        "<section id=\"metrics\"><h2>Against the ground truth</h2><table><tr><th>pose set</th>"
-        "<th>alignment</th><th>mean rotation error (°)</th><th>mean centre error</th>"
-        "<th>frames</th></tr>" +
+        "<section id=\"metrics\"><h2>Against the ground truth</h2><table>" +
+        HtmlRow({"pose set", "alignment", "mean rotation error (°)", "mean centre error", "frames"},
+                "th") +
         rows + "</table></section>";
   }
   if (!splat_rows.empty()) {
-    html +=
-        "<section id=\"splat\"><h2>Splats (held-out views)</h2><table><tr><th>pose set</th>"
-        "<th>stage</th><th>trainer</th><th>status</th><th>PSNR (dB)</th><th>SSIM</th>"
-        "<th>raytime PSNR (dB)</th><th>raytime SSIM</th><th>seconds</th></tr>" +
-        splat_rows + "</table></section>";
+    html += "<section id=\"splat\"><h2>Splats (held-out views)</h2><table>" +
+            HtmlRow({"pose set", "stage", "trainer", "status", "PSNR (dB)", "SSIM",
+                     "raytime PSNR (dB)", "raytime SSIM", "seconds"},
+                    "th") +
+            splat_rows + "</table></section>";
   }
   return html;
 }
