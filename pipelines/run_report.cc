@@ -306,17 +306,17 @@ std::string CamerasSvg(const RunPage& page, const std::string& view, int vertica
   const double extent = std::max(hi.x() - lo.x(), 1e-12);
   const double scale = (width - 2 * margin) / extent;
   const double height = std::max(160.0, (hi.y() - lo.y()) * scale + 2 * margin);
-  const auto at = [&](const Eigen::Vector3d& x) {
+  // A centre's screen position as two attributes: a circle's cx, cy or a line end's x1, y1.
+  const auto at = [&](const Eigen::Vector3d& x, const char* x_name = "cx",
+                      const char* y_name = "cy") {
     const Eigen::Vector2d p = project(x);
     const Eigen::Vector2d s(margin + (p.x() - lo.x()) * scale,
                             height - margin - (p.y() - lo.y()) * scale);
-    return "cx=\"" + HtmlNumber(s.x(), 6) + "\" cy=\"" + HtmlNumber(s.y(), 6) + "\"";
+    return std::string(x_name) + "=\"" + HtmlNumber(s.x(), 6) + "\" " + y_name + "=\"" +
+           HtmlNumber(s.y(), 6) + "\"";
   };
   const auto line = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-    std::string from = at(a), to = at(b);
-    from.replace(0, 2, "x1").replace(from.find("cy"), 2, "y1");
-    to.replace(0, 2, "x2").replace(to.find("cy"), 2, "y2");
-    return "<line " + from + " " + to;
+    return "<line " + at(a, "x1", "y1") + " " + at(b, "x2", "y2");
   };
   std::string svg = "<svg id=\"cameras-" + view +
                     "\" xmlns=\"http://www.w3.org/2000/svg\" width=\"" + HtmlNumber(width, 4) +
