@@ -54,7 +54,7 @@ double PerJacobianEvaluation(const RefineSummary& summary) {
   for (const auto& pass : summary.passes) {
     for (const auto& stage : pass.stages) evaluations += stage.jacobian_evaluations;
   }
-  return summary.jacobian_seconds / std::max(1, evaluations);
+  return summary.timings.jacobian_seconds / std::max(1, evaluations);
 }
 
 void PrintRun(const char* label, const Run& run) {
@@ -63,7 +63,7 @@ void PrintRun(const char* label, const Run& run) {
       "  %-28s matches %7d  residuals %7d  ray times %7d  iterations %3d  solve %7.2f s"
       "  jacobian %6.2f s (%.4f s/eval)  rot err %.4f deg\n",
       label, pass.num_matches_used, pass.num_residuals, pass.num_ray_times,
-      run.summary.total_iterations, run.summary.solve_seconds, run.summary.jacobian_seconds,
+      run.summary.total_iterations, run.summary.timings.solve_seconds, run.summary.timings.jacobian_seconds,
       PerJacobianEvaluation(run.summary), run.rotation_error_deg);
 }
 
@@ -121,15 +121,15 @@ int Main(int argc, char** argv) {
   const Run cache_off = Solve(scene, input, options, threads);
   PrintRun("Ceres, autodiff (cache off)", cache_off);
   std::printf("  ratio Ceres / ray-time LM: whole solve %.2fx, per iteration %.2fx\n",
-              ceres_fixed.summary.solve_seconds / cache_on.summary.solve_seconds,
-              (ceres_fixed.summary.solve_seconds / ceres_fixed.summary.total_iterations) /
-                  (cache_on.summary.solve_seconds / cache_on.summary.total_iterations));
+              ceres_fixed.summary.timings.solve_seconds / cache_on.summary.timings.solve_seconds,
+              (ceres_fixed.summary.timings.solve_seconds / ceres_fixed.summary.total_iterations) /
+                  (cache_on.summary.timings.solve_seconds / cache_on.summary.total_iterations));
   std::printf(
       "  ratio autodiff / fixed residual (Ceres): Jacobian evaluation %.2fx per evaluation "
       "(%.2fx total), whole solve %.2fx\n",
       PerJacobianEvaluation(cache_off.summary) / PerJacobianEvaluation(ceres_fixed.summary),
-      cache_off.summary.jacobian_seconds / ceres_fixed.summary.jacobian_seconds,
-      cache_off.summary.solve_seconds / ceres_fixed.summary.solve_seconds);
+      cache_off.summary.timings.jacobian_seconds / ceres_fixed.summary.timings.jacobian_seconds,
+      cache_off.summary.timings.solve_seconds / ceres_fixed.summary.timings.solve_seconds);
 
   std::printf("\n[2] GNC vs plain (all matches)\n");
   options = base;
@@ -139,7 +139,7 @@ int Main(int argc, char** argv) {
   PrintRun("GNC 1e4 -> 1e3 -> 1e2", cache_on);
   std::printf(
       "  ratio GNC/plain: solve %.2fx, iterations %.2fx (paper: about 2x)\n",
-      cache_on.summary.solve_seconds / plain.summary.solve_seconds,
+      cache_on.summary.timings.solve_seconds / plain.summary.timings.solve_seconds,
       static_cast<double>(cache_on.summary.total_iterations) / plain.summary.total_iterations);
 
   std::printf("\n[3] cap 100 vs all matches (GNC)\n");
@@ -149,7 +149,7 @@ int Main(int argc, char** argv) {
   PrintRun("cap 100", cap100);
   PrintRun("all", cache_on);
   std::printf("  ratio all/cap100: solve %.2fx, matches %.2fx\n",
-              cache_on.summary.solve_seconds / cap100.summary.solve_seconds,
+              cache_on.summary.timings.solve_seconds / cap100.summary.timings.solve_seconds,
               static_cast<double>(cache_on.summary.passes[0].num_matches_used) /
                   cap100.summary.passes[0].num_matches_used);
 
@@ -171,9 +171,9 @@ int Main(int argc, char** argv) {
   for (const auto& [cap, run] : sizes) {
     const int matches = run.summary.passes[0].num_matches_used;
     std::printf("  %-10s %10d %12.2f %14.2f %16.4f\n",
-                cap == 0 ? "all" : std::to_string(cap).c_str(), matches, run.summary.solve_seconds,
-                run.summary.solve_seconds / smallest.summary.solve_seconds,
-                1000.0 * run.summary.solve_seconds / matches);
+                cap == 0 ? "all" : std::to_string(cap).c_str(), matches, run.summary.timings.solve_seconds,
+                run.summary.timings.solve_seconds / smallest.summary.timings.solve_seconds,
+                1000.0 * run.summary.timings.solve_seconds / matches);
   }
 
   std::printf(
@@ -200,7 +200,7 @@ int Main(int argc, char** argv) {
           "  %-6s %-9s init depth %6.2f m  drift %.4f deg / %.4f m  iterations %3d  "
           "solve %.2f s\n",
           preset, init, summary.passes[0].ray_time_init.median_depth, drift.mean_rotation_deg,
-          drift.mean_centre_m, summary.total_iterations, summary.solve_seconds);
+          drift.mean_centre_m, summary.total_iterations, summary.timings.solve_seconds);
     }
   }
   return 0;
