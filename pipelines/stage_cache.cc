@@ -29,9 +29,10 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-// XXH3 of this executable's file, computed once per process.
+// XXH3 of this executable's file, computed once per process (read through /proc/self/exe, which
+// opens the running binary even where a rebuild has unlinked its path).
 const std::string& ExecutableHash() {
-  static const std::string hash = HashFileContents(fs::read_symlink("/proc/self/exe").string());
+  static const std::string hash = HashFileContents("/proc/self/exe");
   return hash;
 }
 

@@ -25,15 +25,14 @@ namespace raytime {
 namespace {
 
 // A sweep run in its own process: `raytime run RUN_DIR/pipeline.yaml --workdir RUN_DIR
-// --cache-dir CACHE`, output to RUN_DIR/run.log.
+// --cache-dir CACHE`, output to RUN_DIR/run.log. The executable is /proc/self/exe, not the path it
+// links to: every run of a sweep runs the binary the sweep started with, even when a rebuild has
+// replaced (unlinked) that file meanwhile.
 pid_t SpawnRun(const std::string& run_dir, const std::string& cache_dir, bool force) {
-  std::vector<std::string> args = {fs::read_symlink("/proc/self/exe").string(),
-                                   "run",
-                                   (fs::path(run_dir) / "pipeline.yaml").string(),
-                                   "--workdir",
-                                   run_dir,
-                                   "--cache-dir",
-                                   cache_dir};
+  std::vector<std::string> args = {
+      "/proc/self/exe", "run",   (fs::path(run_dir) / "pipeline.yaml").string(),
+      "--workdir",      run_dir, "--cache-dir",
+      cache_dir};
   if (force) args.push_back("--force");
   ProcessOptions options;
   options.output_path = (fs::path(run_dir) / "run.log").string();
@@ -208,18 +207,15 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
   std::vector<bool> finished(runs.size(), false);
   std::map<pid_t, size_t> running;
   int failures = 0;
-  const auto write = [&](const std::string& status) {
+  const auto write = [&](const std::string& status, const std::string& error = "") {
     std::vector<SweepRow> table;
     for (size_t i = 0; i < runs.size(); ++i) {
       if (finished[i]) table.push_back(rows[i]);
     }
-    WriteSweepOutputs(workdir, table,
-                      {{"pipeline", spec.path},
-                       {"name", spec.name},
-                       {"num_runs", runs.size()},
-                       {"failures", failures},
-                       {"status", status},
-                       {"seconds", SecondsSince(start)}});
+    json fields = {{"pipeline", spec.path}, {"name", spec.name}, {"num_runs", runs.size()},
+                   {"failures", failures},  {"status", status},  {"seconds", SecondsSince(start)}};
+    if (!error.empty()) fields["error"] = error;
+    WriteSweepOutputs(workdir, table, fields);
   };
   // On SIGINT/SIGTERM: stop the running children (each writes its own "interrupted" summary),
   // keep every row finished so far, and say the sweep was interrupted.
@@ -242,7 +238,22 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     {
       std::lock_guard<std::mutex> lock(mutex);
       while (next < runs.size() && static_cast<int>(running.size()) < jobs) {
-        running[SpawnRun(run_dirs[next], cache_dir, options.force)] = next;
+        try {
+          running[SpawnRun(run_dirs[next], cache_dir, options.force)] = next;
+        } catch (const std::exception& e) {
+          // The runs not started are not rows: the summary says the sweep failed and why, never
+          // "running" with nothing left running. Runs under way are stopped and keep their rows.
+          for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
+          for (const auto& [pid, index] : running) {
+            WaitProcess(pid);
+            rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
+            finished[index] = true;
+          }
+          running.clear();
+          const std::string error = std::string("run ") + runs[next].label + ": " + e.what();
+          write("failed", error);
+          throw std::runtime_error("sweep stopped: " + error);
+        }
         ++next;
       }
     }

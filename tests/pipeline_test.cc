@@ -174,6 +174,33 @@ TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   EXPECT_LT(summary["metrics"]["refined"]["sim3"]["mean_rotation_deg"].get<double>(), 0.3);
 }
 
+// A run that cannot be started (here its run.log cannot be opened: a folder by that name) stops
+// the sweep with a clear error and a summary that says "failed" and why, the finished runs' rows
+// kept: never a summary left saying "running" by a sweep that is gone.
+TEST_F(PipelineTest, SweepThatCannotStartARunSaysSoInItsSummary) {
+  const std::string pipeline = WriteFile("sweep_blocked.yaml", R"(
+name: blocked-sweep
+dataset: {format: strecha, root: data/sample/fountain-P11}
+stages:
+  - prior: {mode: iid}
+sweep:
+  prior.level_deg: [0, 2]
+)");
+  const fs::path run_dir = workdir_ / "blocked";
+  fs::create_directories(run_dir / "runs" / "level_deg=2" / "run.log");
+  CommandResult result =
+      RunRaytime("run " + pipeline + " --workdir " + run_dir.string() + " --jobs 1");
+  EXPECT_NE(result.exit_code, 0) << result.output;
+  EXPECT_NE(result.output.find("sweep stopped: run level_deg=2: cannot run"), std::string::npos)
+      << result.output;
+  const json summary = ReadJson(run_dir / "summary.json");
+  EXPECT_EQ(summary["status"], "failed");
+  EXPECT_NE(summary["error"].get<std::string>().find("level_deg=2"), std::string::npos);
+  const json rows = ReadJson(run_dir / "sweep.json");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0]["status"], "ok");
+}
+
 TEST_F(PipelineTest, SweepCollectsOneRowPerRun) {
   const std::string pipeline = WriteFile("sweep.yaml", R"(
 name: small-sweep
