@@ -337,8 +337,8 @@ std::vector<const ImageInfo*> ImagesInNameOrder(const ImageSet& images,
   return ordered;
 }
 
-// The images, once, into `folder` (every pose set's images/ links to it): undistorted to their
-// pinhole camera, or copied when they have no distortion; the colours of the solve's observations
+// The images, once, into `folder` (every pose set's images/ links to it): undistorted (and centred)
+// to their pinhole camera, or copied when that is their own camera; the colours of the solve's observations
 // read on the way.
 void WriteImagesOnce(const ImageSet& images, const std::optional<RayTimeSource>& source,
                      const TrainerExportOptions& options, const fs::path& folder,
@@ -352,7 +352,7 @@ void WriteImagesOnce(const ImageSet& images, const std::optional<RayTimeSource>&
     const fs::path path = fs::path(images.image_root) / info.name;
     const fs::path target = folder / info.name;
     fs::create_directories(target.parent_path());
-    const bool copy = IsUndistorted(distorted);
+    const bool copy = !IsResampled(distorted, shared->PinholeCamera(i));
     const std::vector<int>& observations = shared->exported.of_image[i];
     cv::Mat bgr;
     if (!copy || !observations.empty()) {

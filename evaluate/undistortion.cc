@@ -42,25 +42,11 @@ double AxisScale(double c, double size, double near_min, double near_max, double
   return scale;
 }
 
-}  // namespace
-
-bool IsUndistorted(const CameraIntrinsics& camera) {
-  for (const int k : {kK1, kK2, kP1, kP2}) {
-    if (std::abs(camera.params[k]) > kNoDistortion) return false;
-  }
-  return true;
-}
-
-CameraIntrinsics UndistortedCamera(const CameraIntrinsics& distorted,
-                                   const UndistortionOptions& options) {
-  ValidateOptions(options, "undistortion");
-  if (distorted.width <= 0 || distorted.height <= 0) {
-    throw InputError("undistortion: camera has no image size (" + std::to_string(distorted.width) +
-                     " x " + std::to_string(distorted.height) + ")");
-  }
+// UndistortedCamera of a camera with distortion, before centring: COLMAP's size rule.
+CameraIntrinsics ResizedPinhole(const CameraIntrinsics& distorted,
+                                const UndistortionOptions& options) {
   CameraIntrinsics pinhole = distorted;
   for (const int k : {kK1, kK2, kP1, kP2}) pinhole.params[k] = 0.0;
-  if (IsUndistorted(distorted)) return pinhole;
 
   const double w = distorted.width, h = distorted.height;
   constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -103,6 +89,47 @@ CameraIntrinsics UndistortedCamera(const CameraIntrinsics& distorted,
   pinhole.params[kCy] = cy * pinhole.height / h - 0.5;
   return pinhole;
 }
+
+}  // namespace
+
+bool IsUndistorted(const CameraIntrinsics& camera) {
+  for (const int k : {kK1, kK2, kP1, kP2}) {
+    if (std::abs(camera.params[k]) > kNoDistortion) return false;
+  }
+  return true;
+}
+
+CameraIntrinsics UndistortedCamera(const CameraIntrinsics& distorted,
+                                   const UndistortionOptions& options) {
+  ValidateOptions(options, "undistortion");
+  if (distorted.width <= 0 || distorted.height <= 0) {
+    throw InputError("undistortion: camera has no image size (" + std::to_string(distorted.width) +
+                     " x " + std::to_string(distorted.height) + ")");
+  }
+  CameraIntrinsics pinhole = distorted;
+  for (const int k : {kK1, kK2, kP1, kP2}) pinhole.params[k] = 0.0;
+  if (!IsUndistorted(distorted)) pinhole = ResizedPinhole(distorted, options);
+  if (options.centre_principal_point) {
+    // COLMAP convention (the image spans [0, size]); at least one pixel.
+    const auto centre = [](double c, int* size, double* param) {
+      const double half = std::min(c, *size - c);
+      *size = static_cast<int>(std::max(1.0, std::floor(2.0 * half + 1e-9)));
+      *param = 0.5 * *size - 0.5;
+    };
+    centre(pinhole.params[kCx] + 0.5, &pinhole.width, &pinhole.params[kCx]);
+    centre(pinhole.params[kCy] + 0.5, &pinhole.height, &pinhole.params[kCy]);
+  }
+  return pinhole;
+}
+
+bool IsResampled(const CameraIntrinsics& distorted, const CameraIntrinsics& pinhole) {
+  return !IsUndistorted(distorted) || pinhole.width != distorted.width ||
+         pinhole.height != distorted.height || pinhole.params[kCx] != distorted.params[kCx] ||
+         pinhole.params[kCy] != distorted.params[kCy] ||
+         pinhole.params[kFx] != distorted.params[kFx] ||
+         pinhole.params[kFy] != distorted.params[kFy];
+}
+
 
 cv::Mat UndistortImage(const cv::Mat& image, const CameraIntrinsics& distorted,
                        const CameraIntrinsics& pinhole) {

@@ -26,6 +26,10 @@ struct UndistortionOptions {
   // Bounds on the change of the image size (COLMAP's defaults).
   double min_scale = 0.2;
   double max_scale = 2.0;
+  // Crop the new image symmetrically about the principal point so that it is the image centre:
+  // the Inria code and OpenSplat's CPU path place it there whatever the camera says (issue 33), so
+  // an off-centre one (7 px on the Strecha scenes at 1536 px) shifts every training ray.
+  bool centre_principal_point = true;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
@@ -40,6 +44,9 @@ struct UndistortionOptions {
     v("undistort_max_scale", max_scale,
       "3dgs: largest change of the undistorted image's size, factor (colmap --max_scale)",
       Positive());
+    v("centre_principal_point", centre_principal_point,
+      "3dgs: crop each image symmetrically so its principal point is the image centre (trainers "
+      "that ignore cx, cy: Inria, OpenSplat on CPU)");
   }
   void CheckRelations(const Requirement& require) const {
     require(min_scale <= max_scale, "undistort_min_scale must not exceed undistort_max_scale");
@@ -51,12 +58,19 @@ struct UndistortionOptions {
 constexpr double kNoDistortion = 1e-8;
 bool IsUndistorted(const CameraIntrinsics& camera);
 
-// The pinhole camera (zero distortion) of `distorted`'s undistorted image, sized as above.
-// A camera that IsUndistorted comes back unchanged but for its (tiny) distortion set to zero.
+// The pinhole camera (zero distortion) of `distorted`'s undistorted image, sized as above, then
+// (centre_principal_point) cropped to the largest image centred on the principal point: in COLMAP's
+// convention width = floor(2 min(cx, width - cx)), cx = width / 2, the same for y.
+// Otherwise a camera that IsUndistorted comes back unchanged but for its (tiny) distortion set to
+// zero; IsResampled says whether the image must be resampled into the camera or can be copied.
 // Throws InputError when the distortion folds the border over (no finite scale) or when the
 // camera has no image size.
 CameraIntrinsics UndistortedCamera(const CameraIntrinsics& distorted,
                                    const UndistortionOptions& options);
+
+// Whether `pinhole` (from UndistortedCamera) differs from `distorted` by more than its tiny
+// distortion: its image is resampled, not copied.
+bool IsResampled(const CameraIntrinsics& distorted, const CameraIntrinsics& pinhole);
 
 // `image` (of `distorted`'s size) resampled into `pinhole`: each new pixel takes the bilinear
 // interpolation of the distorted image at where `distorted` images its ray

@@ -45,10 +45,13 @@ CameraIntrinsics Camera(int width, int height, double f, double cx, double cy, d
 // 0.955), so the near one decides: no blank pixel needs the factor 100.5 / 104, width =
 // floor(211 · 104 / 100.5) = floor(218.35) = 218, and the principal point keeps its relative
 // position: 100.5 · 218 / 211 in COLMAP's convention. The same for y.
+// (COLMAP's camera: centre_principal_point off.)
 TEST(UndistortionTest, CameraAsColmapComputesIt) {
   const double k1 = -(0.52 - 0.5) / std::pow(0.52, 3);
   const CameraIntrinsics distorted = Camera(211, 211, 200.0, 100.0, 100.0, k1);
-  const CameraIntrinsics pinhole = UndistortedCamera(distorted, UndistortionOptions());
+  UndistortionOptions as_colmap;
+  as_colmap.centre_principal_point = false;
+  const CameraIntrinsics pinhole = UndistortedCamera(distorted, as_colmap);
   EXPECT_EQ(pinhole.width, 218);
   EXPECT_EQ(pinhole.height, 218);
   EXPECT_DOUBLE_EQ(pinhole.fx(), 200.0);
@@ -58,21 +61,22 @@ TEST(UndistortionTest, CameraAsColmapComputesIt) {
   EXPECT_FALSE(pinhole.HasDistortion());
 
   // The scale is clipped to [min_scale, max_scale]: 1.01 · 211 = 213.11 -> 213.
-  UndistortionOptions clipped;
+  UndistortionOptions clipped = as_colmap;
   clipped.max_scale = 1.01;
   const CameraIntrinsics small = UndistortedCamera(distorted, clipped);
   EXPECT_EQ(small.width, 213);
   EXPECT_NEAR(small.cx(), 100.5 * 213.0 / 211.0 - 0.5, 1e-12);
 
   // Keeping every distorted pixel (blank_pixels = 1) needs a larger image still.
-  UndistortionOptions keep_all;
+  UndistortionOptions keep_all = as_colmap;
   keep_all.blank_pixels = 1.0;
   EXPECT_GT(UndistortedCamera(distorted, keep_all).width, 218);
 
   // No distortion (COLMAP: |k| <= 1e-8): the camera as it is.
   const CameraIntrinsics plain = Camera(640, 480, 500.0, 319.5, 239.5, 1e-9);
-  const CameraIntrinsics same = UndistortedCamera(plain, UndistortionOptions());
+  const CameraIntrinsics same = UndistortedCamera(plain, as_colmap);
   EXPECT_TRUE(IsUndistorted(plain));
+  EXPECT_FALSE(IsResampled(plain, same));
   EXPECT_EQ(same.width, 640);
   EXPECT_EQ(same.height, 480);
   EXPECT_EQ(same.cx(), 319.5);
@@ -86,6 +90,41 @@ TEST(UndistortionTest, CameraAsColmapComputesIt) {
   UndistortionOptions invalid;
   invalid.min_scale = 3.0;
   EXPECT_THROW(UndistortedCamera(distorted, invalid), InputError);
+}
+
+// Centring (the default): the largest image centred on the principal point, which trainers that
+// place it at the centre (Inria, OpenSplat on CPU) then read right. COLMAP convention: a principal
+// point 7.5 px left of centre in a 640-wide image (cx 312.5 OpenCV = 313 COLMAP) leaves
+// floor(2 · 313) = 626 columns, cx = 313 - 0.5; below centre in y (cy 250.25 OpenCV = 250.75):
+// floor(2 · (480 - 250.75)) = 458 rows, cy = 229 - 0.5. The image is the photo shifted by
+// (0, 250.25 - 228.5 = 21.75) px (bilinear: exact on a linear image up to remap's 1/32 px).
+TEST(UndistortionTest, CentringCropsAboutThePrincipalPoint) {
+  const CameraIntrinsics plain = Camera(640, 480, 500.0, 312.5, 250.25);
+  const CameraIntrinsics centred = UndistortedCamera(plain, UndistortionOptions());
+  EXPECT_EQ(centred.width, 626);
+  EXPECT_EQ(centred.height, 458);
+  EXPECT_DOUBLE_EQ(centred.cx(), 0.5 * 626 - 0.5);
+  EXPECT_DOUBLE_EQ(centred.cy(), 0.5 * 458 - 0.5);
+  EXPECT_DOUBLE_EQ(centred.fx(), 500.0);
+  EXPECT_TRUE(IsResampled(plain, centred));
+  cv::Mat image(480, 640, CV_32FC1);
+  for (int y = 0; y < 480; ++y) {
+    for (int x = 0; x < 640; ++x) image.at<float>(y, x) = static_cast<float>(x + 1000 * y);
+  }
+  const cv::Mat out = UndistortImage(image, plain, centred);
+  ASSERT_EQ(out.cols, 626);
+  ASSERT_EQ(out.rows, 458);
+  for (const auto& [x, y] : std::vector<std::pair<int, int>>{{0, 0}, {625, 457}, {300, 200}}) {
+    EXPECT_NEAR(out.at<float>(y, x), x + 1000 * (y + 21.75), 1000 * 1.0 / 32 + 1e-3) << x << "," << y;
+  }
+  // A principal point already centred: the camera as it is, the image copied.
+  const CameraIntrinsics centre = Camera(640, 480, 500.0, 319.5, 239.5);
+  EXPECT_FALSE(IsResampled(centre, UndistortedCamera(centre, UndistortionOptions())));
+  // With distortion: the resized camera, then centred.
+  const CameraIntrinsics distorted = Camera(320, 240, 300.0, 161.3, 118.2, -0.2, 0.05);
+  const CameraIntrinsics pinhole = UndistortedCamera(distorted, UndistortionOptions());
+  EXPECT_DOUBLE_EQ(pinhole.cx(), 0.5 * pinhole.width - 0.5);
+  EXPECT_DOUBLE_EQ(pinhole.cy(), 0.5 * pinhole.height - 0.5);
 }
 
 // Each undistorted pixel holds the distorted image at where the distorted camera sees its ray:
