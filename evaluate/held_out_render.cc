@@ -102,6 +102,29 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir,
       std::fill(image.point3D_ids.begin(), image.point3D_ids.end(), kInvalidPoint3DId);
     }
   }
+  if (seed != 0) {
+    // The points' file order too: a trainer that draws each Gaussian's random state in file order
+    // from a fixed seed (OpenSplat's initial rotations, torch seeded with 42) then gives every
+    // point another draw.
+    std::vector<uint64_t> ids;
+    for (const auto& [id, point] : model.points3D) ids.push_back(id);
+    std::vector<uint64_t> shuffled = ids;
+    std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(static_cast<uint32_t>(seed) + 1u));
+    std::map<uint64_t, uint64_t> new_id;
+    for (size_t k = 0; k < ids.size(); ++k) new_id[ids[k]] = shuffled[k];
+    std::map<uint64_t, ColmapPoint3D> points;
+    for (auto& [id, point] : model.points3D) {
+      point.point3D_id = new_id.at(id);
+      points[point.point3D_id] = point;
+    }
+    model.points3D = std::move(points);
+    for (auto& [id, image] : model.images) {
+      for (uint64_t& point_id : image.point3D_ids) {
+        const auto it = new_id.find(point_id);
+        if (it != new_id.end()) point_id = it->second;
+      }
+    }
+  }
   const fs::path sparse = fs::path(view_dir) / "sparse" / "0";
   fs::create_directories(sparse);
   WriteColmapModelBinary(model, sparse.string());

@@ -17,10 +17,11 @@ std::vector<std::string> HeldOutNames(const std::string& data_dir);
 
 // Writes VIEW_DIR/sparse/0/{cameras,images,points3D}.bin: the export's model (DATA_DIR/sparse/0)
 // without its held-out images, so a trainer pointed at VIEW_DIR (with its images read from
-// DATA_DIR/images) never sees one. `seed` other than 0 shuffles the images' order (their ids,
-// tracks renumbered alike): a trainer that visits cameras in file order with a fixed random state
-// (OpenSplat seeds its own generator with 42) then trains another way on the same frames, which
-// is how two "seeds" of one pose set measure the training-noise floor. Returns the number of
+// DATA_DIR/images) never sees one. `seed` other than 0 shuffles the images' order and the points'
+// order (their ids, tracks renumbered alike): a trainer that visits cameras in file order and
+// draws each Gaussian's initial state in file order from a fixed random state (OpenSplat seeds its
+// generators with 42) then trains another way on the same frames and points, which is how two
+// "seeds" of one pose set measure the training-noise floor. Returns the number of
 // training images. `random_points` > 0 replaces the export's points by that many drawn uniformly in
 // a ball around the training cameras (centre: their mean; radius: 3 × their largest distance from
 // it, the extent of gsplat's random initialization) with random colours, from `seed`: the paper's

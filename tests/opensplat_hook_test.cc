@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -148,23 +149,68 @@ TEST_F(OpenSplatHookTest, TrainsOnTheTrainingFramesAndIsScoredByRaytimesOwnRende
   EXPECT_LT(off.raytime_psnr, summary.raytime_psnr - 15.0);
 }
 
-// A seed shuffles the order a trainer meets the training frames (OpenSplat has no seed of its
-// own): the same frames and poses, in another order.
-TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesOrderNotTheFrames) {
+// A seed shuffles the order a trainer meets the training frames and the initial points (OpenSplat
+// has no seed of its own and draws each Gaussian's rotation in file order): the same frames,
+// poses and points, in another order, every track still naming the images that see its point.
+TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesAndPointsOrderNotTheirContent) {
   const std::string data = (dir_ / "3dgs" / "refined").string();
-  const auto order = [&](int seed) {
+  // The export's points: 30, each seen by the two images after the one it is numbered from.
+  ColmapModel model = ReadColmapModel(data + "/sparse/0");
+  std::vector<uint32_t> image_ids;
+  for (const auto& [id, image] : model.images) image_ids.push_back(id);
+  for (uint64_t p = 1; p <= 30; ++p) {
+    ColmapPoint3D point;
+    point.point3D_id = p;
+    point.xyz = Eigen::Vector3d(0.01 * p, -0.02 * p, 0.03 * static_cast<double>(p % 7));
+    for (size_t k = 1; k <= 2; ++k) {
+      ColmapImage& image = model.images.at(image_ids[(p + k) % image_ids.size()]);
+      point.track.push_back({image.image_id, static_cast<uint32_t>(image.points2D.size())});
+      image.points2D.emplace_back(10.0 + p, 20.0);
+      image.point3D_ids.push_back(p);
+    }
+    model.points3D[p] = point;
+  }
+  WriteColmapModelBinary(model, data + "/sparse/0");
+  const auto view_of = [&](int seed) {
     const std::string view = (dir_ / ("view" + std::to_string(seed))).string();
     EXPECT_EQ(WriteTrainOnlyView(data, view, seed), 6);
+    return ReadColmapModel(view + "/sparse/0");
+  };
+  const auto names = [](const ColmapModel& model) {
     std::vector<std::string> names;
-    for (const auto& [id, image] : ReadColmapModel(view + "/sparse/0").images) {
-      names.push_back(image.name);
-    }
+    for (const auto& [id, image] : model.images) names.push_back(image.name);
     return names;
   };
-  const std::vector<std::string> exported = order(0), seeded = order(5);
-  EXPECT_NE(seeded, exported);
-  EXPECT_TRUE(std::is_permutation(seeded.begin(), seeded.end(), exported.begin()));
-  EXPECT_EQ(order(5), seeded);  // the same seed, the same order
+  const auto positions = [](const ColmapModel& model) {
+    std::vector<std::array<double, 3>> xyz;
+    for (const auto& [id, point] : model.points3D) {
+      xyz.push_back({point.xyz.x(), point.xyz.y(), point.xyz.z()});
+    }
+    return xyz;
+  };
+  const ColmapModel exported = view_of(0), seeded = view_of(5);
+  ASSERT_GT(exported.points3D.size(), 10u);
+  const std::vector<std::string> exported_names = names(exported), seeded_names = names(seeded);
+  EXPECT_NE(seeded_names, exported_names);
+  EXPECT_TRUE(std::is_permutation(seeded_names.begin(), seeded_names.end(),
+                                  exported_names.begin(), exported_names.end()));
+  const auto exported_points = positions(exported), seeded_points = positions(seeded);
+  EXPECT_NE(seeded_points, exported_points);
+  EXPECT_TRUE(std::is_permutation(seeded_points.begin(), seeded_points.end(),
+                                  exported_points.begin(), exported_points.end()));
+  for (const auto& [image_id, image] : seeded.images) {
+    for (const uint64_t point_id : image.point3D_ids) {
+      if (point_id == kInvalidPoint3DId) continue;
+      ASSERT_TRUE(seeded.points3D.count(point_id)) << image.name << " names no point " << point_id;
+      const auto& track = seeded.points3D.at(point_id).track;
+      EXPECT_TRUE(std::any_of(track.begin(), track.end(), [&](const ColmapTrackElement& element) {
+        return element.image_id == image_id;
+      })) << image.name << " names point " << point_id << " whose track does not name it";
+    }
+  }
+  const ColmapModel again = view_of(5);  // the same seed, the same order
+  EXPECT_EQ(names(again), seeded_names);
+  EXPECT_EQ(positions(again), seeded_points);
 }
 
 // The paper's random initialization: N points in a ball around the training cameras (radius 3 ×
