@@ -182,13 +182,15 @@ std::string SplatSection(const CampaignReport& report) {
   std::string html =
       "<section id=\"splat\"><h2>Downstream 3DGS (Table 4)</h2><table>" +
       HtmlRow({"stage", "trainer", "level", "scene", "pose source", "PSNR (dB)", "SSIM", "LPIPS",
-               "raytime PSNR", "raytime SSIM", "trainings", "failed"},
+               "raytime PSNR", "raytime SSIM", "seed spread (dB)", "time / model (s)",
+               "trainings", "failed"},
               "th");
   for (const SplatCell& c : report.splat_cells) {
     html += HtmlRow({HtmlEscape(c.stage_id), HtmlEscape(c.trainer), LevelLabel(report, c.level_deg),
                      HtmlEscape(c.scene), HtmlEscape(c.pose_set), HtmlNumber(c.psnr, 4),
                      HtmlNumber(c.ssim), HtmlNumber(c.lpips), HtmlNumber(c.raytime_psnr, 4),
-                     HtmlNumber(c.raytime_ssim), std::to_string(c.trainings),
+                     HtmlNumber(c.raytime_ssim), HtmlNumber(c.seed_spread_psnr, 3),
+                     HtmlNumber(c.median_seconds, 3), std::to_string(c.trainings),
                      std::to_string(c.failed)});
   }
   return html + "</table></section>";

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <set>
 #include <tuple>
@@ -191,6 +192,19 @@ double MeanOfFinite(const std::vector<double>& values) {
   return count > 0 ? sum / count : kNoValue;
 }
 
+// Largest minus smallest of the finite values; NaN with fewer than two.
+double Spread(const std::vector<double>& values) {
+  double low = std::numeric_limits<double>::infinity(), high = -low;
+  int count = 0;
+  for (const double value : values) {
+    if (!std::isfinite(value)) continue;
+    low = std::min(low, value);
+    high = std::max(high, value);
+    ++count;
+  }
+  return count >= 2 ? high - low : kNoValue;
+}
+
 // Averages `cells` (each a scene's) into one: each metric the mean over the cells that have it.
 void AverageInto(const std::vector<const SplatCell*>& cells, SplatCell* out) {
   std::vector<double> psnr, ssim, lpips, raytime_psnr, raytime_ssim;
@@ -232,7 +246,7 @@ std::vector<SplatCell> AggregateSplat(const std::vector<RunRecord>& runs,
       std::vector<SplatCell> scene_cells;
       for (const auto& scene : scenes) {
         SplatCell cell{id, trainer, level, scene, pose_set};
-        std::vector<double> psnr, ssim, lpips, raytime_psnr, raytime_ssim;
+        std::vector<double> psnr, ssim, lpips, raytime_psnr, raytime_ssim, seconds;
         bool tried = false;
         for (const RunRecord& run : runs) {
           if (run.scene != scene || run.level_deg != level) continue;
@@ -252,6 +266,7 @@ std::vector<SplatCell> AggregateSplat(const std::vector<RunRecord>& runs,
           lpips.push_back(result.lpips);
           raytime_psnr.push_back(result.raytime_psnr);
           raytime_ssim.push_back(result.raytime_ssim);
+          if (std::isfinite(result.seconds)) seconds.push_back(result.seconds);
         }
         if (!tried) continue;
         cell.scenes_tried = 1;
@@ -261,18 +276,28 @@ std::vector<SplatCell> AggregateSplat(const std::vector<RunRecord>& runs,
         cell.lpips = MeanOfFinite(lpips);
         cell.raytime_psnr = MeanOfFinite(raytime_psnr);
         cell.raytime_ssim = MeanOfFinite(raytime_ssim);
+        cell.seed_spread_psnr = Spread(raytime_psnr);
+        cell.median_seconds = Median(seconds, kNoValue);
         scene_cells.push_back(cell);
       }
       SplatCell all{id, trainer, level, CampaignReport::kAllScenes, pose_set};
       std::vector<const SplatCell*> scored;
+      std::vector<double> seconds;
       for (const SplatCell& cell : scene_cells) {
         all.scenes_tried += cell.scenes_tried;
         all.scenes += cell.scenes;
         all.trainings += cell.trainings;
         all.failed += cell.failed;
         if (cell.scenes > 0) scored.push_back(&cell);
+        if (std::isfinite(cell.seed_spread_psnr)) {
+          all.seed_spread_psnr = std::isnan(all.seed_spread_psnr)
+                                     ? cell.seed_spread_psnr
+                                     : std::max(all.seed_spread_psnr, cell.seed_spread_psnr);
+        }
+        if (std::isfinite(cell.median_seconds)) seconds.push_back(cell.median_seconds);
       }
       AverageInto(scored, &all);
+      all.median_seconds = Median(seconds, kNoValue);
       cells.insert(cells.end(), scene_cells.begin(), scene_cells.end());
       cells.push_back(all);
     }
@@ -517,8 +542,10 @@ std::string HalvingTable(const CampaignReport& report) {
 }
 
 // Table 4 shape (§4.5): per splat stage, trainer and level, pose sources x the trainer's PSNR,
-// SSIM, LPIPS and raytime's PSNR, SSIM, mean over scenes; then per-scene PSNR (the appendix's
-// per-scene table) when there are several scenes.
+// SSIM, LPIPS and raytime's PSNR, SSIM, mean over scenes, with the seed spread (the training-noise
+// floor) and the time per model; then per-scene PSNR (the appendix's per-scene table) when there
+// are several scenes: raytime's where any training has it (the same scorer for every trainer),
+// else the trainer's.
 std::string SplatTables(const CampaignReport& report) {
   std::vector<std::tuple<std::string, std::string, double>> groups;
   for (const SplatCell& cell : report.splat_cells) {
@@ -531,54 +558,83 @@ std::string SplatTables(const CampaignReport& report) {
     const std::string& id = std::get<0>(group);
     const std::string& trainer = std::get<1>(group);
     const double level = std::get<2>(group);
+    const auto in_group = [&](const SplatCell& cell) {
+      return cell.stage_id == id && cell.trainer == trainer && cell.level_deg == level;
+    };
     if (groups.size() > 1 || report.level_swept) {
       text += "\n### `" + id + "` (" + trainer + ")" +
               (report.level_swept ? ", level " + LevelText(report, level) : std::string()) + "\n\n";
     } else {
       text += "\nStage `" + id + "`, trainer " + trainer + ":\n\n";
     }
-    text += TableHeader("pose source", {"PSNR ↑", "SSIM ↑", "LPIPS ↓", "raytime PSNR ↑",
-                                        "raytime SSIM ↑", "scenes", "failed"});
+    text += TableHeader("pose source",
+                        {"PSNR ↑", "SSIM ↑", "LPIPS ↓", "raytime PSNR ↑", "raytime SSIM ↑",
+                         "seed spread (dB)", "time / model (s)", "scenes", "failed"});
     std::vector<std::string> pose_sets;
+    double floor = kNoValue;
+    bool raytime = false;
     for (const SplatCell& cell : report.splat_cells) {
-      if (cell.stage_id != id || cell.trainer != trainer || cell.level_deg != level ||
-          cell.scene != CampaignReport::kAllScenes) {
-        continue;
-      }
+      if (!in_group(cell)) continue;
+      raytime = raytime || std::isfinite(cell.raytime_psnr);
+      if (cell.scene != CampaignReport::kAllScenes) continue;
       pose_sets.push_back(cell.pose_set);
+      if (std::isfinite(cell.seed_spread_psnr)) {
+        floor = std::isnan(floor) ? cell.seed_spread_psnr : std::max(floor, cell.seed_spread_psnr);
+      }
       text += TableRow(
           cell.pose_set,
           {Format("%.2f", cell.psnr), Format("%.3f", cell.ssim), Format("%.3f", cell.lpips),
            Format("%.2f", cell.raytime_psnr), Format("%.3f", cell.raytime_ssim),
+           Format("%.2f", cell.seed_spread_psnr), Format("%.0f", cell.median_seconds),
            CountText(cell.scenes, cell.scenes_tried), std::to_string(cell.failed)});
     }
+    text += std::isnan(floor)
+                ? "\nTraining-noise floor: not measured (one scored training per scene and pose "
+                  "source; sweep the trainer's seed, e.g. `splat.seed: [0, 1]`).\n"
+                : "\nTraining-noise floor: " + Format("%.2f", floor) +
+                      " dB, the largest seed spread of raytime PSNR (one scene's trainings of one "
+                      "pose source): differences below it are not told apart.\n";
     if (report.scenes.size() < 2) continue;
-    text += "\nPSNR per scene (dB):\n\n" + TableHeader("scene", pose_sets);
+    const auto value = [&](const SplatCell& cell) {
+      return raytime ? cell.raytime_psnr : cell.psnr;
+    };
+    text += std::string(raytime ? "\nraytime PSNR" : "\nPSNR") +
+            " per scene (dB; seed spread: the scene's largest over its pose sources, in the Mean "
+            "row the floor):\n\n";
+    std::vector<std::string> columns = pose_sets;
+    columns.push_back("seed spread");
+    text += TableHeader("scene", columns);
     for (const auto& scene : report.scenes) {
       std::vector<std::string> cells;
       bool any = false;
+      double spread = kNoValue;
       for (const auto& pose_set : pose_sets) {
         const auto it = std::find_if(
             report.splat_cells.begin(), report.splat_cells.end(), [&](const SplatCell& cell) {
-              return cell.stage_id == id && cell.trainer == trainer && cell.level_deg == level &&
-                     cell.scene == scene && cell.pose_set == pose_set;
+              return in_group(cell) && cell.scene == scene && cell.pose_set == pose_set;
             });
         any = any || it != report.splat_cells.end();
         cells.push_back(it == report.splat_cells.end() ? "–"
                         : it->scenes == 0              ? "failed"
-                                                       : Format("%.2f", it->psnr));
+                                                       : Format("%.2f", value(*it)));
+        if (it != report.splat_cells.end() && std::isfinite(it->seed_spread_psnr)) {
+          spread = std::isnan(spread) ? it->seed_spread_psnr
+                                      : std::max(spread, it->seed_spread_psnr);
+        }
       }
+      cells.push_back(Format("%.2f", spread));
       if (any) text += TableRow(scene, cells);
     }
     std::vector<std::string> means;
     for (const auto& pose_set : pose_sets) {
       const auto it = std::find_if(
           report.splat_cells.begin(), report.splat_cells.end(), [&](const SplatCell& cell) {
-            return cell.stage_id == id && cell.trainer == trainer && cell.level_deg == level &&
-                   cell.scene == CampaignReport::kAllScenes && cell.pose_set == pose_set;
+            return in_group(cell) && cell.scene == CampaignReport::kAllScenes &&
+                   cell.pose_set == pose_set;
           });
-      means.push_back(Format("%.2f", it->psnr));
+      means.push_back(Format("%.2f", value(*it)));
     }
+    means.push_back(Format("%.2f", floor));
     text += TableRow("Mean", means);
   }
   return text;
@@ -869,14 +925,15 @@ std::string CampaignSplatCsv(const CampaignReport& report) {
   if (report.splat_cells.empty()) return "";
   std::string csv =
       "stage,trainer,level_deg,scene,pose_set,scenes,scenes_tried,trainings,failed,psnr,ssim,"
-      "lpips,raytime_psnr,raytime_ssim\n";
+      "lpips,raytime_psnr,raytime_ssim,seed_spread_psnr,median_seconds\n";
   for (const SplatCell& cell : report.splat_cells) {
     csv += CsvText(cell.stage_id) + "," + CsvText(cell.trainer) + "," + CsvNumber(cell.level_deg) +
            "," + CsvText(cell.scene) + "," + CsvText(cell.pose_set) + "," +
            std::to_string(cell.scenes) + "," + std::to_string(cell.scenes_tried) + "," +
            std::to_string(cell.trainings) + "," + std::to_string(cell.failed) + "," +
            CsvNumber(cell.psnr) + "," + CsvNumber(cell.ssim) + "," + CsvNumber(cell.lpips) + "," +
-           CsvNumber(cell.raytime_psnr) + "," + CsvNumber(cell.raytime_ssim) + "\n";
+           CsvNumber(cell.raytime_psnr) + "," + CsvNumber(cell.raytime_ssim) + "," +
+           CsvNumber(cell.seed_spread_psnr) + "," + CsvNumber(cell.median_seconds) + "\n";
   }
   return csv;
 }

@@ -118,6 +118,11 @@ struct SplatCell {
   double lpips = kNoValue;         // NaN when the trainer reported none
   double raytime_psnr = kNoValue;  // raytime's own over the trainer's renders (image_metrics.h)
   double raytime_ssim = kNoValue;
+  // The training-noise floor (§4.5): the largest minus the smallest raytime PSNR of the scene's
+  // trainings of this pose set (runs that differ in their seed, typically), dB; over scenes, the
+  // largest scene's. NaN with fewer than two scored trainings.
+  double seed_spread_psnr = kNoValue;
+  double median_seconds = kNoValue;  // the trainer's wall time per training (model)
 };
 
 struct CampaignReport {

@@ -475,23 +475,29 @@ TEST(CampaignReportTest, SplatTable4IsTheMeanOverScenesPerPoseSource) {
             std::string::npos);
   EXPECT_NE(markdown.find("### `splat` (gsplat), level 4°"), std::string::npos) << markdown;
   EXPECT_NE(markdown.find("### `splat@inria` (inria), level 4°"), std::string::npos);
-  EXPECT_NE(markdown.find("| prior | 19.00 | 0.475 | 0.425 | 31.00 | 0.500 | 2/2 | 1 |"),
+  EXPECT_NE(markdown.find("| prior | 19.00 | 0.475 | 0.425 | 31.00 | 0.500 | 2.00 | 100 | 2/2 | 1 |"),
             std::string::npos)
       << markdown;
-  EXPECT_NE(markdown.find("| refined | 26.50 | 0.775 | 0.150 | 32.00 | 0.500 | 2/2 | 0 |"),
+  EXPECT_NE(
+      markdown.find("| refined | 26.50 | 0.775 | 0.150 | 32.00 | 0.500 | 2.00 | 100 | 2/2 | 0 |"),
             std::string::npos)
       << markdown;
-  EXPECT_NE(markdown.find("| ground_truth | 30.00 | 0.900 | 0.050 | – | – | 1/1 | 0 |"),
+  EXPECT_NE(markdown.find("| ground_truth | 30.00 | 0.900 | 0.050 | – | – | – | 100 | 1/1 | 0 |"),
             std::string::npos)
       << markdown;
-  // Per-scene PSNR (two scenes), with its mean row.
-  EXPECT_NE(markdown.find("| A | 21.00 | 25.00 | – |"), std::string::npos) << markdown;
-  EXPECT_NE(markdown.find("| B | 17.00 | 28.00 | 30.00 |"), std::string::npos) << markdown;
-  EXPECT_NE(markdown.find("| Mean | 19.00 | 26.50 | 30.00 |"), std::string::npos) << markdown;
+  // The floor: scene A's two seeds of one pose source differ by 2 dB (raytime PSNR 30 and 32).
+  EXPECT_NE(markdown.find("Training-noise floor: 2.00 dB"), std::string::npos) << markdown;
+  // Per-scene PSNR (two scenes), with its mean row: raytime's where a training has it (gsplat),
+  // the trainer's where none has (Inria), each scene's largest seed spread last.
+  EXPECT_NE(markdown.find("| A | 31.00 | 32.00 | – | 2.00 |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("| B | – | – | – | – |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("| Mean | 31.00 | 32.00 | – | 2.00 |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("| A | 10.00 | – |"), std::string::npos) << markdown;
+  EXPECT_NE(markdown.find("Training-noise floor: not measured"), std::string::npos) << markdown;
 
   const std::string csv = CampaignSplatCsv(report);
   EXPECT_EQ(csv.rfind("stage,trainer,level_deg,scene,pose_set,", 0), 0u) << csv;
-  EXPECT_NE(csv.find("splat,gsplat,4,(all),prior,2,2,3,1,19,0.475,0.425,31,0.5\n"),
+  EXPECT_NE(csv.find("splat,gsplat,4,(all),prior,2,2,3,1,19,0.475,0.425,31,0.5,2,100\n"),
             std::string::npos)
       << csv;
   // A sweep without splat stages has no Table 4.
