@@ -8,14 +8,25 @@
 # SOURCE_DIR: an OpenSplat checkout to build (offline). Without it, the pinned commit below is
 # cloned (needs the network). The binary goes to $PREFIX/bin/opensplat (PREFIX: /usr/local by
 # default) and the commit it was built from to $PREFIX/share/opensplat/commit, which the splat
-# stage records in its summary. CPU build; with CUDA's nvcc on PATH and a CUDA libtorch, set
-# GPU_RUNTIME=CUDA for the GPU build (same flags otherwise). Build jobs: JOBS (default: all cores).
+# stage records in its summary. Build jobs: JOBS (default: all cores).
+#
+# GPU build (a machine with an NVIDIA GPU; Debian's libtorch is CPU-only): CUDA's nvcc on PATH, a
+# CUDA libtorch unpacked from pytorch.org (the cxx11-ABI zip), then
+#   GPU_RUNTIME=CUDA LIBTORCH_DIR=/opt/libtorch scripts/install_opensplat.sh [SOURCE_DIR]
+# The splat stage runs whichever `opensplat` is on PATH (or `splat.binary`), the same way.
 set -euo pipefail
 readonly PINNED_COMMIT=15b7e80016bb25107f07956b5682231f226f62b9  # 1.1.5, 2025-11-20
 readonly REPOSITORY=https://github.com/pierotofy/OpenSplat
 PREFIX=${PREFIX:-/usr/local}
 GPU_RUNTIME=${GPU_RUNTIME:-CPU}
 JOBS=${JOBS:-$(nproc)}
+# Where CMake looks for Torch first: a libtorch of one's own (CUDA), then Debian's.
+prefix_path=/usr/lib/x86_64-linux-gnu/cmake
+if [ -n "${LIBTORCH_DIR:-}" ]; then
+  [ -f "$LIBTORCH_DIR/share/cmake/Torch/TorchConfig.cmake" ] ||
+    { echo "install_opensplat: LIBTORCH_DIR=$LIBTORCH_DIR holds no share/cmake/Torch/TorchConfig.cmake" >&2; exit 2; }
+  prefix_path="$LIBTORCH_DIR;$prefix_path"
+fi
 
 packages=(build-essential cmake git libtorch-dev libnanoflann-dev libcxxopts-dev libglm-dev
           libopencv-dev)
@@ -37,7 +48,7 @@ echo "install_opensplat: building $source_dir at $commit ($GPU_RUNTIME, $JOBS jo
 # FETCHCONTENT_*: the project fetches its dependencies unless told to find the installed ones.
 cmake -S "$source_dir" -B "$work/build" -DGPU_RUNTIME="$GPU_RUNTIME" -DCMAKE_BUILD_TYPE=Release \
   -DFETCHCONTENT_FULLY_DISCONNECTED=ON -DFETCHCONTENT_TRY_FIND_PACKAGE_MODE=ALWAYS \
-  -DCMAKE_PREFIX_PATH=/usr/lib/x86_64-linux-gnu/cmake > "$work/cmake.log" 2>&1 ||
+  -DCMAKE_PREFIX_PATH="$prefix_path" > "$work/cmake.log" 2>&1 ||
   { cat "$work/cmake.log" >&2; exit 1; }
 cmake --build "$work/build" --target opensplat -j "$JOBS"
 install -d "$PREFIX/bin" "$PREFIX/share/opensplat"
