@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
 #include <stdexcept>
@@ -193,8 +194,32 @@ std::vector<MergedTrack> MergeTracks(const TrackObservations& obs,
     summary->num_observations_kept += static_cast<int>(track.size());
     tracks.push_back(std::move(merged));
   }
-  summary->num_kept = static_cast<int>(tracks.size());
-  return tracks;
+  // Tracks at exactly the same point are one: SIFT gives a keypoint one descriptor per dominant
+  // orientation, and the copies, matched alike, come back as separate tracks with bitwise equal
+  // points. Merged into the first (observations joined, colours and errors weighted by them); left
+  // apart, OpenSplat turned one of such twins into a Gaussian of NaNs within 100 steps (castle-P19,
+  // issue 33).
+  std::map<std::array<double, 3>, size_t> first_at;
+  std::vector<MergedTrack> unique;
+  for (MergedTrack& track : tracks) {
+    const std::array<double, 3> key = {track.xyz.x(), track.xyz.y(), track.xyz.z()};
+    const auto [it, inserted] = first_at.emplace(key, unique.size());
+    if (inserted) {
+      unique.push_back(std::move(track));
+      continue;
+    }
+    MergedTrack& into = unique[it->second];
+    const double a = static_cast<double>(into.observations.size());
+    const double b = static_cast<double>(track.observations.size());
+    into.rgb = (a * into.rgb + b * track.rgb) / (a + b);
+    into.mean_error_px = (a * into.mean_error_px + b * track.mean_error_px) / (a + b);
+    into.observations.insert(into.observations.end(), track.observations.begin(),
+                             track.observations.end());
+    std::sort(into.observations.begin(), into.observations.end());
+    ++summary->num_duplicates_merged;
+  }
+  summary->num_kept = static_cast<int>(unique.size());
+  return unique;
 }
 
 namespace {
@@ -338,8 +363,8 @@ std::vector<const ImageInfo*> ImagesInNameOrder(const ImageSet& images,
 }
 
 // The images, once, into `folder` (every pose set's images/ links to it): undistorted (and centred)
-// to their pinhole camera, or copied when that is their own camera; the colours of the solve's observations
-// read on the way.
+// to their pinhole camera, or copied when that is their own camera; the colours of the solve's
+// observations read on the way.
 void WriteImagesOnce(const ImageSet& images, const std::optional<RayTimeSource>& source,
                      const TrainerExportOptions& options, const fs::path& folder,
                      SharedExport* shared, TrainerExportSummary* summary) {
@@ -415,10 +440,12 @@ void MergeSourceTracks(const RayTimeSource& source, const TrainerExportOptions& 
   summary->points_from = source.pose_set;
   spdlog::info(fmt::format(
       "export (3dgs): {} tracks from the ray times of '{}' ({} observations): {} kept, {} "
-      "disagreeing beyond {} px, {} behind a camera, {} without a ray time",
+      "disagreeing beyond {} px, {} behind a camera, {} without a ray time, {} at another's point "
+      "merged into it",
       summary->tracks.num_tracks, source.pose_set, track_obs.image.size(), summary->tracks.num_kept,
       summary->tracks.num_disagreeing, options.max_track_error_px,
-      summary->tracks.num_behind_camera, summary->tracks.num_without_ray_time));
+      summary->tracks.num_behind_camera, summary->tracks.num_without_ray_time,
+      summary->tracks.num_duplicates_merged));
 
   shared->points2D.assign(num_images, {});
   shared->point3D_ids.assign(num_images, {});

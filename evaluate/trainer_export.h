@@ -70,9 +70,11 @@ struct TrackMergeSummary {
   int num_disagreeing = 0;        // dropped: beyond max_error_px in some observation
   int num_behind_camera = 0;      // dropped: behind some observing camera
   int num_observations_kept = 0;  // observations of kept tracks
+  int num_duplicates_merged = 0;  // kept tracks at exactly another's point, merged into it
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrackMergeSummary, num_tracks, num_kept, num_without_ray_time,
-                                   num_disagreeing, num_behind_camera, num_observations_kept)
+                                   num_disagreeing, num_behind_camera, num_observations_kept,
+                                   num_duplicates_merged)
 
 // Tracks = connected components of the matches (union-find over observations). A track's point is
 // the per-coordinate median of the points of its observations that own a ray time, its colour the
@@ -80,7 +82,9 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrackMergeSummary, num_tracks, num_kept, num_
 // every camera observing it and reprojects within `max_error_px` of every one of its observations
 // (with `projections[i]` = K_i [R_i | t_i], camera i's 3x4 pinhole projection): a chain that
 // merged two different scene points (a wrong match) disagrees with itself and is dropped whole,
-// since no single point explains it. Kept tracks are in order of their first observation.
+// since no single point explains it. Kept tracks at bitwise the same point (the copies of a SIFT
+// keypoint with two orientations, matched alike) are merged into the first. Kept tracks are in
+// order of their first observation.
 std::vector<MergedTrack> MergeTracks(const TrackObservations& observations,
                                      const std::vector<Eigen::Matrix<double, 3, 4>>& projections,
                                      double max_error_px, TrackMergeSummary* summary);

@@ -115,7 +115,8 @@ TEST(UndistortionTest, CentringCropsAboutThePrincipalPoint) {
   ASSERT_EQ(out.cols, 626);
   ASSERT_EQ(out.rows, 458);
   for (const auto& [x, y] : std::vector<std::pair<int, int>>{{0, 0}, {625, 457}, {300, 200}}) {
-    EXPECT_NEAR(out.at<float>(y, x), x + 1000 * (y + 21.75), 1000 * 1.0 / 32 + 1e-3) << x << "," << y;
+    EXPECT_NEAR(out.at<float>(y, x), x + 1000 * (y + 21.75), 1000 * 1.0 / 32 + 1e-3)
+        << x << "," << y;
   }
   // A principal point already centred: the camera as it is, the image copied.
   const CameraIntrinsics centre = Camera(640, 480, 500.0, 319.5, 239.5);
@@ -202,6 +203,40 @@ std::vector<Eigen::Matrix<double, 3, 4>> ThreeCameras() {
 
 Eigen::Vector2d Pixel(int camera, const Eigen::Vector3d& x) {
   return Eigen::Vector2d(100 * (x.x() - (camera - 1.0)) / x.z() + 50, 100 * x.y() / x.z() + 50);
+}
+
+// The copies of a keypoint SIFT describes twice (two orientations), matched alike, are two tracks
+// at bitwise the same point: one point in the export (OpenSplat made a Gaussian of NaNs of such a
+// twin), with both tracks' observations, colours averaged by them.
+TEST(TrainerExportTest, TracksAtTheSamePointAreOne) {
+  const std::vector<Eigen::Matrix<double, 3, 4>> projections = ThreeCameras();
+  const Eigen::Vector3d E(0.2, 0.1, 5.0), F(-0.3, 0.2, 4.0);
+  TrackObservations obs;
+  obs.image.resize(7);
+  obs.points.resize(7, 3);
+  obs.pixels.resize(7, 2);
+  obs.colours.resize(7, 3);
+  const int images[7] = {0, 1, 0, 1, 2, 0, 2};
+  const Eigen::Vector3d points[7] = {E, E, E, E, E, F, F};
+  for (int o = 0; o < 7; ++o) {
+    obs.image(o) = images[o];
+    obs.points.row(o) = points[o].transpose();
+    obs.pixels.row(o) = Pixel(images[o], points[o]).transpose();
+    obs.colours.row(o) = Eigen::RowVector3d::Constant(o < 2 ? 30.0 : 60.0);
+  }
+  obs.matches.resize(4, 2);
+  obs.matches << 0, 1, 2, 3, 3, 4, 5, 6;  // E twice (the second seen thrice), F once
+  TrackMergeSummary summary;
+  const std::vector<MergedTrack> tracks = MergeTracks(obs, projections, 4.0, &summary);
+  ASSERT_EQ(tracks.size(), 2u);
+  EXPECT_EQ(tracks[0].observations, (std::vector<int>{0, 1, 2, 3, 4}));
+  EXPECT_EQ(tracks[0].xyz, E);
+  EXPECT_LT((tracks[0].rgb - Eigen::Vector3d::Constant((2 * 30.0 + 3 * 60.0) / 5)).norm(), 1e-12);
+  EXPECT_EQ(tracks[1].observations, (std::vector<int>{5, 6}));
+  EXPECT_EQ(summary.num_tracks, 3);
+  EXPECT_EQ(summary.num_kept, 2);
+  EXPECT_EQ(summary.num_duplicates_merged, 1);
+  EXPECT_EQ(summary.num_observations_kept, 7);
 }
 
 TEST(TrainerExportTest, ChainedMatchesMergeIntoOneTrack) {
