@@ -309,8 +309,8 @@ TEST_F(SplatStageTest, TheCampaignReportShowsTable4PerTrainer) {
       if (pose_set == "refined") {
         std::snprintf(row, sizeof(row), "| refined | – | – | – | – | – | – | – | 0/1 | 1 |");
       } else {
-        std::snprintf(row, sizeof(row), "| %s | %.2f | %.3f | %.3f | %s | – | ",
-                      pose_set.c_str(), known.psnr, known.ssim, known.lpips, own);
+        std::snprintf(row, sizeof(row), "| %s | %.2f | %.3f | %.3f | %s | – | ", pose_set.c_str(),
+                      known.psnr, known.ssim, known.lpips, own);
       }
       const size_t at = report.find(row, section);
       ASSERT_NE(at, std::string::npos) << row << "\n" << report;
