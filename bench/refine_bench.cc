@@ -63,8 +63,9 @@ void PrintRun(const char* label, const Run& run) {
       "  %-28s matches %7d  residuals %7d  ray times %7d  iterations %3d  solve %7.2f s"
       "  jacobian %6.2f s (%.4f s/eval)  rot err %.4f deg\n",
       label, pass.num_matches_used, pass.num_residuals, pass.num_ray_times,
-      run.summary.total_iterations, run.summary.timings.solve_seconds, run.summary.timings.jacobian_seconds,
-      PerJacobianEvaluation(run.summary), run.rotation_error_deg);
+      run.summary.total_iterations, run.summary.timings.solve_seconds,
+      run.summary.timings.jacobian_seconds, PerJacobianEvaluation(run.summary),
+      run.rotation_error_deg);
 }
 
 int Main(int argc, char** argv) {
@@ -171,7 +172,8 @@ int Main(int argc, char** argv) {
   for (const auto& [cap, run] : sizes) {
     const int matches = run.summary.passes[0].num_matches_used;
     std::printf("  %-10s %10d %12.2f %14.2f %16.4f\n",
-                cap == 0 ? "all" : std::to_string(cap).c_str(), matches, run.summary.timings.solve_seconds,
+                cap == 0 ? "all" : std::to_string(cap).c_str(), matches,
+                run.summary.timings.solve_seconds,
                 run.summary.timings.solve_seconds / smallest.summary.timings.solve_seconds,
                 1000.0 * run.summary.timings.solve_seconds / matches);
   }

@@ -130,7 +130,6 @@ bool IsResampled(const CameraIntrinsics& distorted, const CameraIntrinsics& pinh
          pinhole.params[kFy] != distorted.params[kFy];
 }
 
-
 cv::Mat UndistortImage(const cv::Mat& image, const CameraIntrinsics& distorted,
                        const CameraIntrinsics& pinhole) {
   if (image.cols != distorted.width || image.rows != distorted.height) {

@@ -179,12 +179,11 @@ std::string SuccessCellsTable(const CampaignReport& report, const std::string& s
 
 std::string SplatSection(const CampaignReport& report) {
   if (report.splat_cells.empty()) return "";
-  std::string html =
-      "<section id=\"splat\"><h2>Downstream 3DGS (Table 4)</h2><table>" +
-      HtmlRow({"stage", "trainer", "level", "scene", "pose source", "PSNR (dB)", "SSIM", "LPIPS",
-               "raytime PSNR", "raytime SSIM", "seed spread (dB)", "time / model (s)",
-               "trainings", "failed"},
-              "th");
+  std::string html = "<section id=\"splat\"><h2>Downstream 3DGS (Table 4)</h2><table>" +
+                     HtmlRow({"stage", "trainer", "level", "scene", "pose source", "PSNR (dB)",
+                              "SSIM", "LPIPS", "raytime PSNR", "raytime SSIM", "seed spread (dB)",
+                              "time / model (s)", "trainings", "failed"},
+                             "th");
   for (const SplatCell& c : report.splat_cells) {
     html += HtmlRow({HtmlEscape(c.stage_id), HtmlEscape(c.trainer), LevelLabel(report, c.level_deg),
                      HtmlEscape(c.scene), HtmlEscape(c.pose_set), HtmlNumber(c.psnr, 4),

@@ -618,8 +618,8 @@ std::string SplatTables(const CampaignReport& report) {
                         : it->scenes == 0              ? "failed"
                                                        : Format("%.2f", value(*it)));
         if (it != report.splat_cells.end() && std::isfinite(it->seed_spread_psnr)) {
-          spread = std::isnan(spread) ? it->seed_spread_psnr
-                                      : std::max(spread, it->seed_spread_psnr);
+          spread =
+              std::isnan(spread) ? it->seed_spread_psnr : std::max(spread, it->seed_spread_psnr);
         }
       }
       cells.push_back(Format("%.2f", spread));

@@ -475,12 +475,13 @@ TEST(CampaignReportTest, SplatTable4IsTheMeanOverScenesPerPoseSource) {
             std::string::npos);
   EXPECT_NE(markdown.find("### `splat` (gsplat), level 4°"), std::string::npos) << markdown;
   EXPECT_NE(markdown.find("### `splat@inria` (inria), level 4°"), std::string::npos);
-  EXPECT_NE(markdown.find("| prior | 19.00 | 0.475 | 0.425 | 31.00 | 0.500 | 2.00 | 100 | 2/2 | 1 |"),
-            std::string::npos)
+  EXPECT_NE(
+      markdown.find("| prior | 19.00 | 0.475 | 0.425 | 31.00 | 0.500 | 2.00 | 100 | 2/2 | 1 |"),
+      std::string::npos)
       << markdown;
   EXPECT_NE(
       markdown.find("| refined | 26.50 | 0.775 | 0.150 | 32.00 | 0.500 | 2.00 | 100 | 2/2 | 0 |"),
-            std::string::npos)
+      std::string::npos)
       << markdown;
   EXPECT_NE(markdown.find("| ground_truth | 30.00 | 0.900 | 0.050 | – | – | – | 100 | 1/1 | 0 |"),
             std::string::npos)

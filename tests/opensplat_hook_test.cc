@@ -192,8 +192,8 @@ TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesAndPointsOrderNotTheirCo
   ASSERT_GT(exported.points3D.size(), 10u);
   const std::vector<std::string> exported_names = names(exported), seeded_names = names(seeded);
   EXPECT_NE(seeded_names, exported_names);
-  EXPECT_TRUE(std::is_permutation(seeded_names.begin(), seeded_names.end(),
-                                  exported_names.begin(), exported_names.end()));
+  EXPECT_TRUE(std::is_permutation(seeded_names.begin(), seeded_names.end(), exported_names.begin(),
+                                  exported_names.end()));
   const auto exported_points = positions(exported), seeded_points = positions(seeded);
   EXPECT_NE(seeded_points, exported_points);
   EXPECT_TRUE(std::is_permutation(seeded_points.begin(), seeded_points.end(),
@@ -203,9 +203,10 @@ TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesAndPointsOrderNotTheirCo
       if (point_id == kInvalidPoint3DId) continue;
       ASSERT_TRUE(seeded.points3D.count(point_id)) << image.name << " names no point " << point_id;
       const auto& track = seeded.points3D.at(point_id).track;
-      EXPECT_TRUE(std::any_of(track.begin(), track.end(), [&](const ColmapTrackElement& element) {
-        return element.image_id == image_id;
-      })) << image.name << " names point " << point_id << " whose track does not name it";
+      EXPECT_TRUE(std::any_of(
+          track.begin(), track.end(),
+          [&](const ColmapTrackElement& element) { return element.image_id == image_id; }))
+          << image.name << " names point " << point_id << " whose track does not name it";
     }
   }
   const ColmapModel again = view_of(5);  // the same seed, the same order
