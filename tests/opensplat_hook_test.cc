@@ -198,7 +198,8 @@ TEST_F(OpenSplatHookTest, ASeedShufflesTheTrainingFramesAndPointsOrderNotTheirCo
   EXPECT_NE(seeded_points, exported_points);
   EXPECT_TRUE(std::is_permutation(seeded_points.begin(), seeded_points.end(),
                                   exported_points.begin(), exported_points.end()));
-  for (const auto& [image_id, image] : seeded.images) {
+  for (const auto& [id, image] : seeded.images) {
+    const uint32_t image_id = id;  // a lambda below captures it (not a structured binding, C++17)
     for (const uint64_t point_id : image.point3D_ids) {
       if (point_id == kInvalidPoint3DId) continue;
       ASSERT_TRUE(seeded.points3D.count(point_id)) << image.name << " names no point " << point_id;
