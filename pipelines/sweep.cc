@@ -217,16 +217,22 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
     if (!error.empty()) fields["error"] = error;
     WriteSweepOutputs(workdir, table, fields);
   };
-  // On SIGINT/SIGTERM: stop the running children (each writes its own "interrupted" summary),
-  // keep every row finished so far, and say the sweep was interrupted.
-  const InterruptAction on_interrupt([&](int signal) {
-    std::lock_guard<std::mutex> lock(mutex);
+  // Stops the running children (each writes its own "interrupted" summary) and keeps their rows;
+  // the caller holds `mutex`.
+  const auto stop_running = [&] {
     for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
     for (const auto& [pid, index] : running) {
       WaitProcess(pid);
       rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
       finished[index] = true;
     }
+    running.clear();
+  };
+  // On SIGINT/SIGTERM: stop the running children, keep every row finished so far, and say the
+  // sweep was interrupted.
+  const InterruptAction on_interrupt([&](int signal) {
+    std::lock_guard<std::mutex> lock(mutex);
+    stop_running();
     write("interrupted");
     spdlog::error(fmt::format(
         "sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
@@ -243,13 +249,7 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
         } catch (const std::exception& e) {
           // The runs not started are not rows: the summary says the sweep failed and why, never
           // "running" with nothing left running. Runs under way are stopped and keep their rows.
-          for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
-          for (const auto& [pid, index] : running) {
-            WaitProcess(pid);
-            rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
-            finished[index] = true;
-          }
-          running.clear();
+          stop_running();
           const std::string error = std::string("run ") + runs[next].label + ": " + e.what();
           write("failed", error);
           throw std::runtime_error("sweep stopped: " + error);
