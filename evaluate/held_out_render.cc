@@ -62,6 +62,26 @@ std::map<uint64_t, ColmapPoint3D> RandomBallPoints(const ColmapModel& model, int
   return points;
 }
 
+// Gives the items of `items` (keyed by their own id, the member `id`) their ids in a shuffled
+// order drawn from `seed`, so the map (and a file written from it) lists them in that order.
+// Returns old id -> new id, for the references elsewhere to follow.
+template <class Id, class Item>
+std::map<Id, Id> ShuffleIds(std::map<Id, Item>* items, Id Item::*id, uint32_t seed) {
+  std::vector<Id> ids;
+  for (const auto& [key, item] : *items) ids.push_back(key);
+  std::vector<Id> shuffled = ids;
+  std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(seed));
+  std::map<Id, Id> new_id;
+  for (size_t k = 0; k < ids.size(); ++k) new_id[ids[k]] = shuffled[k];
+  std::map<Id, Item> renumbered;
+  for (auto& [key, item] : *items) {
+    item.*id = new_id.at(key);
+    renumbered[item.*id] = std::move(item);
+  }
+  *items = std::move(renumbered);
+  return new_id;
+}
+
 }  // namespace
 
 int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir, int seed,
@@ -77,18 +97,8 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir,
                "the export holds no training image: nothing to train on");
   }
   if (seed != 0) {
-    std::vector<uint32_t> ids;
-    for (const auto& [id, image] : model.images) ids.push_back(id);
-    std::vector<uint32_t> shuffled = ids;
-    std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(static_cast<uint32_t>(seed)));
-    std::map<uint32_t, uint32_t> new_id;
-    for (size_t k = 0; k < ids.size(); ++k) new_id[ids[k]] = shuffled[k];
-    std::map<uint32_t, ColmapImage> images;
-    for (auto& [id, image] : model.images) {
-      image.image_id = new_id.at(id);
-      images[image.image_id] = image;
-    }
-    model.images = std::move(images);
+    const std::map<uint32_t, uint32_t> new_id =
+        ShuffleIds(&model.images, &ColmapImage::image_id, static_cast<uint32_t>(seed));
     for (auto& [id, point] : model.points3D) {
       for (ColmapTrackElement& element : point.track) {
         const auto it = new_id.find(element.image_id);
@@ -106,18 +116,8 @@ int WriteTrainOnlyView(const std::string& data_dir, const std::string& view_dir,
     // The points' file order too: a trainer that draws each Gaussian's random state in file order
     // from a fixed seed (OpenSplat's initial rotations, torch seeded with 42) then gives every
     // point another draw.
-    std::vector<uint64_t> ids;
-    for (const auto& [id, point] : model.points3D) ids.push_back(id);
-    std::vector<uint64_t> shuffled = ids;
-    std::shuffle(shuffled.begin(), shuffled.end(), std::mt19937(static_cast<uint32_t>(seed) + 1u));
-    std::map<uint64_t, uint64_t> new_id;
-    for (size_t k = 0; k < ids.size(); ++k) new_id[ids[k]] = shuffled[k];
-    std::map<uint64_t, ColmapPoint3D> points;
-    for (auto& [id, point] : model.points3D) {
-      point.point3D_id = new_id.at(id);
-      points[point.point3D_id] = point;
-    }
-    model.points3D = std::move(points);
+    const std::map<uint64_t, uint64_t> new_id =
+        ShuffleIds(&model.points3D, &ColmapPoint3D::point3D_id, static_cast<uint32_t>(seed) + 1u);
     for (auto& [id, image] : model.images) {
       for (uint64_t& point_id : image.point3D_ids) {
         const auto it = new_id.find(point_id);
