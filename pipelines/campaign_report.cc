@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <limits>
 #include <map>
 #include <set>
 #include <tuple>
@@ -194,15 +193,17 @@ double MeanOfFinite(const std::vector<double>& values) {
 
 // Largest minus smallest of the finite values; NaN with fewer than two.
 double Spread(const std::vector<double>& values) {
-  double low = std::numeric_limits<double>::infinity(), high = -low;
-  int count = 0;
-  for (const double value : values) {
-    if (!std::isfinite(value)) continue;
-    low = std::min(low, value);
-    high = std::max(high, value);
-    ++count;
-  }
-  return count >= 2 ? high - low : kNoValue;
+  const std::vector<double> finite = FiniteValues(values);
+  if (finite.size() < 2) return kNoValue;
+  const auto [low, high] = std::minmax_element(finite.begin(), finite.end());
+  return *high - *low;
+}
+
+// `value` if `largest` is NaN (none yet), else the larger of the two; a NaN `value` changes
+// nothing.
+double LargerOf(double largest, double value) {
+  if (std::isnan(value)) return largest;
+  return std::isnan(largest) ? value : std::max(largest, value);
 }
 
 // Averages `cells` (each a scene's) into one: each metric the mean over the cells that have it.
@@ -289,11 +290,7 @@ std::vector<SplatCell> AggregateSplat(const std::vector<RunRecord>& runs,
         all.trainings += cell.trainings;
         all.failed += cell.failed;
         if (cell.scenes > 0) scored.push_back(&cell);
-        if (std::isfinite(cell.seed_spread_psnr)) {
-          all.seed_spread_psnr = std::isnan(all.seed_spread_psnr)
-                                     ? cell.seed_spread_psnr
-                                     : std::max(all.seed_spread_psnr, cell.seed_spread_psnr);
-        }
+        all.seed_spread_psnr = LargerOf(all.seed_spread_psnr, cell.seed_spread_psnr);
         if (std::isfinite(cell.median_seconds)) seconds.push_back(cell.median_seconds);
       }
       AverageInto(scored, &all);
@@ -578,9 +575,7 @@ std::string SplatTables(const CampaignReport& report) {
       raytime = raytime || std::isfinite(cell.raytime_psnr);
       if (cell.scene != CampaignReport::kAllScenes) continue;
       pose_sets.push_back(cell.pose_set);
-      if (std::isfinite(cell.seed_spread_psnr)) {
-        floor = std::isnan(floor) ? cell.seed_spread_psnr : std::max(floor, cell.seed_spread_psnr);
-      }
+      floor = LargerOf(floor, cell.seed_spread_psnr);
       text += TableRow(
           cell.pose_set,
           {Format("%.2f", cell.psnr), Format("%.3f", cell.ssim), Format("%.3f", cell.lpips),
@@ -617,10 +612,7 @@ std::string SplatTables(const CampaignReport& report) {
         cells.push_back(it == report.splat_cells.end() ? "–"
                         : it->scenes == 0              ? "failed"
                                                        : Format("%.2f", value(*it)));
-        if (it != report.splat_cells.end() && std::isfinite(it->seed_spread_psnr)) {
-          spread =
-              std::isnan(spread) ? it->seed_spread_psnr : std::max(spread, it->seed_spread_psnr);
-        }
+        if (it != report.splat_cells.end()) spread = LargerOf(spread, it->seed_spread_psnr);
       }
       cells.push_back(Format("%.2f", spread));
       if (any) text += TableRow(scene, cells);
