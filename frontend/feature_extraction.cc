@@ -189,7 +189,8 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
   const auto start = std::chrono::steady_clock::now();
   const int num_images = static_cast<int>(images.images.size());
   features->assign(num_images, ImageFeatures());
-  std::atomic<int> done{0}, upsampled{0};
+  std::atomic<int> done{0};
+  std::vector<char> upsampled(num_images, 0);  // char: written from several threads
   ProgressBar bar("features", num_images);
   tbb::parallel_for(0, num_images, [&](int i) {
     const auto image_start = std::chrono::steady_clock::now();
@@ -209,7 +210,7 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
                           : ""));
     }
     (*features)[i] = ExtractSift(gray, options);
-    if (EffectiveFirstOctave(gray.cols, gray.rows, options) < 0) ++upsampled;
+    upsampled[i] = EffectiveFirstOctave(gray.cols, gray.rows, options) < 0;
     // On a terminal the bar shows the count; the per-image lines stay in the debug log.
     const std::string line =
         fmt::format("features: [{}/{}] {}: {} keypoints in {:.2f} s", ++done, num_images, info.name,
@@ -224,7 +225,9 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
 
   FeatureExtractionSummary summary;
   summary.num_images = num_images;
-  summary.num_upsampled = upsampled.load();
+  summary.upsampled.assign(upsampled.begin(), upsampled.end());
+  summary.num_upsampled =
+      static_cast<int>(std::count(summary.upsampled.begin(), summary.upsampled.end(), true));
   summary.min_keypoints = num_images > 0 ? std::numeric_limits<int>::max() : 0;
   for (const ImageFeatures& f : *features) {
     const int count = static_cast<int>(f.keypoints.rows());

@@ -74,8 +74,10 @@ struct FeatureExtractionSummary {
   int min_keypoints = 0;      // per image
   int max_keypoints = 0;
   double seconds = 0;  // wall clock, all images
+  // Per image: its scale space started at octave -1 (not in ToJson: num_upsampled counts them).
+  std::vector<bool> upsampled;
 
-  nlohmann::json ToJson() const;  // the fields by name
+  nlohmann::json ToJson() const;  // the fields above `upsampled` by name
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FeatureExtractionSummary, num_images, num_upsampled,
                                    num_keypoints, min_keypoints, max_keypoints, seconds)

@@ -40,4 +40,9 @@ std::string HashFileContents(const std::string& path) {
   return Hex(XXH3_128bits_digest(state.get()));
 }
 
+const std::string& ExecutableHash() {
+  static const std::string hash = HashFileContents("/proc/self/exe");
+  return hash;
+}
+
 }  // namespace raytime

@@ -3,11 +3,18 @@
 // whose sampled frames this stage writes to WORKDIR/frames and lists itself.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
+#include <chrono>
 #include <filesystem>
+#include <limits>
+#include <map>
 
+#include "core/error.h"
 #include "core/hdf5_store.h"
+#include "core/timing.h"
 #include "frontend/feature_extraction.h"
 #include "frontend/video_frames.h"
+#include "pipelines/content_hash.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;
@@ -16,6 +23,17 @@ namespace raytime {
 namespace {
 
 constexpr const char* kFramesFolder = "frames";
+// JSON document beside the features: per image (in the order of /features) the content key its
+// features were computed under and whether its scale space was upsampled, so the next run reuses
+// them image by image.
+constexpr const char* kFeatureKeysJson = "feature_keys";
+
+// The features of the previous run in this work directory, by content key.
+struct PreviousFeatures {
+  std::map<std::string, int> row_of_key;
+  std::vector<ImageFeatures> features;
+  std::vector<bool> upsampled;
+};
 
 struct FeaturesStageOptions {
   FeatureExtractionOptions extraction;
@@ -59,22 +77,113 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
     } else {
       images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
     }
-    std::vector<ImageFeatures> features;
-    const FeatureExtractionSummary extraction =
-        ExtractFeatures(images, options_.extraction, &features);
+    const auto start = std::chrono::steady_clock::now();
+    const int num_images = static_cast<int>(images.images.size());
+    // Images whose key the previous run's output holds are not read again (issue 34: a capture
+    // that grows costs only its new frames).
+    std::vector<std::string> keys(num_images);
+    for (int i = 0; i < num_images; ++i) keys[i] = FeatureKey(images, i);
+    const PreviousFeatures previous = ReadPrevious(context);
+    std::vector<ImageFeatures> features(num_images);
+    std::vector<bool> upsampled(num_images, false);
+    ImageSet to_extract = images;
+    to_extract.images.clear();
+    std::vector<int> extracted_index;
+    for (int i = 0; i < num_images; ++i) {
+      const auto found = previous.row_of_key.find(keys[i]);
+      if (found == previous.row_of_key.end()) {
+        to_extract.images.push_back(images.images[i]);
+        extracted_index.push_back(i);
+        continue;
+      }
+      features[i] = previous.features[found->second];
+      upsampled[i] = previous.upsampled[found->second];
+    }
+    const int num_reused = num_images - static_cast<int>(extracted_index.size());
+    if (num_reused > 0) {
+      spdlog::info(fmt::format(
+          "features: {} of {} images unchanged since the previous run here, their features reused",
+          num_reused, num_images));
+    }
+    FeatureExtractionSummary extraction;
+    if (!extracted_index.empty()) {
+      std::vector<ImageFeatures> extracted;
+      extraction = ExtractFeatures(to_extract, options_.extraction, &extracted);
+      for (size_t k = 0; k < extracted_index.size(); ++k) {
+        features[extracted_index[k]] = std::move(extracted[k]);
+        upsampled[extracted_index[k]] = extraction.upsampled[k];
+      }
+    }
+    // The summary describes every image, reused or extracted.
+    FeatureExtractionSummary total;
+    total.num_images = num_images;
+    total.num_upsampled = static_cast<int>(std::count(upsampled.begin(), upsampled.end(), true));
+    total.min_keypoints = num_images > 0 ? std::numeric_limits<int>::max() : 0;
+    for (const ImageFeatures& f : features) {
+      const int count = static_cast<int>(f.keypoints.rows());
+      total.num_keypoints += count;
+      total.min_keypoints = std::min(total.min_keypoints, count);
+      total.max_keypoints = std::max(total.max_keypoints, count);
+    }
+    total.seconds = SecondsSince(start);
     spdlog::info(fmt::format(
-        "features: {} keypoints in {} images ({} to {} per image, budget {}; {} upsampled), "
-        "{:.2f} s",
-        extraction.num_keypoints, extraction.num_images, extraction.min_keypoints,
-        extraction.max_keypoints, options_.extraction.max_features, extraction.num_upsampled,
-        extraction.seconds));
+        "features: {} keypoints in {} images ({} extracted, {} reused; {} to {} per image, budget "
+        "{}; {} upsampled), {:.2f} s",
+        total.num_keypoints, total.num_images, extracted_index.size(), num_reused,
+        total.min_keypoints, total.max_keypoints, options_.extraction.max_features,
+        total.num_upsampled, total.seconds));
     Hdf5Writer writer(context.output_path);
     // A video's frames exist only here: this file is where later stages find the image list.
     if (FromVideo()) writer.WriteImages(images);
     writer.WriteFeatures(features, MakeProvenance(*this));
+    writer.WriteJson(kFeatureKeysJson, {{"keys", keys}, {"upsampled", upsampled}});
     writer.Commit();
-    summary.update(extraction.ToJson());
+    summary.update(total.ToJson());
+    summary["num_images_extracted"] = extracted_index.size();
+    summary["num_images_reused"] = num_reused;
+    summary["extraction_seconds"] = extraction.seconds;
     return summary;
+  }
+
+ private:
+  // What an image's features are a function of: its file's bytes, the size the image list gives
+  // it (checked against the file when extracted), the extraction options and this executable.
+  std::string FeatureKey(const ImageSet& images, int i) const {
+    const ImageInfo& info = images.images[i];
+    FeatureExtractionOptions extraction = options_.extraction;
+    const nlohmann::json material = {
+        {"executable", ExecutableHash()},
+        {"options", OptionsToJson(extraction)},
+        {"image", HashFileContents((fs::path(images.image_root) / info.name).string())},
+        {"width", info.width},
+        {"height", info.height}};
+    return HashBytes(material.dump());
+  }
+
+  // The previous run's features by key; none when there is no previous output, it predates the
+  // keys, or it does not read (then everything is extracted, and the log says why).
+  static PreviousFeatures ReadPrevious(const StageContext& context) {
+    PreviousFeatures previous;
+    if (context.previous_output.empty()) return previous;
+    try {
+      const Hdf5Reader reader(context.previous_output);
+      if (!reader.HasJson(kFeatureKeysJson) || !reader.HasFeatures()) return previous;
+      const nlohmann::json index = reader.ReadJson(kFeatureKeysJson);
+      const auto keys = index.at("keys").get<std::vector<std::string>>();
+      previous.upsampled = index.at("upsampled").get<std::vector<bool>>();
+      previous.features = reader.ReadFeatures();
+      if (keys.size() != previous.features.size() || keys.size() != previous.upsampled.size()) {
+        throw InputError(std::to_string(keys.size()) + " keys for " +
+                         std::to_string(previous.features.size()) + " images");
+      }
+      for (size_t r = 0; r < keys.size(); ++r) previous.row_of_key[keys[r]] = static_cast<int>(r);
+    } catch (const std::exception& e) {
+      spdlog::warn(fmt::format(
+          "features: the previous run's features in {} cannot be reused ({}); extracting all",
+          context.previous_output, e.what()));
+      return PreviousFeatures();
+    }
+    return previous;
   }
 };
 

@@ -63,6 +63,13 @@ struct StageContext {
   // `raytime run --force`: redo also what a stage would reuse from its own earlier results (the
   // splat stage's finished trainings).
   bool force = false;
+  // The output this stage wrote at its previous run in this work directory, when its inputs or
+  // options have changed since (else the stage is skipped) and the file is still the one it wrote
+  // (the checksum in its record); "" when there is none or with --force. A stage may reuse
+  // results in it item by item under content keys (issue 34: features of unchanged images,
+  // matches of unchanged pairs, the previous solution as a warm start). It stays in place until
+  // this run's output replaces it.
+  std::string previous_output;
 
   // File holding `artifact`; MissingArtifactError naming the artifact and those there are.
   const std::string& Require(const std::string& artifact) const;

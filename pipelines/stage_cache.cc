@@ -29,13 +29,6 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-// XXH3 of this executable's file, computed once per process (read through /proc/self/exe, which
-// opens the running binary even where a rebuild has unlinked its path).
-const std::string& ExecutableHash() {
-  static const std::string hash = HashFileContents("/proc/self/exe");
-  return hash;
-}
-
 std::string UtcNow() {
   const std::time_t now = std::time(nullptr);
   char buffer[32];
@@ -297,6 +290,18 @@ bool PreviousResultHolds(Stage& stage, const StageContext& context, const json& 
   return true;
 }
 
+// The stage's output of its previous run here, for item-by-item reuse (StageContext::
+// previous_output): only the file that run recorded writing (same checksum), never with --force.
+std::string VerifiedPreviousOutput(const StageContext& context, const json& previous_record,
+                                   bool force) {
+  if (force || previous_record.is_discarded() || !previous_record.contains("output_hash") ||
+      !fs::exists(context.output_path)) {
+    return "";
+  }
+  if (previous_record["output_hash"] != HashFileContents(context.output_path)) return "";
+  return context.output_path;
+}
+
 // 2. The record of a result another run left in the shared cache; null when there is none or it is
 // damaged (no record or checksum, or the content differs).
 json CachedRecord(const fs::path& cached, const std::string& tag) {
@@ -413,6 +418,7 @@ void StepStage(const PipelineSpec& spec, size_t index, const std::string& workdi
       entry["seconds"] = 0.0;
       entry["previous_seconds"] = record["seconds"];
     } else {
+      context.previous_output = VerifiedPreviousOutput(context, previous_record, options.force);
       record = RunStageNow(*stage, stage_spec, context, key, previous_record, tag, run, &entry);
       if (record.is_null()) return;  // failed without stopping the run, recorded
       if (cacheable) {
