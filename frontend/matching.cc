@@ -176,7 +176,8 @@ MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatu
 MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageFeatures>& features,
                                 const MatchingOptions& options,
                                 const std::vector<std::pair<int, int>>& candidates,
-                                std::vector<PairMatches>* pairs) {
+                                std::vector<PairMatches>* pairs,
+                                std::vector<CandidatePairOutcome>* outcomes) {
   ValidateOptions(options, "matching");
   const auto start = Clock::now();
   const int num_images = static_cast<int>(images.images.size());
@@ -243,7 +244,11 @@ MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageF
   summary.num_pairs = num_pairs;
   summary.kernel = MatchKernelName(kernel);
   pairs->clear();
+  if (outcomes != nullptr) outcomes->assign(num_pairs, CandidatePairOutcome());
   for (int p = 0; p < num_pairs; ++p) {
+    if (outcomes != nullptr) {
+      (*outcomes)[p] = {stats[p].kept, stats[p].num_putative, stats[p].num_inliers_first_pass};
+    }
     summary.num_putative += stats[p].num_putative;
     summary.matching_thread_seconds += stats[p].matching_seconds;
     summary.verification_thread_seconds += stats[p].verification_seconds;

@@ -123,6 +123,14 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(MatchingSummary, num_images, num_pairs, num_v
                                    num_inliers_first_pass, kernel, seconds, matching_thread_seconds,
                                    verification_thread_seconds, guided_thread_seconds)
 
+// One candidate pair's outcome, kept or dropped: what a caller needs to stand in for matching the
+// pair again (the pipelines keep it per pair, issue 34).
+struct CandidatePairOutcome {
+  bool kept = false;                   // at least min_num_inliers verified inliers
+  int64_t num_putative = 0;            // first-pass putative matches
+  int64_t num_inliers_first_pass = 0;  // verified inliers before guided matching
+};
+
 // Candidate pairs (i < j, indices into the image list), sorted, for pairs "exhaustive" and
 // "sequential"; InputError for "prior" (chosen by the caller from poses).
 std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptions& options);
@@ -132,11 +140,14 @@ std::vector<std::pair<int, int>> SelectPairs(int num_images, const MatchingOptio
 // images.images[i]. Output: the kept pairs sorted by (image1, image2); `matches` holds the
 // first-pass putative matches plus the guided ones (so inlier_matches is a subset of it).
 // Keypoints are undistorted (core/camera.h) before estimation when the camera has distortion;
-// the stored indices refer to the original keypoints.
+// the stored indices refer to the original keypoints. `outcomes` (optional) receives one entry
+// per candidate, in the candidates' order. A pair's result depends on its two images' features and
+// cameras and the options only (the robust estimators start from a fixed seed per pair).
 MatchingSummary MatchImagePairs(const ImageSet& images, const std::vector<ImageFeatures>& features,
                                 const MatchingOptions& options,
                                 const std::vector<std::pair<int, int>>& candidates,
-                                std::vector<PairMatches>* pairs);
+                                std::vector<PairMatches>* pairs,
+                                std::vector<CandidatePairOutcome>* outcomes = nullptr);
 
 // MatchImagePairs on SelectPairs(options).
 MatchingSummary MatchImages(const ImageSet& images, const std::vector<ImageFeatures>& features,

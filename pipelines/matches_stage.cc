@@ -5,10 +5,15 @@
 // and the front end matches and verifies them without ever seeing a pose.
 #include <spdlog/spdlog.h>
 
+#include <chrono>
+#include <map>
+
 #include "core/error.h"
 #include "core/hdf5_store.h"
+#include "core/timing.h"
 #include "core/warnings.h"
 #include "frontend/matching.h"
+#include "pipelines/content_hash.h"
 #include "pipelines/pair_selection.h"
 #include "pipelines/stages.h"
 
@@ -16,6 +21,19 @@ namespace raytime {
 namespace {
 
 constexpr const char* kArtifactFeatures = "features";
+// JSON document beside the matches: per candidate pair matched, [content key, row in /matches or
+// -1 when dropped, putative matches, first-pass inliers], so the next run reuses it pair by pair.
+constexpr const char* kPairKeysJson = "pair_keys";
+
+// A candidate pair's result from the previous run in this work directory.
+struct PreviousPair {
+  int row = -1;  // in `pairs`; -1: matched and dropped
+  CandidatePairOutcome outcome;
+};
+struct PreviousMatches {
+  std::map<std::string, PreviousPair> by_key;
+  std::vector<PairMatches> pairs;
+};
 
 struct MatchesStageOptions {
   MatchingOptions matching;
@@ -70,24 +88,150 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
     } else {
       candidates = SelectPairs(static_cast<int>(images.images.size()), options_.matching);
     }
+    const auto start = std::chrono::steady_clock::now();
     std::vector<PairMatches> pairs;
+    std::vector<nlohmann::json> pair_keys;
+    int num_matched = 0;
     const MatchingSummary summary =
-        MatchImagePairs(images, features, options_.matching, candidates, &pairs);
-    spdlog::info(
-        fmt::format("matches: {} of {} pairs verified ({} dropped below {} inliers), {} inliers, "
-                    "{:.2f} s",
-                    summary.num_verified_pairs, summary.num_pairs, summary.num_dropped_pairs,
-                    options_.matching.min_num_inliers, summary.num_inliers, summary.seconds));
+        MatchOrReuse(context, images, features, candidates, &pairs, &pair_keys, &num_matched);
+    const int num_reused = summary.num_pairs - num_matched;
+    spdlog::info(fmt::format(
+        "matches: {} of {} pairs verified ({} dropped below {} inliers; {} matched, {} reused), "
+        "{} inliers, {:.2f} s",
+        summary.num_verified_pairs, summary.num_pairs, summary.num_dropped_pairs,
+        options_.matching.min_num_inliers, num_matched, num_reused, summary.num_inliers,
+        SecondsSince(start)));
     Hdf5Writer writer(context.output_path);
     writer.WriteMatches(pairs, MakeProvenance(*this));
+    writer.WriteJson(kPairKeysJson, pair_keys);
     writer.Commit();
     nlohmann::json out = summary.ToJson();
+    out["num_pairs_matched"] = num_matched;
+    out["num_pairs_reused"] = num_reused;
+    out["seconds"] = SecondsSince(start);
     if (PriorPairs()) out["pair_selection"] = selection_json;
     out["warnings"] = WarningsToJson(warnings);
     return out;
   }
 
  private:
+  // The candidates' verified pairs: those whose content key the previous run's output holds are
+  // taken from it, the others matched (issue 34: a capture that grows matches only the pairs
+  // that involve its new frames). `pair_keys` receives every candidate's entry of kPairKeysJson;
+  // the summary counts every candidate, its thread times only the pairs matched now.
+  MatchingSummary MatchOrReuse(const StageContext& context, const ImageSet& images,
+                               const std::vector<ImageFeatures>& features,
+                               const std::vector<std::pair<int, int>>& candidates,
+                               std::vector<PairMatches>* pairs,
+                               std::vector<nlohmann::json>* pair_keys, int* num_matched) const {
+    std::vector<std::string> image_keys(images.images.size());
+    for (size_t i = 0; i < images.images.size(); ++i) {
+      image_keys[i] = ImageKey(features.at(i), images.cameras.at(images.images[i].camera_index));
+    }
+    MatchingOptions matching = options_.matching;
+    nlohmann::json result_options = OptionsToJson(matching);
+    // Which pairs are chosen does not change a pair's result.
+    for (const char* choice : {"pairs", "window", "loop_stride"}) result_options.erase(choice);
+    const std::string options_key = result_options.dump();
+    std::vector<std::string> keys;
+    for (const auto& [i, j] : candidates) {
+      keys.push_back(HashBytes(nlohmann::json{
+          {"executable", ExecutableHash()},
+          {"options", options_key},
+          {"image1", image_keys[i]},
+          {"image2",
+           image_keys[j]}}.dump()));
+    }
+    const PreviousMatches previous = ReadPrevious(context);
+    std::vector<std::pair<int, int>> to_match;
+    for (size_t p = 0; p < candidates.size(); ++p) {
+      if (previous.by_key.count(keys[p]) == 0) to_match.push_back(candidates[p]);
+    }
+    *num_matched = static_cast<int>(to_match.size());
+    if (to_match.size() < candidates.size()) {
+      spdlog::info(fmt::format(
+          "matches: {} of {} pairs unchanged since the previous run here (same features, cameras "
+          "and options), their results reused; matching {}",
+          candidates.size() - to_match.size(), candidates.size(), to_match.size()));
+    }
+    std::vector<PairMatches> matched;
+    std::vector<CandidatePairOutcome> outcomes;
+    MatchingSummary summary;
+    if (!to_match.empty()) {
+      summary = MatchImagePairs(images, features, options_.matching, to_match, &matched, &outcomes);
+    }
+    // Candidates in order, from the previous run or from this one; kept pairs stay sorted.
+    summary.num_images = static_cast<int>(images.images.size());
+    summary.num_pairs = static_cast<int>(candidates.size());
+    summary.num_putative = summary.num_inliers = summary.num_inliers_first_pass = 0;
+    pairs->clear();
+    pair_keys->clear();
+    size_t next_matched = 0, next_outcome = 0;
+    for (size_t p = 0; p < candidates.size(); ++p) {
+      const auto found = previous.by_key.find(keys[p]);
+      CandidatePairOutcome outcome;
+      if (found != previous.by_key.end()) {
+        outcome = found->second.outcome;
+        if (outcome.kept) {
+          PairMatches pair = previous.pairs.at(found->second.row);
+          pair.image1 = candidates[p].first;
+          pair.image2 = candidates[p].second;
+          pairs->push_back(std::move(pair));
+        }
+      } else {
+        outcome = outcomes.at(next_outcome++);
+        if (outcome.kept) pairs->push_back(std::move(matched.at(next_matched++)));
+      }
+      summary.num_putative += outcome.num_putative;
+      summary.num_inliers_first_pass += outcome.kept ? outcome.num_inliers_first_pass : 0;
+      if (outcome.kept) summary.num_inliers += pairs->back().geometry.inlier_matches.rows();
+      pair_keys->push_back({keys[p], outcome.kept ? static_cast<int>(pairs->size()) - 1 : -1,
+                            outcome.num_putative, outcome.num_inliers_first_pass});
+    }
+    summary.num_verified_pairs = static_cast<int>(pairs->size());
+    summary.num_dropped_pairs = summary.num_pairs - summary.num_verified_pairs;
+    return summary;
+  }
+
+  // What a pair's result depends on besides the options, per image: its keypoints, descriptors
+  // and camera.
+  static std::string ImageKey(const ImageFeatures& f, const CameraIntrinsics& camera) {
+    std::string bytes(reinterpret_cast<const char*>(f.keypoints.data()),
+                      f.keypoints.size() * sizeof(float));
+    bytes.append(reinterpret_cast<const char*>(f.descriptors.data()), f.descriptors.size());
+    const nlohmann::json rest = {f.keypoints.rows(), f.descriptors.cols(), camera.width,
+                                 camera.height, camera.params};
+    return HashBytes(HashBytes(bytes) + rest.dump());
+  }
+
+  // The previous run's pair results by key; none when there is no previous output, it predates
+  // the keys, or it does not read (then every pair is matched, and the log says why).
+  static PreviousMatches ReadPrevious(const StageContext& context) {
+    PreviousMatches previous;
+    if (context.previous_output.empty()) return previous;
+    try {
+      const Hdf5Reader reader(context.previous_output);
+      if (!reader.HasJson(kPairKeysJson) || !reader.HasMatches()) return previous;
+      previous.pairs = reader.ReadMatches();
+      for (const nlohmann::json& entry : reader.ReadJson(kPairKeysJson)) {
+        PreviousPair pair;
+        pair.row = entry.at(1).get<int>();
+        if (pair.row >= static_cast<int>(previous.pairs.size())) {
+          throw InputError("pair row " + std::to_string(pair.row) + " of " +
+                           std::to_string(previous.pairs.size()));
+        }
+        pair.outcome = {pair.row >= 0, entry.at(2).get<int64_t>(), entry.at(3).get<int64_t>()};
+        previous.by_key[entry.at(0).get<std::string>()] = pair;
+      }
+    } catch (const std::exception& e) {
+      spdlog::warn(fmt::format(
+          "matches: the previous run's matches in {} cannot be reused ({}); matching every pair",
+          context.previous_output, e.what()));
+      return PreviousMatches();
+    }
+    return previous;
+  }
+
   // The prior pairs, logged and summarized (pairs chosen against the exhaustive count).
   std::vector<std::pair<int, int>> ChoosePriorPairs(const ImageSet& images, const PoseSet& poses,
                                                     nlohmann::json* summary_json,
