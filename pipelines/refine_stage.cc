@@ -13,6 +13,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <limits>
@@ -49,6 +50,10 @@ struct RefineStageOptions {
   // matches fit worse than the others' (refine/frame_doubt.h: wrong intrinsics, say).
   bool check_frame_doubts = true;
   FrameDoubtOptions frame_doubt;
+  // Start the passes on all matches from this stage's solution at its previous run in the work
+  // directory (issue 34: a capture that grew or lost frames): the same recipe and decisions, the
+  // same minimum, reached in fewer iterations. Frames it did not have start as the recipe says.
+  bool warm_start = true;
   RefineOptions refine;
 
   template <class Visitor>
@@ -64,6 +69,9 @@ struct RefineStageOptions {
       "Name, and leave out of the refined export, frames that moved far more than the others and "
       "fit their matches worse (wrong intrinsics, a frame the solve could not place); not for a "
       "prior made from the match graph");
+    v("warm_start", warm_start,
+      "Start the all-match passes from this work directory's previous refine solution (frames "
+      "added or removed since); off: every run starts from the prior");
     frame_doubt.VisitFields(v);  // flat keys: refine.frame_doubt_residual_ratio, ...
     refine.VisitFields(v);       // flat keys: refine.max_matches_per_pair, ...
   }
@@ -275,6 +283,91 @@ void AppendRayTimes(const RefineInput& input, const SolvedObservations& solved,
     rays->matches.row(match_start + m) << static_cast<uint32_t>(start + solved.matches(m, 0)),
         static_cast<uint32_t>(start + solved.matches(m, 1));
   }
+}
+
+// JSON document beside a refined pose set: per pass name that an earlier run's solution may start
+// (RefineWarmStart), per image name, its pose at the end of that pass: [qw, qx, qy, qz, x, y, z]
+// (rotation world_from_cam, camera centre). Written by refine, read by its next run.
+constexpr const char* kPassPosesJson = "pass_poses";
+
+// This stage's solution at its previous run in the work directory, by image name.
+struct EarlierSolution {
+  std::map<std::string, std::map<std::string, Rigid3>> pass_poses;
+  // Per image name, per keypoint row: its pixel (to check the keypoint is the same) and ray time.
+  std::map<std::string, std::map<uint32_t, std::pair<Eigen::Vector2d, double>>> rays;
+  bool empty() const { return pass_poses.empty(); }
+};
+
+nlohmann::json PoseJson(const Rigid3& pose) {
+  const Eigen::Quaterniond& q = pose.rotation;
+  const Eigen::Vector3d& c = pose.translation;
+  return {q.w(), q.x(), q.y(), q.z(), c.x(), c.y(), c.z()};
+}
+
+Rigid3 PoseFromJson(const nlohmann::json& value) {
+  const std::vector<double> v = value.get<std::vector<double>>();
+  if (v.size() != 7) throw InputError("a pose of " + std::to_string(v.size()) + " numbers, not 7");
+  Rigid3 pose;
+  pose.rotation = Eigen::Quaterniond(v[0], v[1], v[2], v[3]).normalized();
+  pose.translation = Eigen::Vector3d(v[4], v[5], v[6]);
+  return pose;
+}
+
+// The earlier solution in `path` (the stage's previous output); empty when it has none (an older
+// output, or every solve returned the prior). Unreadable: empty, and the log says why.
+EarlierSolution ReadEarlierSolution(const std::string& path, const std::string& pose_set) {
+  EarlierSolution earlier;
+  if (path.empty()) return earlier;
+  try {
+    const Hdf5Reader reader(path);
+    if (!reader.HasJson(kPassPosesJson) || !reader.HasRayTimes(pose_set)) return earlier;
+    const nlohmann::json pass_poses = reader.ReadJson(kPassPosesJson);
+    for (const auto& [pass, poses] : pass_poses.items()) {
+      for (const auto& [name, pose] : poses.items()) {
+        earlier.pass_poses[pass][name] = PoseFromJson(pose);
+      }
+    }
+    const RayTimeObservations rays = reader.ReadRayTimes(pose_set);
+    for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
+      if (!std::isfinite(rays.ray_times(o))) continue;
+      earlier.rays[rays.image_names.at(rays.observations(o, 0))][rays.observations(o, 1)] = {
+          rays.pixels.row(o).transpose(), rays.ray_times(o)};
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn(fmt::format(
+        "refine: the previous run's solution in {} cannot start this one ({}); starting from the "
+        "prior",
+        path, e.what()));
+    return EarlierSolution();
+  }
+  return earlier;
+}
+
+// The earlier solution as the start of one component's solve (its images by name; a ray time
+// only where the keypoint row still holds the same pixel).
+RefineWarmStart WarmStartOf(const EarlierSolution& earlier, const RefineInput& input,
+                            const std::vector<std::string>& names) {
+  RefineWarmStart warm;
+  for (const auto& [pass, poses] : earlier.pass_poses) {
+    std::vector<std::optional<Rigid3>>& start = warm.world_from_cam[pass];
+    start.resize(names.size());
+    for (size_t i = 0; i < names.size(); ++i) {
+      const auto found = poses.find(names[i]);
+      if (found != poses.end()) start[i] = found->second;
+    }
+  }
+  for (size_t i = 0; i < names.size(); ++i) {
+    const auto image = earlier.rays.find(names[i]);
+    if (image == earlier.rays.end()) continue;
+    for (const auto& [keypoint, ray] : image->second) {
+      if (keypoint >= input.keypoints[i].rows() ||
+          input.keypoints[i].row(keypoint).transpose() != ray.first) {
+        continue;
+      }
+      warm.ray_times[WarmRayTimeKey(static_cast<int>(i), static_cast<int>(keypoint))] = ray.second;
+    }
+  }
+  return warm;
 }
 
 // The verified pairs' relative poses from their essential matrices (pairs of images that both have
@@ -523,9 +616,13 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
       solves.warnings.push_back(DisconnectedGraphWarning(
           images, components, num_solved, prior_rotations_from_matches, &solves.loose));
     }
+    const EarlierSolution earlier =
+        options_.warm_start
+            ? ReadEarlierSolution(context.previous_output, context.OutputPoseSetName("refined"))
+            : EarlierSolution();
     for (size_t c = 0; c < num_solved; ++c) {
       SolveComponent(images, features, matches, prior, components[c], c == 0,
-                     prior_rotations_from_matches, &solves);
+                     prior_rotations_from_matches, earlier, &solves);
     }
     // One verdict over the components: a check that fired anywhere is reported.
     nlohmann::json& result = solves.result;
@@ -574,6 +671,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     std::vector<CameraIntrinsics> cameras;
     // Where each solve put its observations, for the solves whose poses are returned.
     RayTimeObservations rays;
+    // The same solves' poses at the end of each pass (kPassPosesJson).
+    nlohmann::json pass_poses = nlohmann::json::object();
   };
 
   // The prior against the matches' relative poses (prior_convention.h); refused with the reason.
@@ -648,11 +747,13 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
   void SolveComponent(const ImageSet& images, const std::vector<ImageFeatures>& features,
                       const std::vector<PairMatches>& matches, const PoseSet& prior,
                       const std::vector<int>& component, bool largest,
-                      bool prior_rotations_from_matches, Solves* solves) const {
+                      bool prior_rotations_from_matches, const EarlierSolution& earlier,
+                      Solves* solves) const {
     std::vector<std::string> names;
     RefineInput input = ComponentInput(images, features, matches, prior, component, &names);
     input.prior_rotations_from_matches = prior_rotations_from_matches;
     input.names = names;
+    if (!earlier.empty()) input.warm_start = WarmStartOf(earlier, input, names);
     RefineOutput output;
     const RefineSummary summary = RefinePoses(input, options_.refine, &output);
     for (size_t k = 0; k < names.size(); ++k) {
@@ -693,6 +794,11 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
         if (largest) solves->frame_doubts = verdict;
       }
       AppendRayTimes(input, output.solved_observations, names, &solves->rays);
+      for (const auto& [pass, poses] : output.pass_world_from_cam) {
+        for (size_t k = 0; k < names.size(); ++k) {
+          solves->pass_poses[pass][names[k]] = PoseJson(poses[k]);
+        }
+      }
       for (size_t k = 0; k < names.size() && summary.uncertainty.computed; ++k) {
         solves->uncertainty[names[k]] = summary.uncertainty.cameras[k];
       }
@@ -738,6 +844,7 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     writer.WriteJson(kLooseImagesJson, solves->loose);
     writer.WriteJson(kPoseUncertaintyJson, solves->uncertainty);
     writer.WriteJson(kSolveDiagnosticsJson, solves->diagnostics);
+    writer.WriteJson(kPassPosesJson, solves->pass_poses);
     writer.Commit();
   }
 };

@@ -93,6 +93,9 @@ void RunRecipe(const RefineInput& input, const RefineOptions& options,
   nominal.refine_focal = options.refine_focal;
   nominal.refine_principal_point = options.refine_principal_point;
   nominal.refine_distortion = options.refine_distortion;
+  // The passes on the nominal settings (and the basin-first finish and anneal copied from them)
+  // may start from an earlier run's solution; the capped passes that decide never do.
+  nominal.warm_startable = true;
   if (options.staged) {
     // §4.3: pass 1 poses only, light orientation anchor, capped matches, full GNC schedule ...
     PassSettings pass1;
@@ -304,6 +307,7 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);
   output->solved_observations = SolvedObservationsOf(state);
+  output->pass_world_from_cam = state.pass_world_from_cam;
   output->world_from_cam = summary.guardrails.returned_prior ? prior : state.world_from_cam;
   output->cameras = summary.guardrails.returned_prior ? input.cameras : output->solved_cameras;
   summary.timings.total_seconds = SecondsSince(start);

@@ -123,6 +123,16 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.self_calibration =
       settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
   const auto build_start = std::chrono::steady_clock::now();
+  const auto warm = settings.warm_startable ? input.warm_start.world_from_cam.find(settings.name)
+                                            : input.warm_start.world_from_cam.end();
+  const bool warm_started = warm != input.warm_start.world_from_cam.end();
+  if (warm_started) {
+    for (size_t i = 0; i < warm->second.size() && i < state->world_from_cam.size(); ++i) {
+      if (!warm->second[i]) continue;
+      state->world_from_cam[i] = *warm->second[i];
+      ++pass.ray_time_init.num_images_from_earlier_run;
+    }
+  }
   state->layout =
       options.parameterization == "anchored"
           ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
@@ -140,6 +150,22 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     ray_times[t] = it->second;
     unsolved[t] = false;
     ++pass.ray_time_init.num_warm_started;
+  }
+  // ... or, from an earlier run's solution, from its value there (with the poses above).
+  if (warm_started) {
+    for (size_t t = 0; t < ray_times.size(); ++t) {
+      const LayoutObservation& obs = layout.observations[layout.ray_time_observation[t]];
+      const auto it = input.warm_start.ray_times.find(WarmRayTimeKey(obs.image, obs.keypoint));
+      if (it == input.warm_start.ray_times.end()) continue;
+      ray_times[t] = it->second;
+      if (unsolved[t]) ++pass.ray_time_init.num_warm_started;
+      unsolved[t] = false;
+      ++pass.ray_time_init.num_ray_times_from_earlier_run;
+    }
+    spdlog::info(fmt::format(
+        "refine: {}: started from the previous run's solution: {} of {} images, {} of {} ray times",
+        settings.name, pass.ray_time_init.num_images_from_earlier_run, state->world_from_cam.size(),
+        pass.ray_time_init.num_ray_times_from_earlier_run, ray_times.size()));
   }
   // ... and, in the basin-first finish, the ones the earlier passes' cap left out at their own
   // closest approach at the solved poses.
@@ -257,6 +283,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
       "refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px, mean "
       "match term {:.4g} px²",
       pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2));
+  state->pass_world_from_cam[settings.name] = state->world_from_cam;
   return pass;
 }
 

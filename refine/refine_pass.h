@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -27,6 +28,9 @@ struct PassSettings {
   bool refine_principal_point = false;
   bool refine_distortion = false;
   bool start_unsolved_at_closest_approach = false;  // StartRayTimesAtClosestApproach
+  // Starts from the input's RefineWarmStart for this pass's name, where it has one (the passes on
+  // all matches after the recipe's decisions).
+  bool warm_startable = false;
 };
 
 // State carried from one pass to the next (the staged recipe's warm start), and the last pass's
@@ -38,6 +42,7 @@ struct PassState {
   // Per image, the median residual norm landing in it at the pass's solution (SolveDiagnostics).
   std::vector<double> image_residual_median_px;
   ProblemLayout layout;
+  std::map<std::string, std::vector<Rigid3>> pass_world_from_cam;  // RefineOutput's
 };
 
 // Solves one pass from *state (poses, intrinsics blocks, solved ray times) with the poses' prior

@@ -6,8 +6,11 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "core/camera.h"
@@ -27,6 +30,23 @@ struct PairMatchIndices {
 
 using Keypoints = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
 
+// An earlier solution of an overlapping problem (the same capture before frames were added or
+// removed, issue 34) to start the passes that solve on all matches from: they start near their
+// minimum instead of at the capped passes' solution, and converge in fewer iterations. Only the
+// start changes: the capped passes, whose solutions make the recipe's decisions (wrong-pair
+// removal, the orientation-prior probe), and every prior term are as without it.
+struct RefineWarmStart {
+  // Per pass name ("solve", "finish", "finish_anneal"), per image of the input: its pose at the
+  // end of that pass in the earlier solve; none for an image it did not have.
+  std::map<std::string, std::vector<std::optional<Rigid3>>> world_from_cam;
+  // Ray times of the earlier solve's last pass, keyed by WarmRayTimeKey(image, keypoint) (image
+  // and keypoint of this input; only where the keypoint is the same one).
+  std::unordered_map<uint64_t, double> ray_times;
+};
+inline uint64_t WarmRayTimeKey(int image, int keypoint) {
+  return (static_cast<uint64_t>(image) << 32) | static_cast<uint32_t>(keypoint);
+}
+
 struct RefineInput {
   // The cameras' intrinsics (SPEC §2) and, per image, the index of its camera: one camera when
   // the images share intrinsics (the paper's setting, §3.1), several for per-frame intrinsics
@@ -44,6 +64,7 @@ struct RefineInput {
   // Per image, its name for the log's verdicts (a user reads frames by name, not by index); empty:
   // the log says indices.
   std::vector<std::string> names;
+  RefineWarmStart warm_start;  // empty: every pass starts as the recipe says
 
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
   // names[image], or its index when there are no names.
@@ -99,6 +120,8 @@ struct RefineOutput {
   // At solved_world_from_cam and solved_cameras (so not the returned poses when a guardrail fired).
   SolvedObservations solved_observations;
   SolveDiagnostics diagnostics;  // at the solve, as solved_observations
+  // Per pass name, the poses at its end: a later run's RefineWarmStart.
+  std::map<std::string, std::vector<Rigid3>> pass_world_from_cam;
 };
 
 // The bins of a GNC stage's residual histogram (GncStageSummary::residual_histogram): norms of the
@@ -149,10 +172,15 @@ struct RayTimeInitSummary {
   // (StartRayTimesAtClosestApproach, ray_time_init.h).
   int num_warm_started = 0;
   int num_closest_approach_started = 0;
+  // From an earlier run's solution (RefineWarmStart): the images whose pose, and the ray times
+  // (among num_warm_started) whose value, this pass started from.
+  int num_images_from_earlier_run = 0;
+  int num_ray_times_from_earlier_run = 0;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RayTimeInitSummary, mode, num_depth_samples,
                                    images_with_fallback, min_depth, median_depth, max_depth,
-                                   num_warm_started, num_closest_approach_started)
+                                   num_warm_started, num_closest_approach_started,
+                                   num_images_from_earlier_run, num_ray_times_from_earlier_run)
 
 // One pass of the refiner: a problem object and its GNC stages (two passes in the staged room
 // recipe of §4.3, three in the basin-first solve, one otherwise).

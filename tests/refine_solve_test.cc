@@ -617,6 +617,8 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].ray_time_init.max_depth",
       "passes[].ray_time_init.num_warm_started",
       "passes[].ray_time_init.num_closest_approach_started",
+      "passes[].ray_time_init.num_images_from_earlier_run",
+      "passes[].ray_time_init.num_ray_times_from_earlier_run",
       "passes[].gauge_polish",
       "passes[].gauge_polish.prior_cost_before",
       "passes[].gauge_polish.prior_cost_after",
