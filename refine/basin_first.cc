@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <set>
 #include <string>
 #include <utility>
@@ -147,13 +148,20 @@ namespace {
 const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOptions& options,
                                     const PassSettings& basin, const std::vector<Rigid3>& prior,
                                     const PassState& start, PassState* state,
-                                    RefineSummary* summary, std::optional<RefineInput>* pruned) {
+                                    RefineSummary* summary, std::optional<RefineInput>* pruned,
+                                    size_t* solution_pass) {
   const RefineInput* active = &input;
+  *solution_pass = summary->passes.size() - 1;  // the basin's
   PairRemovalSummary& removal = summary->pair_removal;
   removal.enabled = options.max_pair_removal_rounds > 0;
   if (removal.enabled) {
     const ProblemLayout judged = BuildPerObservationLayout(
         input, options.basin_max_matches_per_pair, options.match_cap_seed);
+    // Each round's solution by the pairs it was solved without: a round that would remove a set
+    // an earlier round removed would solve the same problem from the same start (the solve is
+    // deterministic) and reach that round's solution, so it is taken instead (the removals cycle).
+    std::map<std::set<std::pair<int, int>>, std::pair<PassState, size_t>> solved_without = {
+        {{}, {*state, *solution_pass}}};
     while (true) {
       const std::vector<PairResidual> residuals =
           PairResidualsAt(input, judged, state->world_from_cam, state->cameras);
@@ -179,6 +187,19 @@ const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOption
       removal.kept = kept;
       pruned->emplace(WithoutPairs(input, selected));
       active = &pruned->value();
+      const auto solved = solved_without.find(PairKeys(selected));
+      if (solved != solved_without.end()) {
+        spdlog::info(fmt::format(
+            "refine: the {} pairs above {:.3g} px at the basin solution are the ones an earlier "
+            "round removed: the removals cycle; that round's solution stands (round {} of at most "
+            "{})",
+            selected.size(), options.inconsistent_pair_px, removal.rounds,
+            options.max_pair_removal_rounds));
+        *state = solved->second.first;
+        *solution_pass = solved->second.second;
+        removal.stop_reason = "cycle";
+        break;
+      }
       spdlog::info(fmt::format(
           "refine: {} of {} pairs above {:.3g} px at the basin solution{}{}; solving the basin "
           "again from the prior without them (round {} of at most {})",
@@ -193,6 +214,8 @@ const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOption
       PassSettings again = basin;
       again.name = "basin_round" + std::to_string(removal.rounds + 1);
       summary->passes.push_back(RunPass(*active, options, again, prior, state));
+      *solution_pass = summary->passes.size() - 1;
+      solved_without[PairKeys(selected)] = {*state, *solution_pass};
     }
   }
   return active;
@@ -204,15 +227,16 @@ const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOption
 // matches.
 void ProbeOrientationPrior(const RefineInput& active, const RefineOptions& options,
                            const PassSettings& basin, const std::vector<Rigid3>& prior,
-                           PassState* state, RefineSummary* summary) {
+                           size_t basin_pass, PassState* state, RefineSummary* summary) {
   const PassState basin_state = *state;
+  const RefinePassSummary basin_solution = summary->passes.at(basin_pass);
 
   OrientationPriorProbe& probe = summary->orientation_prior;
   probe.enabled = true;
   probe.weight = options.orientation_weight;
   probe.max_increase = options.orientation_prior_max_increase;
-  probe.free_residual_median_px = summary->passes.back().residual_median_px;
-  probe.free_match_cost_px2 = summary->passes.back().match_cost_px2;
+  probe.free_residual_median_px = basin_solution.residual_median_px;
+  probe.free_match_cost_px2 = basin_solution.match_cost_px2;
   probe.prior_from_matches = active.prior_rotations_from_matches && options.orientation_weight > 0;
   if (probe.prior_from_matches) {
     spdlog::info(fmt::format(
@@ -270,9 +294,10 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   const PassState start = *state;
   summary->passes.push_back(RunPass(input, options, basin, prior, state));
 
+  size_t basin_pass = 0;  // the pass whose solution the removal returns
   const RefineInput* active =
-      RemoveWrongPairs(input, options, basin, prior, start, state, summary, pruned);
-  ProbeOrientationPrior(*active, options, basin, prior, state, summary);
+      RemoveWrongPairs(input, options, basin, prior, start, state, summary, pruned, &basin_pass);
+  ProbeOrientationPrior(*active, options, basin, prior, basin_pass, state, summary);
   const OrientationPriorProbe& probe = summary->orientation_prior;
 
   PassSettings finish = nominal;

@@ -306,7 +306,8 @@ struct PairRemovalSummary {
   // measure when they were kept.
   std::vector<PairResidual> kept;
   // "consistent": no pair above the threshold at the last basin solution; "stable": exactly the
-  // removed pairs are; "max_rounds": the bound was reached with another set above it.
+  // removed pairs are; "cycle": an earlier round removed the set now above it, and that round's
+  // solution is returned; "max_rounds": the bound was reached with another set above it.
   std::string stop_reason;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairRemovalSummary, enabled, rounds, removed, kept, stop_reason)
