@@ -81,8 +81,10 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
     const int num_images = static_cast<int>(images.images.size());
     // Images whose key the previous run's output holds are not read again (issue 34: a capture
     // that grows costs only its new frames).
+    FeatureExtractionOptions extraction_options = options_.extraction;
+    const std::string options_key = OptionsToJson(extraction_options).dump();
     std::vector<std::string> keys(num_images);
-    for (int i = 0; i < num_images; ++i) keys[i] = FeatureKey(images, i);
+    for (int i = 0; i < num_images; ++i) keys[i] = FeatureKey(images, i, options_key);
     const PreviousFeatures previous = ReadPrevious(context);
     std::vector<ImageFeatures> features(num_images);
     std::vector<bool> upsampled(num_images, false);
@@ -147,13 +149,13 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
 
  private:
   // What an image's features are a function of: its file's bytes, the size the image list gives
-  // it (checked against the file when extracted), the extraction options and this executable.
-  std::string FeatureKey(const ImageSet& images, int i) const {
+  // it (checked against the file when extracted), the extraction options (`options_key`, their
+  // JSON) and this executable.
+  static std::string FeatureKey(const ImageSet& images, int i, const std::string& options_key) {
     const ImageInfo& info = images.images[i];
-    FeatureExtractionOptions extraction = options_.extraction;
     const nlohmann::json material = {
         {"executable", ExecutableHash()},
-        {"options", OptionsToJson(extraction)},
+        {"options", options_key},
         {"image", HashFileContents((fs::path(images.image_root) / info.name).string())},
         {"width", info.width},
         {"height", info.height}};
@@ -164,26 +166,23 @@ class FeaturesStage : public StageWithOptions<FeaturesStageOptions> {
   // keys, or it does not read (then everything is extracted, and the log says why).
   static PreviousFeatures ReadPrevious(const StageContext& context) {
     PreviousFeatures previous;
-    if (context.previous_output.empty()) return previous;
-    try {
-      const Hdf5Reader reader(context.previous_output);
-      if (!reader.HasJson(kFeatureKeysJson) || !reader.HasFeatures()) return previous;
-      const nlohmann::json index = reader.ReadJson(kFeatureKeysJson);
-      const auto keys = index.at("keys").get<std::vector<std::string>>();
-      previous.upsampled = index.at("upsampled").get<std::vector<bool>>();
-      previous.features = reader.ReadFeatures();
-      if (keys.size() != previous.features.size() || keys.size() != previous.upsampled.size()) {
-        throw InputError(std::to_string(keys.size()) + " keys for " +
-                         std::to_string(previous.features.size()) + " images");
-      }
-      for (size_t r = 0; r < keys.size(); ++r) previous.row_of_key[keys[r]] = static_cast<int>(r);
-    } catch (const std::exception& e) {
-      spdlog::warn(fmt::format(
-          "features: the previous run's features in {} cannot be reused ({}); extracting all",
-          context.previous_output, e.what()));
-      return PreviousFeatures();
-    }
-    return previous;
+    const bool read = context.ReadPreviousOutput(
+        [&](const Hdf5Reader& reader) {
+          if (!reader.HasJson(kFeatureKeysJson) || !reader.HasFeatures()) return;
+          const nlohmann::json index = reader.ReadJson(kFeatureKeysJson);
+          const auto keys = index.at("keys").get<std::vector<std::string>>();
+          previous.upsampled = index.at("upsampled").get<std::vector<bool>>();
+          previous.features = reader.ReadFeatures();
+          if (keys.size() != previous.features.size() || keys.size() != previous.upsampled.size()) {
+            throw InputError(std::to_string(keys.size()) + " keys for " +
+                             std::to_string(previous.features.size()) + " images");
+          }
+          for (size_t r = 0; r < keys.size(); ++r) {
+            previous.row_of_key[keys[r]] = static_cast<int>(r);
+          }
+        },
+        "extracting every image");
+    return read ? previous : PreviousFeatures();
   }
 };
 

@@ -208,28 +208,23 @@ class MatchesStage : public StageWithOptions<MatchesStageOptions> {
   // the keys, or it does not read (then every pair is matched, and the log says why).
   static PreviousMatches ReadPrevious(const StageContext& context) {
     PreviousMatches previous;
-    if (context.previous_output.empty()) return previous;
-    try {
-      const Hdf5Reader reader(context.previous_output);
-      if (!reader.HasJson(kPairKeysJson) || !reader.HasMatches()) return previous;
-      previous.pairs = reader.ReadMatches();
-      for (const nlohmann::json& entry : reader.ReadJson(kPairKeysJson)) {
-        PreviousPair pair;
-        pair.row = entry.at(1).get<int>();
-        if (pair.row >= static_cast<int>(previous.pairs.size())) {
-          throw InputError("pair row " + std::to_string(pair.row) + " of " +
-                           std::to_string(previous.pairs.size()));
-        }
-        pair.outcome = {pair.row >= 0, entry.at(2).get<int64_t>(), entry.at(3).get<int64_t>()};
-        previous.by_key[entry.at(0).get<std::string>()] = pair;
-      }
-    } catch (const std::exception& e) {
-      spdlog::warn(fmt::format(
-          "matches: the previous run's matches in {} cannot be reused ({}); matching every pair",
-          context.previous_output, e.what()));
-      return PreviousMatches();
-    }
-    return previous;
+    const bool read = context.ReadPreviousOutput(
+        [&](const Hdf5Reader& reader) {
+          if (!reader.HasJson(kPairKeysJson) || !reader.HasMatches()) return;
+          previous.pairs = reader.ReadMatches();
+          for (const nlohmann::json& entry : reader.ReadJson(kPairKeysJson)) {
+            PreviousPair pair;
+            pair.row = entry.at(1).get<int>();
+            if (pair.row >= static_cast<int>(previous.pairs.size())) {
+              throw InputError("pair row " + std::to_string(pair.row) + " of " +
+                               std::to_string(previous.pairs.size()));
+            }
+            pair.outcome = {pair.row >= 0, entry.at(2).get<int64_t>(), entry.at(3).get<int64_t>()};
+            previous.by_key[entry.at(0).get<std::string>()] = pair;
+          }
+        },
+        "matching every pair");
+    return read ? previous : PreviousMatches();
   }
 
   // The prior pairs, logged and summarized (pairs chosen against the exhaustive count).

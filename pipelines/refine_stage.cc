@@ -318,34 +318,28 @@ Rigid3 PoseFromJson(const nlohmann::json& value) {
   return pose;
 }
 
-// The earlier solution in `path` (the stage's previous output); empty when it has none (an older
-// output, or every solve returned the prior). Unreadable: empty, and the log says why.
-EarlierSolution ReadEarlierSolution(const std::string& path, const std::string& pose_set) {
+// The earlier solution in the stage's previous output; empty when it has none (an older output, or
+// every solve returned the prior). Unreadable: empty, and the log says why.
+EarlierSolution ReadEarlierSolution(const StageContext& context, const std::string& pose_set) {
   EarlierSolution earlier;
-  if (path.empty()) return earlier;
-  try {
-    const Hdf5Reader reader(path);
-    if (!reader.HasJson(kPassPosesJson) || !reader.HasRayTimes(pose_set)) return earlier;
-    const nlohmann::json pass_poses = reader.ReadJson(kPassPosesJson);
-    for (const auto& [pass, poses] : pass_poses.items()) {
-      for (const auto& [name, pose] : poses.items()) {
-        earlier.pass_poses[pass][name] = PoseFromJson(pose);
-      }
-    }
-    const RayTimeObservations rays = reader.ReadRayTimes(pose_set);
-    for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
-      if (!std::isfinite(rays.ray_times(o))) continue;
-      earlier.rays[rays.image_names.at(rays.observations(o, 0))][rays.observations(o, 1)] = {
-          rays.pixels.row(o).transpose(), rays.ray_times(o)};
-    }
-  } catch (const std::exception& e) {
-    spdlog::warn(fmt::format(
-        "refine: the previous run's solution in {} cannot start this one ({}); starting from the "
-        "prior",
-        path, e.what()));
-    return EarlierSolution();
-  }
-  return earlier;
+  const bool read = context.ReadPreviousOutput(
+      [&](const Hdf5Reader& reader) {
+        if (!reader.HasJson(kPassPosesJson) || !reader.HasRayTimes(pose_set)) return;
+        const nlohmann::json pass_poses = reader.ReadJson(kPassPosesJson);
+        for (const auto& [pass, poses] : pass_poses.items()) {
+          for (const auto& [name, pose] : poses.items()) {
+            earlier.pass_poses[pass][name] = PoseFromJson(pose);
+          }
+        }
+        const RayTimeObservations rays = reader.ReadRayTimes(pose_set);
+        for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
+          if (!std::isfinite(rays.ray_times(o))) continue;
+          earlier.rays[rays.image_names.at(rays.observations(o, 0))][rays.observations(o, 1)] = {
+              rays.pixels.row(o).transpose(), rays.ray_times(o)};
+        }
+      },
+      "starting from the prior");
+  return read ? earlier : EarlierSolution();
 }
 
 // The earlier solution as the start of one component's solve (its images by name; a ray time
@@ -622,9 +616,8 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
           images, components, num_solved, prior_rotations_from_matches, &solves.loose));
     }
     const EarlierSolution earlier =
-        options_.warm_start
-            ? ReadEarlierSolution(context.previous_output, context.OutputPoseSetName("refined"))
-            : EarlierSolution();
+        options_.warm_start ? ReadEarlierSolution(context, context.OutputPoseSetName("refined"))
+                            : EarlierSolution();
     for (size_t c = 0; c < num_solved; ++c) {
       SolveComponent(images, features, matches, prior, components[c], c == 0,
                      prior_rotations_from_matches, earlier, &solves);

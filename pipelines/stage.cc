@@ -1,10 +1,25 @@
 #include "pipelines/stage.h"
 
+#include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
 #include "core/error.h"
+#include "core/hdf5_store.h"
 
 namespace raytime {
+
+bool StageContext::ReadPreviousOutput(const std::function<void(const Hdf5Reader&)>& read,
+                                      const std::string& fallback) const {
+  if (previous_output.empty()) return false;
+  try {
+    read(Hdf5Reader(previous_output));
+  } catch (const std::exception& e) {
+    spdlog::warn(fmt::format("{}: the previous run's output {} cannot be reused ({}); {}", stage_id,
+                             previous_output, e.what(), fallback));
+    return false;
+  }
+  return true;
+}
 
 const std::string& StageContext::Require(const std::string& artifact) const {
   const auto it = artifacts.find(artifact);

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <yaml-cpp/yaml.h>
+#include <functional>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -51,6 +52,8 @@ inline constexpr const char* kSolveDiagnosticsJson = "solve_diagnostics";
 // "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
 inline constexpr const char* kPriorRepairJson = "prior_repair";
 
+class Hdf5Reader;
+
 struct StageContext {
   // The stage's id in the pipeline: its type, or "type@name" when a pipeline runs one stage type
   // more than once (two refine arms, say). Pose sets the stage writes carry the same suffix.
@@ -73,6 +76,10 @@ struct StageContext {
 
   // File holding `artifact`; MissingArtifactError naming the artifact and those there are.
   const std::string& Require(const std::string& artifact) const;
+  // Runs `read` on previous_output, when there is one; false when there is none or `read` throws
+  // (a warning names the file, the error and `fallback`, what the stage does instead).
+  bool ReadPreviousOutput(const std::function<void(const Hdf5Reader&)>& read,
+                          const std::string& fallback) const;
   // "refined" for stage "refine", "refined@gnc" for stage "refine@gnc".
   std::string OutputPoseSetName(const std::string& base) const;
 };

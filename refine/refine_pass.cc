@@ -29,9 +29,7 @@ namespace {
 // solution and the earlier finish differed by 0.15° at most on the grown chair.
 constexpr double kMaxWarmStartRotationDeg = 0.5;
 
-uint64_t KeyOf(const LayoutObservation& obs) {
-  return (static_cast<uint64_t>(obs.image) << 32) | static_cast<uint32_t>(obs.keypoint);
-}
+uint64_t KeyOf(const LayoutObservation& obs) { return WarmRayTimeKey(obs.image, obs.keypoint); }
 
 // Norms of the cross-projection residuals π_target(X_source) − û_target (paper eqs. rij, rji)
 // at the given poses, intrinsics blocks and ray times (indexed as layout.ray_time_observation),
@@ -188,7 +186,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     for (size_t t = 0; t < ray_times.size(); ++t) {
       const LayoutObservation& obs = layout.observations[layout.ray_time_observation[t]];
       if (!from_earlier_run[obs.image]) continue;
-      const auto it = input.warm_start.ray_times.find(WarmRayTimeKey(obs.image, obs.keypoint));
+      const auto it = input.warm_start.ray_times.find(KeyOf(obs));
       if (it == input.warm_start.ray_times.end()) continue;
       ray_times[t] = it->second;
       if (unsolved[t]) ++pass.ray_time_init.num_warm_started;

@@ -43,6 +43,7 @@ struct RefineWarmStart {
   // and keypoint of this input; only where the keypoint is the same one).
   std::unordered_map<uint64_t, double> ray_times;
 };
+// (image, keypoint) as one key, as the passes key their solved ray times (PassState).
 inline uint64_t WarmRayTimeKey(int image, int keypoint) {
   return (static_cast<uint64_t>(image) << 32) | static_cast<uint32_t>(keypoint);
 }
