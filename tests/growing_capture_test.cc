@@ -108,6 +108,17 @@ class GrowingCaptureTest : public ::testing::Test {
     }
   }
 
+  // What a run's features and matches stages computed and reused.
+  static void ExpectWork(const json& run, int extracted, int reused_images, int matched,
+                         int reused_pairs) {
+    const json features = StageSummary(run, "features")["summary"];
+    EXPECT_EQ(features["num_images_extracted"], extracted);
+    EXPECT_EQ(features["num_images_reused"], reused_images);
+    const json matches = StageSummary(run, "matches")["summary"];
+    EXPECT_EQ(matches["num_pairs_matched"], matched);
+    EXPECT_EQ(matches["num_pairs_reused"], reused_pairs);
+  }
+
   fs::path dir_, scene_, aside_;
 };
 
@@ -118,22 +129,16 @@ TEST_F(GrowingCaptureTest, OnlyNewContentIsComputedAndTheResultIsAFreshRuns) {
   Remove("0009.jpg");
   Remove("0010.jpg");
   json run = Run(workdir);
-  EXPECT_EQ(StageSummary(run, "features")["summary"]["num_images_extracted"], 9);
-  EXPECT_EQ(StageSummary(run, "matches")["summary"]["num_pairs_matched"], 36);
+  ExpectWork(run, 9, 0, 36, 0);
 
   // ... then two more: only they are read, only their 19 pairs matched, and (asked for) the
   // solve's finish starts from the nine frames' solution.
   Restore("0009.jpg");
   Restore("0010.jpg");
   run = Run(workdir, "--set refine.warm_start=true");
-  json features = StageSummary(run, "features")["summary"];
-  EXPECT_EQ(features["num_images"], 11);
-  EXPECT_EQ(features["num_images_extracted"], 2);
-  EXPECT_EQ(features["num_images_reused"], 9);
-  json matches = StageSummary(run, "matches")["summary"];
-  EXPECT_EQ(matches["num_pairs"], 55);
-  EXPECT_EQ(matches["num_pairs_matched"], 19);
-  EXPECT_EQ(matches["num_pairs_reused"], 36);
+  EXPECT_EQ(StageSummary(run, "features")["summary"]["num_images"], 11);
+  EXPECT_EQ(StageSummary(run, "matches")["summary"]["num_pairs"], 55);
+  ExpectWork(run, 2, 9, 19, 36);
   bool finish_warm = false;
   const json refine = StageSummary(run, "refine")["summary"];
   for (const json& pass : refine["passes"]) {
@@ -152,13 +157,7 @@ TEST_F(GrowingCaptureTest, OnlyNewContentIsComputedAndTheResultIsAFreshRuns) {
 
   // A frame removed: nothing is computed again, and nothing of it is left.
   Remove("0003.jpg");
-  run = Run(workdir);
-  features = StageSummary(run, "features")["summary"];
-  EXPECT_EQ(features["num_images_extracted"], 0);
-  EXPECT_EQ(features["num_images_reused"], 10);
-  matches = StageSummary(run, "matches")["summary"];
-  EXPECT_EQ(matches["num_pairs_matched"], 0);
-  EXPECT_EQ(matches["num_pairs_reused"], 45);
+  ExpectWork(Run(workdir), 0, 10, 0, 45);
   EXPECT_EQ(Hdf5Reader((workdir / "dataset.h5").string()).ReadImages().Find("0003.jpg"), -1);
   EXPECT_FALSE(Hdf5Reader((workdir / "refine.h5").string()).ReadPoseSet("refined").Has("0003.jpg"));
   Run(dir_ / "fresh10");
@@ -170,13 +169,7 @@ TEST_F(GrowingCaptureTest, OnlyNewContentIsComputedAndTheResultIsAFreshRuns) {
   ASSERT_FALSE(replaced.empty());
   ASSERT_TRUE(
       cv::imwrite((images / "0005.jpg").string(), replaced, {cv::IMWRITE_JPEG_QUALITY, 80}));
-  run = Run(workdir);
-  features = StageSummary(run, "features")["summary"];
-  EXPECT_EQ(features["num_images_extracted"], 1);
-  EXPECT_EQ(features["num_images_reused"], 9);
-  matches = StageSummary(run, "matches")["summary"];
-  EXPECT_EQ(matches["num_pairs_matched"], 9);
-  EXPECT_EQ(matches["num_pairs_reused"], 36);
+  ExpectWork(Run(workdir), 1, 9, 9, 36);
   fs::remove_all(dir_ / "fresh10");
   Run(dir_ / "fresh10");
   ExpectSameResults(workdir, dir_ / "fresh10", 0);
