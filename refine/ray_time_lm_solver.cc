@@ -10,6 +10,8 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 #include "core/timing.h"
 #include "refine/ray_geometry.h"
@@ -52,6 +54,34 @@ inline void AddScaledOuter(double* __restrict block, const double* __restrict a,
   for (int i = 0; i < 6; ++i) {
     const double ai = s * a[i];
     for (int j = 0; j < 6; ++j) block[6 * i + j] += ai * b[j];
+  }
+}
+
+// The lower triangle (j <= i) of block += s·a·aᵀ: a camera's diagonal block is symmetric and
+// only its lower triangle is assembled, so the upper one is never accumulated.
+inline void AddScaledLowerOuter(double* __restrict block, const double* __restrict a, double s) {
+  for (int i = 0; i < 6; ++i) {
+    const double ai = s * a[i];
+    for (int j = 0; j <= i; ++j) block[6 * i + j] += ai * a[j];
+  }
+}
+
+// block += w·Aᵀ·B for 2x6 row-major A and B: both rows in one pass over the block.
+inline void AddWeightedProduct(double* __restrict block, const double* __restrict a,
+                               const double* __restrict b, double w) {
+  for (int i = 0; i < 6; ++i) {
+    const double a0 = w * a[i];
+    const double a1 = w * a[6 + i];
+    for (int j = 0; j < 6; ++j) block[6 * i + j] += a0 * b[j] + a1 * b[6 + j];
+  }
+}
+
+// The lower triangle of block += w·Aᵀ·A for a 2x6 row-major A.
+inline void AddWeightedLowerGram(double* __restrict block, const double* __restrict a, double w) {
+  for (int i = 0; i < 6; ++i) {
+    const double a0 = w * a[i];
+    const double a1 = w * a[6 + i];
+    for (int j = 0; j <= i; ++j) block[6 * i + j] += a0 * a[j] + a1 * a[6 + j];
   }
 }
 
@@ -113,6 +143,19 @@ class ReducedCameraSystem {
     for (const RayTimeLmResidual& r : problem.residuals) ++residual_begin_[r.ray_time + 1];
     for (int t = 0; t < num_ray_times; ++t) residual_begin_[t + 1] += residual_begin_[t];
 
+    // A ray time lives on one observation: its residuals start from that observation's image and
+    // ray (the structured linearization sums their source terms before applying the lever).
+    for (int t = 0; t < num_ray_times; ++t) {
+      for (int k = residual_begin_[t] + 1; k < residual_begin_[t + 1]; ++k) {
+        const RayTimeLmResidual& first = problem.residuals[residual_begin_[t]];
+        if (problem.residuals[k].source_image != first.source_image ||
+            problem.residuals[k].source_ray != first.source_ray) {
+          throw std::invalid_argument("ray time " + std::to_string(t) +
+                                      ": its residuals start from different observations");
+        }
+      }
+    }
+
     // Each ray time's variable images, ascending: the images its elimination couples.
     group_begin_.assign(num_ray_times + 1, 0);
     for (int t = 0; t < num_ray_times; ++t) {
@@ -164,6 +207,15 @@ class ReducedCameraSystem {
     }
     neighbours_.shrink_to_fit();
 
+    // Each residual's coupling block between its two images (-1: one is held, or both are the
+    // same image), found once here rather than searched for in every linearization.
+    cross_block_.assign(problem.residuals.size(), -1);
+    for (size_t k = 0; k < problem.residuals.size(); ++k) {
+      const int c = variable_[problem.residuals[k].source_image];
+      const int d = variable_[problem.residuals[k].target_image];
+      if (c >= 0 && d >= 0 && c != d) cross_block_[k] = Block(c, d);
+    }
+
     // Chunks of ray times of about equal residual counts.
     const size_t num_residuals = problem.residuals.size();
     chunk_begin_.assign(kNumChunks + 1, num_ray_times);
@@ -185,7 +237,10 @@ class ReducedCameraSystem {
   int chunk_begin(int chunk) const { return chunk_begin_[chunk]; }
   int chunk_end(int chunk) const { return chunk_begin_[chunk + 1]; }
 
-  // The variable images a ray time's residuals reach, ascending.
+  // The variable images a ray time's residuals reach, ascending, from position
+  // group_offset(ray_time) of all groups' entries (num_group_entries() in all).
+  int group_offset(int ray_time) const { return group_begin_[ray_time]; }
+  int num_group_entries() const { return static_cast<int>(group_cameras_.size()); }
   const int* group_begin(int ray_time) const {
     return group_cameras_.data() + group_begin_[ray_time];
   }
@@ -196,6 +251,9 @@ class ReducedCameraSystem {
   // here on, ascending in the other image): a walk along it finds the blocks of a group's pairs.
   int first_neighbour(int c) const { return neighbour_begin_[c]; }
   int neighbour(int n) const { return neighbours_[n]; }
+
+  // The block coupling residual k's source (rows when its variable is the lower) and target.
+  int cross_block(int residual) const { return cross_block_[residual]; }
 
   // Block index of the coupling of variables c and d: c for c == d, else the pair's.
   int Block(int c, int d) const {
@@ -209,7 +267,8 @@ class ReducedCameraSystem {
   }
 
   // One chunk's (or the total's) share of the linear system: the 6x6 blocks (diagonal blocks
-  // first, then the pairs c < d as rows c, columns d), the cameras' gradient g, the elimination's
+  // first, lower triangle only, then the pairs c < d as rows c, columns d), the cameras' gradient
+  // g, the elimination's
   // share of the reduced right-hand side (which is -g + elimination), the undamped diagonal of JᵀJ
   // (for the LM damping) and the ray times' projected gradient max norm.
   struct Partial {
@@ -226,24 +285,6 @@ class ReducedCameraSystem {
       gradient_max_norm = 0.0;
     }
   };
-
-  // Adds s·a·bᵀ (rows: c's parameters, columns: d's) to the coupling of c and d.
-  void AddOuter(Partial* partial, int c, int d, const double* a, const double* b, double s) const {
-    if (c > d) std::swap(a, b);
-    AddScaledOuter(partial->blocks[Block(c, d)].data(), a, b, s);
-  }
-
-  // Adds w·Jaᵀ·Jb for 2x6 row-major Ja (c's) and Jb (d's) to the coupling of c and d (both
-  // orders when c == d).
-  void AddProduct(Partial* partial, int c, int d, const double* ja, const double* jb,
-                  double w) const {
-    AddOuter(partial, c, d, ja, jb, w);
-    AddOuter(partial, c, d, ja + 6, jb + 6, w);
-    if (c == d && ja != jb) {
-      AddOuter(partial, c, d, jb, ja, w);
-      AddOuter(partial, c, d, jb + 6, ja + 6, w);
-    }
-  }
 
   std::vector<Partial>& partials() { return partials_; }
 
@@ -280,6 +321,7 @@ class ReducedCameraSystem {
   std::vector<int> neighbour_begin_;
   std::vector<int> neighbours_;
   std::vector<int> chunk_begin_;
+  std::vector<int> cross_block_;
   std::vector<Partial> partials_;
 };
 
@@ -375,32 +417,89 @@ double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px
   return 0.5 * (cost + prior);
 }
 
-// One residual's linearization with the IRLS weight of the loss (Ceres' corrector for ρ'' < 0).
-struct LinearizedResidual {
-  double residual[2];
-  double source[12];  // 2x6 row-major
-  double ray_time[2];
-  double target[12];
-  double weight = 0.0;
-};
+// The structured linearization. A residual's Jacobians all factor through M = ∂r/∂X (2x3, the
+// target projection's derivative at the ray point X): the source pose's rows are B_s·m_a with
+// B_s = [[o]×; I] (o = t·R_s·d, the ray point's offset from the source centre), the target's
+// -[[v]×; I]·m_a (v = X - O_t) and the ray time's dᵀ·m_a (d = R_s·d_cam), m_a the rows of M. So
+// with Q = w·MᵀM (3x3) and q = w·Mᵀr every product the reduced system needs is B·Q·Bᵀ, B·q or
+// B·Q·d: a third of the arithmetic of forming the 2x6 Jacobians and their products, and all of a
+// ray time's residuals share its source lever B_s, so the source's terms are summed as Q and
+// applied once per ray time.
 
-void Linearize(const RayTimeLmProblem& problem, const State& state, const ScaledArctanLoss& loss,
-               const RayTimeLmResidual& r, LinearizedResidual* out) {
-  CrossProjectionKernel(state.rotation[r.source_image].data(), state.centre[r.source_image].data(),
-                        state.ray_times[r.ray_time], state.rotation[r.target_image].data(),
-                        state.centre[r.target_image].data(), problem.pinhole[r.target_image].data(),
-                        r.source_ray.data(), r.target_undistorted.data(), out->residual,
-                        out->source, out->ray_time, out->target);
-  out->weight =
-      loss.Derivative(out->residual[0] * out->residual[0] + out->residual[1] * out->residual[1]);
+// p = [x]×·Q for a symmetric 3x3 Q (row-major).
+inline void SkewTimes(const double* x, const double* q, double* p) {
+  for (int j = 0; j < 3; ++j) {
+    p[j] = x[1] * q[6 + j] - x[2] * q[3 + j];
+    p[3 + j] = x[2] * q[j] - x[0] * q[6 + j];
+    p[6 + j] = x[0] * q[3 + j] - x[1] * q[j];
+  }
 }
 
-// J·δ of a 2x6 row-major block and a camera's 6 step components.
-inline void AddTimes(const double* j, const double* step, double* out) {
-  for (int a = 0; a < 2; ++a) {
-    double sum = 0.0;
-    for (int c = 0; c < 6; ++c) sum += j[6 * a + c] * step[c];
-    out[a] += sum;
+// out = x × y.
+inline void Cross(const double* x, const double* y, double* out) {
+  out[0] = x[1] * y[2] - x[2] * y[1];
+  out[1] = x[2] * y[0] - x[0] * y[2];
+  out[2] = x[0] * y[1] - x[1] * y[0];
+}
+
+// The lower triangle of block += B·Q·Bᵀ for B = [[x]×; I] (6x3), given p = [x]×·Q, and its
+// diagonal into `diagonal`: [[x]×Q[x]×ᵀ, ·; Q[x]×ᵀ, Q], whose row i of [x]×Q[x]×ᵀ is x × p_i.
+inline void AddLeverGram(const double* x, const double* q, const double* p, double* block,
+                         double* diagonal) {
+  for (int i = 0; i < 3; ++i) {
+    double row[3];
+    Cross(x, p + 3 * i, row);
+    for (int j = 0; j <= i; ++j) block[6 * i + j] += row[j];
+    diagonal[i] += row[i];
+    for (int j = 0; j < 3; ++j) block[6 * (3 + i) + j] += p[3 * j + i];
+    for (int j = 0; j <= i; ++j) block[6 * (3 + i) + 3 + j] += q[3 * i + j];
+    diagonal[3 + i] += q[4 * i];
+  }
+}
+
+// out = B·y for B = [[x]×; I] scaled by `sign`, added to the 6-vector out.
+inline void AddLeverTimes(const double* x, const double* y, double sign, double* out) {
+  double top[3];
+  Cross(x, y, top);
+  for (int a = 0; a < 3; ++a) {
+    out[a] += sign * top[a];
+    out[3 + a] += sign * y[a];
+  }
+}
+
+// y = Q·x for a 3x3 row-major Q.
+inline void Times3(const double* q, const double* x, double* y) {
+  for (int a = 0; a < 3; ++a) y[a] = q[3 * a] * x[0] + q[3 * a + 1] * x[1] + q[3 * a + 2] * x[2];
+}
+
+// One residual's target terms within its ray time: the target camera (variable), the residual,
+// v = X - O_t, Q = w·MᵀM, and Q·d.
+struct TargetTerm {
+  int camera = -1;
+  int residual = -1;
+  double v[3];
+  double q[9];
+  double qd[3];
+};
+
+// The source-target block B_s·Z·B_tᵀ = -[[o]×·R, [o]×·Z; R, Z] (6x6 row-major, source rows) with
+// B_s = [[o]×; I], B_t = -[[v]×; I] and R = Z·[v]×ᵀ, whose row i is v × z_i.
+inline void SourceTargetCoupling(const double* lever, const double* v, const double* z,
+                                 double* cross) {
+  double r[9];
+  for (int i = 0; i < 3; ++i) Cross(v, z + 3 * i, r + 3 * i);
+  for (int j = 0; j < 3; ++j) {
+    const double r_column[3] = {r[j], r[3 + j], r[6 + j]};
+    const double z_column[3] = {z[j], z[3 + j], z[6 + j]};
+    double top_left[3], top_right[3];
+    Cross(lever, r_column, top_left);
+    Cross(lever, z_column, top_right);
+    for (int i = 0; i < 3; ++i) {
+      cross[6 * i + j] = -top_left[i];
+      cross[6 * i + 3 + j] = -top_right[i];
+      cross[6 * (3 + i) + j] = -r[3 * i + j];
+      cross[6 * (3 + i) + 3 + j] = -z[3 * i + j];
+    }
   }
 }
 
@@ -428,10 +527,14 @@ class Solver {
  private:
   // Builds the damped reduced camera system at the current point (radius μ: damping D/μ).
   void BuildReducedSystem(const ScaledArctanLoss& loss, double radius);
-  // From the cameras' step, the ray times' step (back-substitution) and the model's predicted
-  // cost decrease -(gᵀδ + ½ δᵀJᵀJδ), at the point BuildReducedSystem linearized.
-  double BackSubstitute(const ScaledArctanLoss& loss, double radius,
-                        const Eigen::VectorXd& camera_step,
+  // One chunk of ray times' share of it: their residuals linearized, reduced and summed into the
+  // chunk's Partial, their couplings kept for the back-substitution.
+  void LinearizeChunk(const ScaledArctanLoss& loss, double radius, int chunk);
+  // From the cameras' step, the ray times' step (back-substitution from the couplings
+  // BuildReducedSystem kept) and the model's predicted cost decrease -(gᵀδ + ½ δᵀJᵀJδ). The step
+  // solves (JᵀJ + D)δ = -g, so δᵀJᵀJδ = -gᵀδ - δᵀDδ and the decrease is ½(δᵀDδ - gᵀδ): a sum of
+  // two non-negative terms, without re-linearizing a residual.
+  double BackSubstitute(double radius, const Eigen::VectorXd& camera_step,
                         std::vector<double>* ray_time_step) const;
 
   const RayTimeLmProblem& problem_;
@@ -440,7 +543,11 @@ class Solver {
   State state_;
   ReducedCameraSystem::Partial total_;
   std::vector<Row6> damping_;
-  std::vector<PriorLinearization> priors_;  // per image, at the point of the reduced system
+  // Per ray time at the point of the reduced system: its couplings H_ct with its group's cameras
+  // (at the group's entries), its gradient g_t and its undamped h_tt.
+  std::vector<Row6> couplings_;
+  std::vector<double> ray_time_gradient_;
+  std::vector<double> ray_time_hessian_;
   Eigen::SparseMatrix<double> matrix_;
   // CHOLMOD's supernodal Cholesky (its own fill-reducing ordering, analyzed once per solve): the
   // damped reduced system is positive definite. A sequence's system is banded and any sparse
@@ -451,73 +558,164 @@ class Solver {
   bool pattern_analyzed_ = false;
 };
 
-void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
+void Solver::LinearizeChunk(const ScaledArctanLoss& loss, double radius, int chunk) {
   const int num_variables = system_.num_variables();
-  std::vector<ReducedCameraSystem::Partial>& partials = system_.partials();
-  ForEachChunk(num_threads_, [&](int chunk) {
-    ReducedCameraSystem::Partial& partial = partials[chunk];
-    partial.Reset(system_.num_blocks(), num_variables);
-    std::vector<Row6> coupling;  // per camera of the group: H_ct
-    LinearizedResidual lin;
-    for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
-      const int* group = system_.group_begin(t);
-      const int group_size = static_cast<int>(system_.group_end(t) - group);
-      coupling.assign(group_size, Row6{});
-      double h_tt = 0.0;
-      double g_t = 0.0;
-      for (int k = system_.residual_begin(t); k < system_.residual_end(t); ++k) {
-        const RayTimeLmResidual& r = problem_.residuals[k];
-        Linearize(problem_, state_, loss, r, &lin);
-        const double w = lin.weight;
-        const double* jd = lin.ray_time;
-        const double* e = lin.residual;
-        h_tt += w * (jd[0] * jd[0] + jd[1] * jd[1]);
-        g_t += w * (jd[0] * e[0] + jd[1] * e[1]);
-        const int c[2] = {system_.variable(r.source_image), system_.variable(r.target_image)};
-        const double* jacobian[2] = {lin.source, lin.target};
-        for (int s = 0; s < 2; ++s) {
-          if (c[s] < 0) continue;
-          const double* j = jacobian[s];
-          const auto slot = std::lower_bound(group, group + group_size, c[s]) - group;
-          double* h_ct = coupling[slot].data();
-          double* gradient = partial.gradient[c[s]].data();
-          double* diagonal = partial.diagonal[c[s]].data();
-          for (int i = 0; i < 6; ++i) {
-            h_ct[i] += w * (j[i] * jd[0] + j[6 + i] * jd[1]);
-            gradient[i] += w * (j[i] * e[0] + j[6 + i] * e[1]);
-            diagonal[i] += w * (j[i] * j[i] + j[6 + i] * j[6 + i]);
-          }
-          system_.AddProduct(&partial, c[s], c[s], j, j, w);
+  ReducedCameraSystem::Partial& partial = system_.partials()[chunk];
+  partial.Reset(system_.num_blocks(), num_variables);
+  std::vector<TargetTerm> terms;
+  for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
+    const int* group = system_.group_begin(t);
+    const int group_size = static_cast<int>(system_.group_end(t) - group);
+    Row6* coupling = couplings_.data() + system_.group_offset(t);  // per camera of the group
+    std::fill(coupling, coupling + group_size, Row6{});
+    auto slot = [&](int camera) {
+      return coupling[std::lower_bound(group, group + group_size, camera) - group].data();
+    };
+    if (system_.residual_begin(t) == system_.residual_end(t)) {  // no match left on it
+      ray_time_gradient_[t] = 0.0;
+      ray_time_hessian_[t] = 0.0;
+      continue;
+    }
+    // The ray time's observation: its residuals share the source image and ray (the problem's
+    // contract, checked when the system is built), hence the ray point and the source lever.
+    const RayTimeLmResidual& first = problem_.residuals[system_.residual_begin(t)];
+    const int source = first.source_image;
+    const int cs = system_.variable(source);
+    double dir[3], point[3], lever[3];
+    RayPoint(state_.rotation[source].data(), state_.centre[source].data(), state_.ray_times[t],
+             first.source_ray.data(), dir, point);
+    for (int a = 0; a < 3; ++a) lever[a] = state_.ray_times[t] * dir[a];
+    double source_q[9] = {};  // Σ w·MᵀM over the ray time's residuals
+    double source_g[3] = {};  // Σ w·Mᵀr
+    terms.clear();
+    for (int k = system_.residual_begin(t); k < system_.residual_end(t); ++k) {
+      const RayTimeLmResidual& r = problem_.residuals[k];
+      const int target = r.target_image;
+      TargetTerm term;
+      double p_cam[3], e[2];
+      TargetResidual(state_.rotation[target].data(), state_.centre[target].data(),
+                     problem_.pinhole[target].data(), point, r.target_undistorted.data(), term.v,
+                     p_cam, e);
+      const TargetResidualDerivative derivative = DifferentiateTargetResidual(
+          state_.rotation[target].data(), problem_.pinhole[target].data(), p_cam);
+      const double* m0 = derivative.du_dX[0];
+      const double* m1 = derivative.du_dX[1];
+      const double w = loss.Derivative(e[0] * e[0] + e[1] * e[1]);
+      double g[3];
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j <= i; ++j) {
+          term.q[3 * i + j] = term.q[3 * j + i] = w * (m0[i] * m0[j] + m1[i] * m1[j]);
         }
-        // One image on both sides (the layouts skip such matches) would couple it to itself:
-        // AddProduct adds both orders then.
-        if (c[0] >= 0 && c[1] >= 0)
-          system_.AddProduct(&partial, c[0], c[1], lin.source, lin.target, w);
+        g[i] = w * (m0[i] * e[0] + m1[i] * e[1]);
       }
-      const double t_value = state_.ray_times[t];
-      const double projected = std::max(t_value - g_t, kRayTimeLowerBound);
-      partial.gradient_max_norm =
-          std::max(partial.gradient_max_norm, std::abs(t_value - projected));
-      // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g). The
-      // group is ascending, so the blocks of (group[i], group[j > i]) come in one walk along
-      // group[i]'s couplings: k²/2 pairs per ray time are the solve's bulk with long tracks, and
-      // a search per pair was a fifth of it.
-      const double damped = h_tt + Clamp(h_tt) / radius;
-      const double scale = -1.0 / damped;
-      for (int i = 0; i < group_size; ++i) {
-        const int ci = group[i];
-        double* elimination = partial.elimination[ci].data();
-        for (int a = 0; a < 6; ++a) elimination[a] += coupling[i][a] * (g_t / damped);
-        AddScaledOuter(partial.blocks[ci].data(), coupling[i].data(), coupling[i].data(), scale);
-        int n = system_.first_neighbour(ci);
-        for (int j = i + 1; j < group_size; ++j) {
-          while (system_.neighbour(n) < group[j]) ++n;
-          AddScaledOuter(partial.blocks[num_variables + n].data(), coupling[i].data(),
-                         coupling[j].data(), scale);
+      for (int a = 0; a < 9; ++a) source_q[a] += term.q[a];
+      for (int a = 0; a < 3; ++a) source_g[a] += g[a];
+      term.camera = system_.variable(target);
+      if (term.camera < 0) continue;
+      term.residual = k;
+      Times3(term.q, dir, term.qd);
+      AddLeverTimes(term.v, g, -1.0, partial.gradient[term.camera].data());
+      AddLeverTimes(term.v, term.qd, -1.0, slot(term.camera));
+      terms.push_back(term);
+    }
+    double source_qd[3];
+    Times3(source_q, dir, source_qd);
+    const double h_tt = dir[0] * source_qd[0] + dir[1] * source_qd[1] + dir[2] * source_qd[2];
+    const double g_t = dir[0] * source_g[0] + dir[1] * source_g[1] + dir[2] * source_g[2];
+    ray_time_gradient_[t] = g_t;
+    ray_time_hessian_[t] = h_tt;
+    const double t_value = state_.ray_times[t];
+    const double projected = std::max(t_value - g_t, kRayTimeLowerBound);
+    partial.gradient_max_norm = std::max(partial.gradient_max_norm, std::abs(t_value - projected));
+    if (cs >= 0) {
+      AddLeverTimes(lever, source_g, 1.0, partial.gradient[cs].data());
+      AddLeverTimes(lever, source_qd, 1.0, slot(cs));
+    }
+
+    // Eliminate the ray time: S -= H_ct H_tc / h̃, rhs += H_ct g_t / h̃ (signs: rhs = -g), with
+    // H_ct = B_c·Q·d. When every camera of the group is one residual's target or the source
+    // (the layouts' matches: one per image pair), the elimination's share of a camera's own block
+    // and of the source-target coupling folds into the 3x3 middle factor, B·(Q - Q·d·dᵀ·Q'/h̃)·Bᵀ,
+    // which is added once instead of the product and the correction separately.
+    const double inverse = 1.0 / (h_tt + Clamp(h_tt) / radius);
+    const bool folded = group_size == static_cast<int>(terms.size()) + (cs >= 0 ? 1 : 0);
+    double z[9], p[9];
+    auto fold = [&](const double* q, const double* left, const double* right) {
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          z[3 * i + j] = q[3 * i + j] - (folded ? left[i] * right[j] * inverse : 0.0);
+        }
+      }
+    };
+    auto add_diagonal_of_elimination = [&](int camera, const double* coupling_row) {
+      // The damping's diag(JᵀJ) is the block's before the elimination.
+      if (!folded) return;
+      for (int a = 0; a < 6; ++a) {
+        partial.diagonal[camera][a] += coupling_row[a] * coupling_row[a] * inverse;
+      }
+    };
+    if (cs >= 0) {
+      fold(source_q, source_qd, source_qd);
+      SkewTimes(lever, z, p);
+      AddLeverGram(lever, z, p, partial.blocks[cs].data(), partial.diagonal[cs].data());
+      add_diagonal_of_elimination(cs, slot(cs));
+    }
+    for (const TargetTerm& term : terms) {
+      fold(term.q, term.qd, term.qd);
+      SkewTimes(term.v, z, p);
+      AddLeverGram(term.v, z, p, partial.blocks[term.camera].data(),
+                   partial.diagonal[term.camera].data());
+      add_diagonal_of_elimination(term.camera, slot(term.camera));
+      if (cs < 0) continue;
+      fold(term.q, source_qd, term.qd);
+      double cross[36];
+      SourceTargetCoupling(lever, term.v, z, cross);
+      if (cs < term.camera) {
+        double* block = partial.blocks[system_.cross_block(term.residual)].data();
+        for (int a = 0; a < 36; ++a) block[a] += cross[a];
+      } else if (cs > term.camera) {
+        double* block = partial.blocks[system_.cross_block(term.residual)].data();
+        for (int i = 0; i < 6; ++i) {
+          for (int j = 0; j < 6; ++j) block[6 * i + j] += cross[6 * j + i];
+        }
+      } else {
+        // One image on both sides (the layouts skip such matches) couples it to itself: both
+        // orders into its diagonal block (of which only the lower triangle is read).
+        double* block = partial.blocks[cs].data();
+        for (int i = 0; i < 6; ++i) {
+          for (int j = 0; j <= i; ++j) block[6 * i + j] += cross[6 * i + j] + cross[6 * j + i];
         }
       }
     }
-  });
+    // The rest of the elimination: the right-hand side, and the products the fold did not take
+    // (all of them when it did not apply). The group is ascending, so the blocks of (group[i],
+    // group[j > i]) come in one walk along group[i]'s couplings: k²/2 pairs per ray time are the
+    // solve's bulk with long tracks, and a search per pair was a fifth of it.
+    const double scale = -inverse;
+    for (int i = 0; i < group_size; ++i) {
+      const int ci = group[i];
+      double* elimination = partial.elimination[ci].data();
+      for (int a = 0; a < 6; ++a) elimination[a] += coupling[i][a] * (g_t * inverse);
+      if (!folded) AddScaledLowerOuter(partial.blocks[ci].data(), coupling[i].data(), scale);
+      if (folded && ci == cs) continue;
+      int n = system_.first_neighbour(ci);
+      for (int j = i + 1; j < group_size; ++j) {
+        if (folded && group[j] == cs) continue;
+        while (system_.neighbour(n) < group[j]) ++n;
+        AddScaledOuter(partial.blocks[num_variables + n].data(), coupling[i].data(),
+                       coupling[j].data(), scale);
+      }
+    }
+  }
+}
+
+void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
+  const int num_variables = system_.num_variables();
+  std::vector<ReducedCameraSystem::Partial>& partials = system_.partials();
+  couplings_.resize(system_.num_group_entries());
+  ray_time_gradient_.resize(state_.ray_times.size());
+  ray_time_hessian_.resize(state_.ray_times.size());
+  ForEachChunk(num_threads_, [&](int chunk) { LinearizeChunk(loss, radius, chunk); });
 
   total_.Reset(system_.num_blocks(), num_variables);
   for (const ReducedCameraSystem::Partial& partial : partials) {
@@ -535,11 +733,11 @@ void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
   }
 
   // Pose priors: direct terms of each camera's diagonal block.
-  priors_ = LinearizePriors(problem_, state_.world_from_cam);
-  for (size_t i = 0; i < priors_.size(); ++i) {
+  const std::vector<PriorLinearization> priors = LinearizePriors(problem_, state_.world_from_cam);
+  for (size_t i = 0; i < priors.size(); ++i) {
     const int c = system_.variable(static_cast<int>(i));
     if (c < 0) continue;
-    const PriorLinearization& p = priors_[i];
+    const PriorLinearization& p = priors[i];
     const double centre_scale = p.centre_scale;
     const Eigen::Matrix3d ata = p.rotation_jacobian.transpose() * p.rotation_jacobian;
     const Eigen::Vector3d gradient = p.rotation_jacobian.transpose() * p.rotation_residual;
@@ -563,62 +761,39 @@ void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
   }
 }
 
-double Solver::BackSubstitute(const ScaledArctanLoss& loss, double radius,
-                              const Eigen::VectorXd& camera_step,
+double Solver::BackSubstitute(double radius, const Eigen::VectorXd& camera_step,
                               std::vector<double>* ray_time_step) const {
   ray_time_step->resize(state_.ray_times.size());
-  std::vector<double> chunk_model(kNumChunks, 0.0);
+  const double* steps = camera_step.data();
+  std::vector<double> chunk_sums(kNumChunks, 0.0);
   ForEachChunk(num_threads_, [&](int chunk) {
-    std::vector<LinearizedResidual> group;
-    double model = 0.0;  // Σ w (rᵀJδ + ½|Jδ|²)
-    const double* steps = camera_step.data();
+    double sum = 0.0;  // Σ (D_t δt² - g_t δt)
     for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
-      const int begin = system_.residual_begin(t);
-      const int end = system_.residual_begin(t + 1);
-      group.resize(end - begin);
-      double h_tt = 0.0;
-      double rhs_t = 0.0;  // -g_t - H_tc δc
-      for (int k = begin; k < end; ++k) {
-        const RayTimeLmResidual& r = problem_.residuals[k];
-        LinearizedResidual& lin = group[k - begin];
-        Linearize(problem_, state_, loss, r, &lin);
-        const double w = lin.weight;
-        h_tt += w * (lin.ray_time[0] * lin.ray_time[0] + lin.ray_time[1] * lin.ray_time[1]);
-        double moved[2] = {lin.residual[0], lin.residual[1]};  // r + J_c δc
-        const int cs = system_.variable(r.source_image);
-        const int ct = system_.variable(r.target_image);
-        if (cs >= 0) AddTimes(lin.source, steps + 6 * cs, moved);
-        if (ct >= 0) AddTimes(lin.target, steps + 6 * ct, moved);
-        rhs_t -= w * (lin.ray_time[0] * moved[0] + lin.ray_time[1] * moved[1]);
+      const int* group = system_.group_begin(t);
+      const int group_size = static_cast<int>(system_.group_end(t) - group);
+      const Row6* coupling = couplings_.data() + system_.group_offset(t);
+      double rhs = -ray_time_gradient_[t];  // -g_t - H_tc δc
+      for (int i = 0; i < group_size; ++i) {
+        const double* step = steps + 6 * group[i];
+        for (int a = 0; a < 6; ++a) rhs -= coupling[i][a] * step[a];
       }
-      const double step = rhs_t / (h_tt + Clamp(h_tt) / radius);
+      const double h_tt = ray_time_hessian_[t];
+      const double damping = Clamp(h_tt) / radius;
+      const double step = rhs / (h_tt + damping);
       (*ray_time_step)[t] = step;
-      for (int k = begin; k < end; ++k) {
-        const RayTimeLmResidual& r = problem_.residuals[k];
-        const LinearizedResidual& lin = group[k - begin];
-        double jd[2] = {lin.ray_time[0] * step, lin.ray_time[1] * step};
-        const int cs = system_.variable(r.source_image);
-        const int ct = system_.variable(r.target_image);
-        if (cs >= 0) AddTimes(lin.source, steps + 6 * cs, jd);
-        if (ct >= 0) AddTimes(lin.target, steps + 6 * ct, jd);
-        model += lin.weight * (lin.residual[0] * jd[0] + lin.residual[1] * jd[1] +
-                               0.5 * (jd[0] * jd[0] + jd[1] * jd[1]));
-      }
+      sum += damping * step * step - ray_time_gradient_[t] * step;
     }
-    chunk_model[chunk] = model;
+    chunk_sums[chunk] = sum;
   });
-  double model = 0.0;
-  for (const double m : chunk_model) model += m;
-  for (size_t i = 0; i < priors_.size(); ++i) {
-    const int c = system_.variable(static_cast<int>(i));
-    if (c < 0) continue;
-    const PriorLinearization& p = priors_[i];
-    const Eigen::Vector3d jr = p.rotation_jacobian * camera_step.segment<3>(6 * c);
-    const Eigen::Vector3d jc = p.centre_scale * camera_step.segment<3>(6 * c + 3);
-    model += p.rotation_residual.dot(jr) + 0.5 * jr.squaredNorm() + p.centre_residual.dot(jc) +
-             0.5 * jc.squaredNorm();
+  double sum = 0.0;
+  for (const double s : chunk_sums) sum += s;
+  for (int c = 0; c < system_.num_variables(); ++c) {
+    for (int a = 0; a < 6; ++a) {
+      const double step = steps[6 * c + a];
+      sum += damping_[c][a] * step * step - total_.gradient[c][a] * step;
+    }
   }
-  return -model;
+  return 0.5 * sum;
 }
 
 GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double function_tolerance,
@@ -672,7 +847,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
         }
       }
       camera_step = factorization_.solve(rhs);
-      model_decrease = BackSubstitute(loss, radius, camera_step, &ray_time_step);
+      model_decrease = BackSubstitute(radius, camera_step, &ray_time_step);
     }
     summary.linear_solver_seconds += SecondsSince(t0);
     ++summary.iterations;

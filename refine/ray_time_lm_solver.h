@@ -64,7 +64,8 @@ struct RayTimeLmProblem {
   // Per image: fx, fy, cx, cy of the plain pinhole the residuals project with.
   std::vector<Eigen::Vector4d> pinhole;
   // Sorted by ray time (a ray time's residuals are contiguous): the solver reduces each ray time's
-  // residuals together.
+  // residuals together. A ray time lives on one observation, so its residuals share their
+  // source_image and source_ray (the solver throws std::invalid_argument otherwise).
   std::vector<RayTimeLmResidual> residuals;
   double match_loss_weight = 0.0;  // w = 2/S (RayTimeProblem::match_loss_weight)
   // Pose priors (§3.3), per image: the anchor and the weights λp/N and λR/N.

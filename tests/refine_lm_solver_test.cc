@@ -10,6 +10,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include <stdexcept>
 
 #include "refine/cross_projection_cost.h"
 #include "refine/pose_prior_cost.h"
@@ -328,25 +329,25 @@ TEST(RayTimeLmSolverTest, SolverIsTheOnlySwitch) {
 
 // An image no residual reaches is held at its start (its only term is the prior, whose minimum
 // is there), and the others still converge; a held image does not enter the reduced system.
-TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
-  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
-  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.1, 5);
+// Exact, undistorted residuals from the true points of `scene` with the poses starting at `start`
+// (also the prior, centres only): every image except `held` sees every point it sees in the
+// scene, and each point's ray time lives on its first such image.
+RayTimeLmProblem ExactProblem(const SyntheticScene& scene, const std::vector<Rigid3>& start,
+                              int held) {
   RayTimeLmProblem problem;
   problem.world_from_cam = start;
   problem.prior_world_from_cam = start;
   problem.held.assign(start.size(), false);
-  problem.held[2] = true;
+  problem.held[held] = true;
   problem.position_weight = 1e-2 / start.size();
   problem.orientation_weight = 0.0;
   const CameraIntrinsics& camera = scene.input.cameras[0];
   problem.pinhole.assign(start.size(), Eigen::Vector4d(camera.params[kFx], camera.params[kFy],
                                                        camera.params[kCx], camera.params[kCy]));
-  // Exact, undistorted residuals from the true points: every image except 2 sees every point it
-  // sees in the scene, and each point's ray time lives on its first such image.
   for (size_t p = 0; p < scene.points.size(); ++p) {
     std::vector<int> images;
     for (int i = 0; i < static_cast<int>(start.size()); ++i) {
-      if (i != 2 && scene.keypoint_of_point[i][p] >= 0) images.push_back(i);
+      if (i != held && scene.keypoint_of_point[i][p] >= 0) images.push_back(i);
     }
     if (images.size() < 2) continue;
     const int source = images[0];
@@ -366,8 +367,15 @@ TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
       problem.residuals.push_back(r);
     }
   }
-  ASSERT_GT(problem.residuals.size(), 100u);
   problem.match_loss_weight = 1.0 / problem.residuals.size();
+  return problem;
+}
+
+TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.1, 5);
+  RayTimeLmProblem problem = ExactProblem(scene, start, 2);
+  ASSERT_GT(problem.residuals.size(), 100u);
   GncSettings settings;
   settings.scales = {1e4, 1e3, 1e2};
   settings.function_tolerance = 1e-12;
@@ -380,6 +388,62 @@ TEST(RayTimeLmSolverTest, HoldsImagesWithoutResiduals) {
   const Rigid3 a = problem.world_from_cam[0].Inverse() * problem.world_from_cam[1];
   const Rigid3 b = scene.ground_truth[0].Inverse() * scene.ground_truth[1];
   EXPECT_LT(AngleBetween(a.rotation, b.rotation) * 180.0 / M_PI, 1e-3);
+}
+
+// The linearization folds a ray time's elimination into its cameras' blocks when each camera of
+// its group appears once (one match per image pair), and adds the products separately when one
+// appears twice. Every residual written twice at half the weight is the same objective, hence
+// the same steps, through the second path: the two solutions agree to rounding.
+TEST(RayTimeLmSolverTest, RepeatedTargetsTakeTheUnfoldedPathToTheSameSolution) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 2.0, 0.2, 7);
+  RayTimeLmProblem once = ExactProblem(scene, start, 2);
+  once.orientation_weight = 1.0 / start.size();
+  RayTimeLmProblem twice = once;
+  twice.residuals.clear();
+  for (const RayTimeLmResidual& r : once.residuals) {
+    twice.residuals.push_back(r);
+    twice.residuals.push_back(r);
+  }
+  twice.match_loss_weight = 0.5 * once.match_loss_weight;
+  GncSettings settings;
+  settings.scales = {1e4, 1e3, 1e2};
+  const std::vector<GncStageSummary> a = SolveGncRayTimeLm(&once, settings);
+  const std::vector<GncStageSummary> b = SolveGncRayTimeLm(&twice, settings);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t s = 0; s < a.size(); ++s) {
+    EXPECT_EQ(a[s].iterations, b[s].iterations) << "stage " << s;
+    EXPECT_NEAR(a[s].final_cost, b[s].final_cost, 1e-12 * a[s].final_cost) << "stage " << s;
+  }
+  double max_angle = 0.0;
+  double max_centre = 0.0;
+  for (size_t i = 0; i < start.size(); ++i) {
+    max_angle = std::max(
+        max_angle, AngleBetween(once.world_from_cam[i].rotation, twice.world_from_cam[i].rotation));
+    max_centre =
+        std::max(max_centre,
+                 (once.world_from_cam[i].translation - twice.world_from_cam[i].translation).norm());
+  }
+  EXPECT_LT(max_angle, 1e-10);
+  EXPECT_LT(max_centre, 1e-10);
+  // And the solve moved: the start was 2° off.
+  EXPECT_GT(AngleBetween(once.world_from_cam[0].rotation, start[0].rotation), 1e-3);
+}
+
+TEST(RayTimeLmSolverTest, RefusesARayTimeWhoseResidualsStartFromTwoObservations) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  RayTimeLmProblem problem = ExactProblem(scene, scene.ground_truth, 2);
+  // Find a ray time with two residuals and move the second one's source ray.
+  size_t k = 1;
+  while (k < problem.residuals.size() &&
+         problem.residuals[k].ray_time != problem.residuals[k - 1].ray_time) {
+    ++k;
+  }
+  ASSERT_LT(k, problem.residuals.size());
+  problem.residuals[k].source_ray = Eigen::Vector3d(0.0, 0.0, 1.0);
+  GncSettings settings;
+  settings.scales = {1e2};
+  EXPECT_THROW(SolveGncRayTimeLm(&problem, settings), std::invalid_argument);
 }
 
 // Bit-identical on any thread count (fixed chunks summed in a fixed order), including the ray
