@@ -444,17 +444,37 @@ inline void Cross(const double* x, const double* y, double* out) {
 
 // The lower triangle of block += B·Q·Bᵀ for B = [[x]×; I] (6x3), given p = [x]×·Q, and its
 // diagonal into `diagonal`: [[x]×Q[x]×ᵀ, ·; Q[x]×ᵀ, Q], whose row i of [x]×Q[x]×ᵀ is x × p_i.
+// Written out entry by entry: a temporary row array that the compiler then read back as packed
+// pairs stalled on store forwarding (perf: the hottest instructions of the linearization).
 inline void AddLeverGram(const double* x, const double* q, const double* p, double* block,
                          double* diagonal) {
+  const double r00 = x[1] * p[2] - x[2] * p[1];
+  const double r10 = x[1] * p[5] - x[2] * p[4];
+  const double r11 = x[2] * p[3] - x[0] * p[5];
+  const double r20 = x[1] * p[8] - x[2] * p[7];
+  const double r21 = x[2] * p[6] - x[0] * p[8];
+  const double r22 = x[0] * p[7] - x[1] * p[6];
+  block[0] += r00;
+  block[6] += r10;
+  block[7] += r11;
+  block[12] += r20;
+  block[13] += r21;
+  block[14] += r22;
   for (int i = 0; i < 3; ++i) {
-    double row[3];
-    Cross(x, p + 3 * i, row);
-    for (int j = 0; j <= i; ++j) block[6 * i + j] += row[j];
-    diagonal[i] += row[i];
     for (int j = 0; j < 3; ++j) block[6 * (3 + i) + j] += p[3 * j + i];
-    for (int j = 0; j <= i; ++j) block[6 * (3 + i) + 3 + j] += q[3 * i + j];
-    diagonal[3 + i] += q[4 * i];
   }
+  block[21] += q[0];
+  block[27] += q[3];
+  block[28] += q[4];
+  block[33] += q[6];
+  block[34] += q[7];
+  block[35] += q[8];
+  diagonal[0] += r00;
+  diagonal[1] += r11;
+  diagonal[2] += r22;
+  diagonal[3] += q[0];
+  diagonal[4] += q[4];
+  diagonal[5] += q[8];
 }
 
 // out = B·y for B = [[x]×; I] scaled by `sign`, added to the 6-vector out.
@@ -482,24 +502,38 @@ struct TargetTerm {
   double qd[3];
 };
 
-// The source-target block B_s·Z·B_tᵀ = -[[o]×·R, [o]×·Z; R, Z] (6x6 row-major, source rows) with
-// B_s = [[o]×; I], B_t = -[[v]×; I] and R = Z·[v]×ᵀ, whose row i is v × z_i.
-inline void SourceTargetCoupling(const double* lever, const double* v, const double* z,
-                                 double* cross) {
+// Adds the source-target block B_s·Z·B_tᵀ = -[[o]×·R, [o]×·Z; R, Z] (source rows i, target
+// columns j) to block[i·row_stride + j·column_stride], with B_s = [[o]×; I], B_t = -[[v]×; I] and
+// R = Z·[v]×ᵀ, whose row i is v × z_i: strides (6, 1) when the source is the block's row camera,
+// (1, 6) when it is the column camera. Added in place: a 6x6 temporary added afterwards stalled on
+// store forwarding.
+inline void AddSourceTargetCoupling(const double* o, const double* v, const double* z,
+                                    double* block, int row_stride, int column_stride) {
   double r[9];
-  for (int i = 0; i < 3; ++i) Cross(v, z + 3 * i, r + 3 * i);
+  for (int i = 0; i < 3; ++i) {
+    const double* zi = z + 3 * i;
+    r[3 * i] = v[1] * zi[2] - v[2] * zi[1];
+    r[3 * i + 1] = v[2] * zi[0] - v[0] * zi[2];
+    r[3 * i + 2] = v[0] * zi[1] - v[1] * zi[0];
+  }
   for (int j = 0; j < 3; ++j) {
-    const double r_column[3] = {r[j], r[3 + j], r[6 + j]};
-    const double z_column[3] = {z[j], z[3 + j], z[6 + j]};
-    double top_left[3], top_right[3];
-    Cross(lever, r_column, top_left);
-    Cross(lever, z_column, top_right);
-    for (int i = 0; i < 3; ++i) {
-      cross[6 * i + j] = -top_left[i];
-      cross[6 * i + 3 + j] = -top_right[i];
-      cross[6 * (3 + i) + j] = -r[3 * i + j];
-      cross[6 * (3 + i) + 3 + j] = -z[3 * i + j];
-    }
+    // Column j of [o]×·R and of [o]×·Z: o × (column j).
+    const double r0 = r[j], r1 = r[3 + j], r2 = r[6 + j];
+    const double z0 = z[j], z1 = z[3 + j], z2 = z[6 + j];
+    double* left = block + j * column_stride;
+    double* right = block + (3 + j) * column_stride;
+    left[0] -= o[1] * r2 - o[2] * r1;
+    left[row_stride] -= o[2] * r0 - o[0] * r2;
+    left[2 * row_stride] -= o[0] * r1 - o[1] * r0;
+    right[0] -= o[1] * z2 - o[2] * z1;
+    right[row_stride] -= o[2] * z0 - o[0] * z2;
+    right[2 * row_stride] -= o[0] * z1 - o[1] * z0;
+    left[3 * row_stride] -= r0;
+    left[4 * row_stride] -= r1;
+    left[5 * row_stride] -= r2;
+    right[3 * row_stride] -= z0;
+    right[4 * row_stride] -= z1;
+    right[5 * row_stride] -= z2;
   }
 }
 
@@ -668,23 +702,18 @@ void Solver::LinearizeChunk(const ScaledArctanLoss& loss, double radius, int chu
       add_diagonal_of_elimination(term.camera, slot(term.camera));
       if (cs < 0) continue;
       fold(term.q, source_qd, term.qd);
-      double cross[36];
-      SourceTargetCoupling(lever, term.v, z, cross);
       if (cs < term.camera) {
-        double* block = partial.blocks[system_.cross_block(term.residual)].data();
-        for (int a = 0; a < 36; ++a) block[a] += cross[a];
+        AddSourceTargetCoupling(lever, term.v, z,
+                                partial.blocks[system_.cross_block(term.residual)].data(), 6, 1);
       } else if (cs > term.camera) {
-        double* block = partial.blocks[system_.cross_block(term.residual)].data();
-        for (int i = 0; i < 6; ++i) {
-          for (int j = 0; j < 6; ++j) block[6 * i + j] += cross[6 * j + i];
-        }
+        AddSourceTargetCoupling(lever, term.v, z,
+                                partial.blocks[system_.cross_block(term.residual)].data(), 1, 6);
       } else {
         // One image on both sides (the layouts skip such matches) couples it to itself: both
         // orders into its diagonal block (of which only the lower triangle is read).
         double* block = partial.blocks[cs].data();
-        for (int i = 0; i < 6; ++i) {
-          for (int j = 0; j <= i; ++j) block[6 * i + j] += cross[6 * i + j] + cross[6 * j + i];
-        }
+        AddSourceTargetCoupling(lever, term.v, z, block, 6, 1);
+        AddSourceTargetCoupling(lever, term.v, z, block, 1, 6);
       }
     }
     // The rest of the elimination: the right-hand side, and the products the fold did not take
