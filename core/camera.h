@@ -10,6 +10,7 @@
 #include <array>
 #include <cmath>
 #include <string>
+#include <type_traits>
 
 namespace raytime {
 
@@ -63,6 +64,12 @@ void UndistortNormalized(const T* intrinsics, const T* xd, T* x,
   const T& p2 = intrinsics[kP2];
   x[0] = xd[0];
   x[1] = xd[1];
+  // Without distortion the fixed point is the start, and every iteration leaves it as it is to the
+  // bit (the residual is exactly zero): plain doubles skip them. Jets do not: their derivatives in
+  // the coefficients are not zero there.
+  if constexpr (std::is_same_v<T, double>) {
+    if (k1 == 0.0 && k2 == 0.0 && p1 == 0.0 && p2 == 0.0) return;
+  }
   for (int it = 0; it < iterations; ++it) {
     const T xx = x[0] * x[0], yy = x[1] * x[1], xy = x[0] * x[1];
     const T r2 = xx + yy;

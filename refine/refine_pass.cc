@@ -90,7 +90,8 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
     problem.pinhole[i] << p[kFx], p[kFy], p[kCx], p[kCy];
   }
   const ObservationRays fixed = FixedObservationRays(input, layout, cameras);
-  problem.residuals.reserve(layout.residuals.size());
+  std::vector<RayTimeLmResidual> unsorted;
+  unsorted.reserve(layout.residuals.size());
   for (const CrossProjection& residual : layout.residuals) {
     const LayoutObservation& source = layout.observations[residual.source];
     RayTimeLmResidual r;
@@ -101,12 +102,15 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
     r.target_undistorted = fixed.undistorted[residual.target];
     r.source_observation = residual.source;
     r.target_observation = residual.target;
-    problem.residuals.push_back(r);
+    unsorted.push_back(r);
   }
-  std::stable_sort(problem.residuals.begin(), problem.residuals.end(),
-                   [](const RayTimeLmResidual& a, const RayTimeLmResidual& b) {
-                     return a.ray_time < b.ray_time;
-                   });
+  // Grouped by ray time, in layout order within each: a counting sort, the order std::stable_sort
+  // gives, in two passes (std::stable_sort's merges were 1 % of a refine's samples).
+  std::vector<size_t> next(problem.ray_times.size() + 1, 0);
+  for (const RayTimeLmResidual& r : unsorted) ++next[r.ray_time + 1];
+  for (size_t t = 1; t < next.size(); ++t) next[t] += next[t - 1];
+  problem.residuals.resize(unsorted.size());
+  for (const RayTimeLmResidual& r : unsorted) problem.residuals[next[r.ray_time]++] = r;
   const int num_scalar_residuals = 2 * static_cast<int>(layout.residuals.size());
   problem.match_loss_weight = num_scalar_residuals > 0 ? 2.0 / num_scalar_residuals : 0.0;
   problem.prior_world_from_cam = prior_world_from_cam;
