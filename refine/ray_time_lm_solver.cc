@@ -66,25 +66,6 @@ inline void AddScaledLowerOuter(double* __restrict block, const double* __restri
   }
 }
 
-// block += w·Aᵀ·B for 2x6 row-major A and B: both rows in one pass over the block.
-inline void AddWeightedProduct(double* __restrict block, const double* __restrict a,
-                               const double* __restrict b, double w) {
-  for (int i = 0; i < 6; ++i) {
-    const double a0 = w * a[i];
-    const double a1 = w * a[6 + i];
-    for (int j = 0; j < 6; ++j) block[6 * i + j] += a0 * b[j] + a1 * b[6 + j];
-  }
-}
-
-// The lower triangle of block += w·Aᵀ·A for a 2x6 row-major A.
-inline void AddWeightedLowerGram(double* __restrict block, const double* __restrict a, double w) {
-  for (int i = 0; i < 6; ++i) {
-    const double a0 = w * a[i];
-    const double a1 = w * a[6 + i];
-    for (int j = 0; j <= i; ++j) block[6 * i + j] += a0 * a[j] + a1 * a[6 + j];
-  }
-}
-
 // The pose prior of one image (refine/pose_prior_cost.h) in the local parameters (φ, δO):
 // r = (sR·Log(R_priorᵀ R), sp·(O - O_prior)) with Jacobian blocks A = sR·Jr⁻¹(θ)·Rᵀ for φ and
 // sp·I for δO (R ← Exp(φ)·R gives Log(R_priorᵀ Exp(φ) R) ≈ θ + Jr⁻¹(θ)·Rᵀφ).
@@ -146,8 +127,9 @@ class ReducedCameraSystem {
     // A ray time lives on one observation: its residuals start from that observation's image and
     // ray (the structured linearization sums their source terms before applying the lever).
     for (int t = 0; t < num_ray_times; ++t) {
+      if (residual_begin_[t] == residual_begin_[t + 1]) continue;
+      const RayTimeLmResidual& first = problem.residuals[residual_begin_[t]];
       for (int k = residual_begin_[t] + 1; k < residual_begin_[t + 1]; ++k) {
-        const RayTimeLmResidual& first = problem.residuals[residual_begin_[t]];
         if (problem.residuals[k].source_image != first.source_image ||
             problem.residuals[k].source_ray != first.source_ray) {
           throw std::invalid_argument("ray time " + std::to_string(t) +
