@@ -446,6 +446,67 @@ TEST(RayTimeLmSolverTest, RefusesARayTimeWhoseResidualsStartFromTwoObservations)
   EXPECT_THROW(SolveGncRayTimeLm(&problem, settings), std::invalid_argument);
 }
 
+// The ray-time update is the Gauss–Newton step taken in inverse depth. A point on the source's
+// optical axis seen by a target 1 m to the side projects at u = -f·b/t, linear in 1/t: from
+// either side of the true depth one step lands on it, where t + δ undershoots from near and, from
+// far, crosses the camera (clamped to the bound).
+TEST(RayTimeLmSolverTest, RayTimeStepIsExactInInverseDepth) {
+  const double truth = 1000.0;
+  const Eigen::Vector4d pinhole(1000.0, 1000.0, 0.0, 0.0);
+  const Eigen::Vector3d target_centre(1.0, 0.0, 0.0);
+  const Eigen::Vector2d observed(-pinhole[0] * target_centre.x() / truth, 0.0);
+  for (const double start : {200.0, 10000.0}) {
+    Eigen::Vector2d r, jd;
+    Eigen::Matrix<double, 2, 6> js, jt;
+    CrossProjectionJacobian(Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), start,
+                            Eigen::Matrix3d::Identity(), target_centre, pinhole,
+                            Eigen::Vector3d::UnitZ(), observed, &r, &js, &jd, &jt);
+    const double step = -jd.dot(r) / jd.squaredNorm();
+    EXPECT_NEAR(RetractRayTime(start, step), truth, 1e-9 * truth) << "from " << start;
+    EXPECT_GT(std::abs(std::max(start + step, kRayTimeLowerBound) - truth), 0.5 * truth)
+        << "from " << start;
+  }
+  // Small steps are t + δ to second order; a step toward the camera never crosses it; a step
+  // beyond 1/t = 0 moves at most kMaxRayTimeGrowth times further.
+  EXPECT_NEAR(RetractRayTime(10.0, 1e-4), 10.0 + 1e-4, 2e-9);
+  EXPECT_NEAR(RetractRayTime(5.0, -100.0), 5.0 / 21.0, 1e-15);
+  EXPECT_EQ(RetractRayTime(5.0, 100.0), 5.0 * kMaxRayTimeGrowth);
+  EXPECT_EQ(RetractRayTime(kRayTimeLowerBound, -1.0), kRayTimeLowerBound);
+}
+
+// A point far out along its ray (a ray time of 1e12 in a scene 30 m across, as matches on distant
+// structure drift) does not stop the solve: the parameter tolerance weighs the poses, not |t|,
+// which here would have let a 1e4-long step count as "no change" and stopped at the jittered start.
+TEST(RayTimeLmSolverTest, AFarRayTimeDoesNotStopTheSolve) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.1, 5);
+  RayTimeLmProblem problem = ExactProblem(scene, start, 2);
+  // A direction seen from image 0 and observed at its vanishing point in image 1.
+  const Eigen::Vector3d direction = Eigen::Vector3d(0.05, -0.02, 1.0).normalized();
+  const Eigen::Vector3d in_target =
+      scene.ground_truth[1].rotation.inverse() * (scene.ground_truth[0].rotation * direction);
+  RayTimeLmResidual far;
+  far.source_image = 0;
+  far.ray_time = static_cast<int>(problem.ray_times.size());
+  far.target_image = 1;
+  far.source_ray = direction;
+  far.target_undistorted << problem.pinhole[1][0] * in_target.x() / in_target.z() +
+                                problem.pinhole[1][2],
+      problem.pinhole[1][1] * in_target.y() / in_target.z() + problem.pinhole[1][3];
+  problem.ray_times.push_back(1e12);
+  problem.residuals.push_back(far);
+  problem.match_loss_weight = 1.0 / problem.residuals.size();
+  GncSettings settings;
+  settings.scales = {1e4, 1e3, 1e2};
+  settings.function_tolerance = 1e-12;
+  const std::vector<GncStageSummary> stages = SolveGncRayTimeLm(&problem, settings);
+  ASSERT_EQ(stages.size(), 3u);
+  EXPECT_GT(stages[0].iterations, 2);
+  const Rigid3 a = problem.world_from_cam[0].Inverse() * problem.world_from_cam[1];
+  const Rigid3 b = scene.ground_truth[0].Inverse() * scene.ground_truth[1];
+  EXPECT_LT(AngleBetween(a.rotation, b.rotation) * 180.0 / M_PI, 1e-3);
+}
+
 // Bit-identical on any thread count (fixed chunks summed in a fixed order), including the ray
 // times.
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
