@@ -3,11 +3,12 @@
 //   matcher_bench [--scene DIR] [--image1 NAME] [--image2 NAME] [--max-features N] [--repeats R]
 //
 // Extracts SIFT (front-end defaults) from two images of a Strecha-layout scene and matches them
-// with the ratio test (0.8) and mutual check by: the front end's AVX2 kernel, its portable
-// cv::gemm kernel, cv::BFMatcher (float, k = 2, both directions) and cv::FlannBasedMatcher
-// (4 k-d trees, 32 and 128 checks, both directions). One thread each (the front end parallelizes
-// over pairs). Prints the best of R runs, the ratio to the AVX2 kernel and how many of the exact
-// matches each method reproduces. All numbers come from this one run.
+// with the ratio test (0.8) and mutual check by: the front end's VNNI byte kernel (where the CPU
+// has it), its AVX2 kernel, its portable cv::gemm kernel, cv::BFMatcher (float, k = 2, both
+// directions) and cv::FlannBasedMatcher (4 k-d trees, 32 and 128 checks, both directions). One
+// thread each (the front end parallelizes over pairs). Prints the best of R runs, the ratio to the
+// first kernel and how many of its matches each method reproduces. All numbers come from this one
+// run.
 //
 // Measured on fountain-P11 1536x1024 (0000.jpg/0001.jpg, 8192 keypoints each, shared 2-core
 // Xeon with AVX-512, load ~20 from other builds): see the report of issue 3 and
@@ -94,9 +95,11 @@ int Main(int argc, char** argv) {
   const auto load = [&](const std::string& name) {
     const std::string path = (fs::path(scene) / "images" / name).string();
     const cv::Mat gray = ReadImage(path, cv::IMREAD_GRAYSCALE);
-    return NormalizeDescriptors(ExtractSift(gray, extraction).descriptors);
+    return ExtractSift(gray, extraction).descriptors;
   };
-  const FloatDescriptors a = load(name1), b = load(name2);
+  const ByteDescriptors a_bytes = load(name1), b_bytes = load(name2);
+  // The OpenCV matchers work on unit-length floats.
+  const FloatDescriptors a = NormalizeDescriptors(a_bytes), b = NormalizeDescriptors(b_bytes);
   cv::setNumThreads(1);
   std::printf("%s: %s (%ld) x %s (%ld), dim %ld, best of %d, 1 thread\n", scene.c_str(),
               name1.c_str(), static_cast<long>(a.rows()), name2.c_str(),
@@ -104,7 +107,7 @@ int Main(int argc, char** argv) {
 
   const auto kernel = [&](MatchKernel which) {
     NeighborList ab, ba;
-    FindNeighbors(a, b, which, &ab, &ba);
+    FindNeighbors(a_bytes, b_bytes, which, &ab, &ba);
     return ToSet(RatioTestMatches(ab, ba, 0.8, 0.7, true));
   };
   const cv::Mat ma(a.rows(), a.cols(), CV_32F, const_cast<float*>(a.data()));
@@ -127,6 +130,7 @@ int Main(int argc, char** argv) {
     const double seconds = Time(repeats, [&] { result = run(); });
     rows.push_back({name, seconds, result});
   };
+  if (CpuHasVnni()) measure("vnni kernel", [&] { return kernel(MatchKernel::kVnni); });
   if (CpuHasAvx2Fma()) measure("avx2 kernel", [&] { return kernel(MatchKernel::kAvx2); });
   measure("gemm kernel (cv::gemm)", [&] { return kernel(MatchKernel::kGemm); });
   measure("cv::BFMatcher float", [&] {

@@ -95,8 +95,8 @@ struct PairInput {
 void MatchPair(const PairInput& in, const MatchingOptions& options, MatchKernel kernel,
                RobustEstimator estimator, PairMatches* out, PairStats* stats) {
   auto start = Clock::now();
-  const FloatDescriptors d1 = NormalizeDescriptors(in.features1->descriptors);
-  const FloatDescriptors d2 = NormalizeDescriptors(in.features2->descriptors);
+  const ByteDescriptors& d1 = in.features1->descriptors;
+  const ByteDescriptors& d2 = in.features2->descriptors;
   NeighborList a_to_b, b_to_a;
   FindNeighbors(d1, d2, kernel, &a_to_b, &b_to_a);
   const MatchList putative = RatioTestMatches(a_to_b, b_to_a, options.max_ratio,

@@ -42,8 +42,8 @@ struct MatchingOptions {
   // Keep a match only when each keypoint is the other's nearest neighbour and both pass the
   // ratio test (COLMAP's SiftMatching.cross_check).
   bool mutual_check = true;
-  // Descriptor product kernel: "auto" (AVX2 when the CPU has it), "avx2", "gemm" (portable).
-  // The choice and its measurement: descriptor_matching.h.
+  // Descriptor product kernel: "auto" (the fastest this CPU has), "vnni", "avx2", "gemm"
+  // (portable); all find the same matches. The choice and its measurement: descriptor_matching.h.
   std::string kernel = "auto";
   // "auto": essential matrix when the pair's cameras have a focal length, fundamental otherwise;
   // "essential" (an image without intrinsics is an error) or "fundamental".
@@ -80,8 +80,8 @@ struct MatchingOptions {
     v("max_distance", max_distance, "Largest descriptor distance of a match (unit descriptors)",
       Positive());
     v("mutual_check", mutual_check, "Keep only mutual nearest neighbours (COLMAP's cross_check)");
-    v("kernel", kernel, "Descriptor product kernel (auto: AVX2 when the CPU has it)",
-      OneOf({"auto", "avx2", "gemm"}));
+    v("kernel", kernel, "Descriptor product kernel (auto: VNNI, else AVX2, else portable)",
+      OneOf({"auto", "vnni", "avx2", "gemm"}));
     v("geometry", geometry,
       "Verification model: auto = essential when the focal is known, else fundamental",
       OneOf({"auto", "essential", "fundamental"}));

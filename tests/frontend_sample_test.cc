@@ -108,8 +108,7 @@ TEST_F(SampleScene, GuidedMatchingDoesNotLoseInliers) {
     x1 = features_[i].keypoints.leftCols<2>().cast<double>();
     x2 = features_[j].keypoints.leftCols<2>().cast<double>();
     const MatchList guided =
-        GuidedMatches(NormalizeDescriptors(features_[i].descriptors),
-                      NormalizeDescriptors(features_[j].descriptors), x1, x2, g.F,
+        GuidedMatches(features_[i].descriptors, features_[j].descriptors, x1, x2, g.F,
                       first_only.max_error_px, first_only.max_ratio, first_only.max_distance, true);
     std::set<std::pair<uint32_t, uint32_t>> guided_set;
     for (Eigen::Index k = 0; k < guided.rows(); ++k) guided_set.emplace(guided(k, 0), guided(k, 1));

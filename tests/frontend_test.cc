@@ -37,76 +37,96 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
-FloatDescriptors RandomUnitDescriptors(int rows, int dim, std::mt19937* rng) {
-  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
-  FloatDescriptors out(rows, dim);
+// Quantized descriptors with the full byte range (entries above 127 exercise the byte kernel's
+// signed bytes, stored as b - 128), an all-zero row, and a repeated row for ties.
+ByteDescriptors RandomByteDescriptors(int rows, int dim, std::mt19937* rng) {
+  std::uniform_int_distribution<int> byte(0, 255);
+  ByteDescriptors out(rows, dim);
   for (int i = 0; i < rows; ++i) {
-    for (int k = 0; k < dim; ++k) out(i, k) = uniform(*rng);
-    out.row(i).normalize();
+    for (int k = 0; k < dim; ++k) out(i, k) = static_cast<uint8_t>(byte(*rng));
+  }
+  if (rows > 4) out.row(4).setZero();
+  if (rows > 10) out.row(10) = out.row(3);
+  return out;
+}
+
+// The similarities by brute force on exact integer dot products, as the kernels promise
+// (descriptor_matching.h: dot · 1/|a| · 1/|b| in float, a from the first image, for both
+// directions).
+Eigen::MatrixXf ReferenceSimilarities(const ByteDescriptors& a, const ByteDescriptors& b) {
+  const auto inverse_norm = [](const ByteDescriptors& d, int i) {
+    const int64_t sum = d.row(i).cast<int64_t>().squaredNorm();
+    return sum > 0 ? static_cast<float>(1.0 / std::sqrt(static_cast<double>(sum))) : 0.0f;
+  };
+  Eigen::MatrixXf out(a.rows(), b.rows());
+  for (int i = 0; i < a.rows(); ++i) {
+    for (int j = 0; j < b.rows(); ++j) {
+      const int64_t dot = a.row(i).cast<int64_t>().dot(b.row(j).cast<int64_t>());
+      out(i, j) = static_cast<float>(dot) * inverse_norm(a, i) * inverse_norm(b, j);
+      // The similarity is the cosine of the two descriptors to float precision.
+      const double norms = a.row(i).cast<double>().norm() * b.row(j).cast<double>().norm();
+      EXPECT_NEAR(out(i, j), norms > 0 ? static_cast<double>(dot) / norms : 0.0, 1e-6);
+    }
   }
   return out;
 }
 
-// Top-2 of each row of a against b in double precision (ties: smallest index).
-void ReferenceNeighbors(const FloatDescriptors& a, const FloatDescriptors& b,
-                        std::vector<int>* index, std::vector<double>* best,
-                        std::vector<double>* second) {
-  const Eigen::MatrixXd dots = a.cast<double>() * b.cast<double>().transpose();
-  const double none = -std::numeric_limits<double>::infinity();
-  index->assign(a.rows(), -1);
-  best->assign(a.rows(), none);
-  second->assign(a.rows(), none);
-  for (int i = 0; i < a.rows(); ++i) {
-    for (int j = 0; j < b.rows(); ++j) {
-      if (dots(i, j) > (*best)[i]) {
-        (*second)[i] = (*best)[i];
-        (*best)[i] = dots(i, j);
-        (*index)[i] = j;
-      } else if (dots(i, j) > (*second)[i]) {
-        (*second)[i] = dots(i, j);
+// Top-2 of each row; ties go to the smallest index.
+NeighborList ReferenceNeighbors(const Eigen::MatrixXf& similarities) {
+  const float none = -std::numeric_limits<float>::infinity();
+  const int n = static_cast<int>(similarities.rows());
+  NeighborList out{std::vector<int>(n, -1), std::vector<float>(n, none),
+                   std::vector<float>(n, none)};
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < similarities.cols(); ++j) {
+      const float similarity = similarities(i, j);
+      if (similarity > out.best[i]) {
+        out.second[i] = out.best[i];
+        out.best[i] = similarity;
+        out.index[i] = j;
+      } else if (similarity > out.second[i]) {
+        out.second[i] = similarity;
       }
     }
   }
+  return out;
 }
 
-void ExpectMatchesReference(const NeighborList& got, const FloatDescriptors& a,
-                            const FloatDescriptors& b) {
-  std::vector<int> index;
-  std::vector<double> best, second;
-  ReferenceNeighbors(a, b, &index, &best, &second);
-  ASSERT_EQ(got.index.size(), index.size());
-  for (size_t i = 0; i < index.size(); ++i) {
-    EXPECT_NEAR(got.best[i], best[i], 1e-5) << "row " << i;
-    if (std::isfinite(second[i])) {
-      EXPECT_NEAR(got.second[i], second[i], 1e-5) << "row " << i;
-    } else {
-      EXPECT_FALSE(std::isfinite(got.second[i])) << "row " << i;
-    }
-    // Float rounding may only reorder near-ties.
-    if (best[i] - second[i] > 1e-5) {
-      EXPECT_EQ(got.index[i], index[i]) << "row " << i;
-    }
+void ExpectSameNeighbors(const NeighborList& got, const NeighborList& expected) {
+  ASSERT_EQ(got.index.size(), expected.index.size());
+  for (size_t i = 0; i < expected.index.size(); ++i) {
+    EXPECT_EQ(got.index[i], expected.index[i]) << "row " << i;
+    EXPECT_EQ(got.best[i], expected.best[i]) << "row " << i;
+    EXPECT_EQ(got.second[i], expected.second[i]) << "row " << i;
   }
 }
 
-TEST(MatchingKernel, AgreesWithBruteForceOnRandomDescriptors) {
+// Every kernel finds exactly the brute-force neighbours, similarities equal to the bit: the
+// products are exact integers whichever kernel ran, so no CPU finds other matches.
+TEST(MatchingKernel, EveryKernelFindsTheBruteForceNeighboursToTheBit) {
   std::mt19937 rng(7);
   // Sizes straddle the kernels' blocking: 6-row tiles, 16-column panels, 1024-column blocks,
-  // 256-row GEMM blocks; single rows and columns have no second neighbour.
-  const std::vector<std::pair<int, int>> sizes = {{1, 1},     {1, 5},      {7, 1},    {13, 17},
-                                                  {300, 257}, {257, 1100}, {1030, 40}};
+  // 256-row GEMM blocks; single rows and columns have no second neighbour; an odd length pads
+  // the byte kernel's groups of four dimensions.
+  const std::vector<std::tuple<int, int, int>> sizes = {
+      {1, 1, 128},     {1, 5, 128},      {7, 1, 128},     {13, 17, 128},
+      {300, 257, 128}, {257, 1100, 128}, {1030, 40, 128}, {13, 17, 7}};
   std::vector<MatchKernel> kernels = {MatchKernel::kGemm};
   if (CpuHasAvx2Fma()) kernels.push_back(MatchKernel::kAvx2);
-  for (const auto& [n, m] : sizes) {
-    const FloatDescriptors a = RandomUnitDescriptors(n, 128, &rng);
-    const FloatDescriptors b = RandomUnitDescriptors(m, 128, &rng);
+  if (CpuHasVnni()) kernels.push_back(MatchKernel::kVnni);
+  for (const auto& [n, m, dim] : sizes) {
+    const ByteDescriptors a = RandomByteDescriptors(n, dim, &rng);
+    const ByteDescriptors b = RandomByteDescriptors(m, dim, &rng);
+    const Eigen::MatrixXf similarities = ReferenceSimilarities(a, b);
+    const NeighborList ab_reference = ReferenceNeighbors(similarities);
+    const NeighborList ba_reference = ReferenceNeighbors(similarities.transpose());
     for (const MatchKernel kernel : kernels) {
       SCOPED_TRACE(std::string(MatchKernelName(kernel)) + " " + std::to_string(n) + "x" +
-                   std::to_string(m));
+                   std::to_string(m) + "x" + std::to_string(dim));
       NeighborList ab, ba;
       FindNeighbors(a, b, kernel, &ab, &ba);
-      ExpectMatchesReference(ab, a, b);
-      ExpectMatchesReference(ba, b, a);
+      ExpectSameNeighbors(ab, ab_reference);
+      ExpectSameNeighbors(ba, ba_reference);
     }
   }
 }
