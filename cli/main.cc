@@ -353,12 +353,15 @@ int Main(int argc, char** argv) {
 
 int main(int argc, char** argv) {
   // Every refine pass builds its problem anew and the matcher packs descriptors per pair: blocks
-  // of 1-30 MB allocated and freed again and again. With glibc's defaults each came from a fresh
-  // mmap (or was trimmed back to the system) and every page faulted in zeroed on first touch:
-  // 9 % of a fountain-P11 refine's samples were page faults. Kept in the heap instead (blocks up to
-  // 32 MB from the heap, up to 1 GB of freed memory kept): refine 1.74 -> 1.49 s at the same peak
-  // memory (163 vs 165 MB), fountain-P11 8° auto, 2 threads, three runs each.
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  // of 1 MB to hundreds of MB, allocated and freed again and again. With glibc's defaults each came
+  // from a fresh mmap (or was trimmed back to the system) and every page faulted in zeroed on first
+  // touch: 8-9 % of a refine's samples were page faults. Large blocks come from the heap instead
+  // and up to 1 GB of freed memory is kept for the next pass (the peak is what it was). Measured,
+  // auto, 2 threads, back to back (the settings as GLIBC_TUNABLES): fountain-P11 8° refine
+  // 1.74 -> 1.49 s with blocks up to 32 MB kept; the chair (24 frames) and the Record3D desk (193
+  // frames), whose problems are larger, 5.5 -> 4.7 s and 50.1 -> 42.4 s more with every block
+  // kept; peak memory +0-2 % (desk 1.43 GB both).
+  mallopt(M_MMAP_MAX, 0);
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
   raytime::InstallInterruptHandler();
   try {
