@@ -407,16 +407,21 @@ struct GuidedInput {
   float max_error_sq = 0;
   std::vector<float> u2, v2, g2;  // padded to a multiple of 8 with NaN
   std::vector<float> lines;       // n x 3
+  // Per line max_error^2 |l_i|_12^2, computed outside the AVX2 scan, where the compiler could fuse
+  // it into a multiply-add the portable scan does not have.
+  std::vector<float> bound;
 };
 
 void GuidedScanPortable(const GuidedInput& in, Top2* rows, Top2* cols) {
   for (int i = 0; i < in.n; ++i) {
     const float l0 = in.lines[3 * i], l1 = in.lines[3 * i + 1], l2 = in.lines[3 * i + 2];
-    const float bound = in.max_error_sq * (l0 * l0 + l1 * l1);
+    const float bound = in.bound[i];
     const float* ai = in.a + size_t(i) * in.dim;
     for (int j = 0; j < in.m; ++j) {
-      const float r = l0 * in.u2[j] + l1 * in.v2[j] + l2;
-      if (!(r * r < bound + in.max_error_sq * in.g2[j])) continue;
+      // The AVX2 scan's expression, fused multiply-adds included, so both scans take the same
+      // candidates (std::fma is exact everywhere, one instruction where the CPU has FMA).
+      const float r = std::fma(l0, in.u2[j], std::fma(l1, in.v2[j], l2));
+      if (!(r * r < std::fma(in.max_error_sq, in.g2[j], bound))) continue;
       const float* bj = in.b + size_t(j) * in.dim;
       float dot = 0.0f;
       for (int k = 0; k < in.dim; ++k) dot += ai[k] * bj[k];
@@ -448,7 +453,7 @@ __attribute__((target("avx2,fma"))) void GuidedScanAvx2(const GuidedInput& in, T
   for (int i = 0; i < in.n; ++i) {
     const float l0 = in.lines[3 * i], l1 = in.lines[3 * i + 1], l2 = in.lines[3 * i + 2];
     const __m256 L0 = _mm256_set1_ps(l0), L1 = _mm256_set1_ps(l1), L2 = _mm256_set1_ps(l2);
-    const __m256 bound = _mm256_set1_ps(in.max_error_sq * (l0 * l0 + l1 * l1));
+    const __m256 bound = _mm256_set1_ps(in.bound[i]);
     const float* ai = in.a + size_t(i) * in.dim;
     for (int j0 = 0; j0 < m_padded; j0 += 8) {
       const __m256 r = _mm256_fmadd_ps(L0, _mm256_loadu_ps(in.u2.data() + j0),
@@ -616,9 +621,12 @@ MatchList GuidedMatches(const ByteDescriptors& a_bytes, const ByteDescriptors& b
     in.g2[j] = static_cast<float>(g.x() * g.x() + g.y() * g.y());
   }
   in.lines.resize(size_t(n) * 3);
+  in.bound.resize(n);
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d l = Fn * Eigen::Vector3d(x1(i, 0), x1(i, 1), 1.0);
     for (int c = 0; c < 3; ++c) in.lines[3 * i + c] = static_cast<float>(l(c));
+    const float l0 = in.lines[3 * i], l1 = in.lines[3 * i + 1];
+    in.bound[i] = in.max_error_sq * (l0 * l0 + l1 * l1);
   }
   std::vector<Top2> rows(n), cols(m);
   if (ResolveMatchKernel(kernel) != MatchKernel::kGemm) {

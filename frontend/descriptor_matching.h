@@ -78,8 +78,9 @@ MatchList RatioTestMatches(const NeighborList& a_to_b, const NeighborList& b_to_
 // keypoint only competes with the keypoints of the other image whose Sampson distance under
 // `F` (x2^T F x1 = 0, pixels) is below `max_error_px`. x1, x2: keypoint positions (rows x, y)
 // in the pixel frame F refers to (undistorted when the camera has distortion). The kernel
-// chooses the AVX2 (for kVnni and kAvx2) or portable screening of the n x m candidates; the
-// screening is in float, so a candidate on the threshold may fall either way between the two.
+// chooses the AVX2 (for kVnni and kAvx2) or portable screening of the n x m candidates; both
+// evaluate the same float expressions (fused multiply-adds included), so they take the same
+// candidates and find the same matches.
 MatchList GuidedMatches(const ByteDescriptors& a, const ByteDescriptors& b,
                         const Eigen::Matrix<double, Eigen::Dynamic, 2>& x1,
                         const Eigen::Matrix<double, Eigen::Dynamic, 2>& x2,

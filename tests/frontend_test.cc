@@ -131,6 +131,82 @@ TEST(MatchingKernel, EveryKernelFindsTheBruteForceNeighboursToTheBit) {
   }
 }
 
+// Guided matching's candidates are the pairs within the Sampson bound, by the same float
+// expressions on every kernel (fused multiply-adds included): its matches equal an all-pairs scan's
+// written out here, to the match. Two views of random points, descriptors of a point alike in both
+// views, plus clutter keypoints in each.
+TEST(MatchingKernel, GuidedMatchingFindsTheAllPairsMatches) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::uniform_int_distribution<int> byte(0, 255), jitter(-6, 6);
+  const double f = 1200.0, cx = 768.0, cy = 512.0, max_error = 4.0;
+  const Eigen::Matrix3d K = (Eigen::Matrix3d() << f, 0, cx, 0, f, cy, 0, 0, 1).finished();
+  const Eigen::Matrix3d R =
+      Eigen::AngleAxisd(0.2, Eigen::Vector3d(0.1, 1.0, 0.05).normalized()).toRotationMatrix();
+  const Eigen::Vector3d t(-1.0, 0.1, 0.2);
+  const Eigen::Matrix3d tx =
+      (Eigen::Matrix3d() << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0).finished();
+  const Eigen::Matrix3d F = K.inverse().transpose() * tx * R * K.inverse();
+  const int num_points = 600, clutter = 300;
+  ByteDescriptors a(num_points + clutter, 128), b(num_points + clutter, 128);
+  Eigen::Matrix<double, Eigen::Dynamic, 2> x1(num_points + clutter, 2), x2(num_points + clutter, 2);
+  for (int p = 0; p < num_points; ++p) {
+    const Eigen::Vector3d X(4.0 * unit(rng), 3.0 * unit(rng), 8.0 + 4.0 * unit(rng));
+    const Eigen::Vector3d p1 = K * X, p2 = K * (R * X + t);
+    x1.row(p) << p1.x() / p1.z(), p1.y() / p1.z();
+    // Up to ~5 px off the epipolar line: some candidates sit near the threshold.
+    x2.row(p) << p2.x() / p2.z() + 3.0 * unit(rng), p2.y() / p2.z() + 3.0 * unit(rng);
+    for (int k = 0; k < 128; ++k) {
+      a(p, k) = static_cast<uint8_t>(byte(rng));
+      b(p, k) = static_cast<uint8_t>(std::clamp(a(p, k) + jitter(rng), 0, 255));
+    }
+  }
+  for (int p = num_points; p < num_points + clutter; ++p) {
+    x1.row(p) << 1536.0 * (0.5 + 0.5 * unit(rng)), 1024.0 * (0.5 + 0.5 * unit(rng));
+    x2.row(p) << 1536.0 * (0.5 + 0.5 * unit(rng)), 1024.0 * (0.5 + 0.5 * unit(rng));
+    for (int k = 0; k < 128; ++k) {
+      a(p, k) = static_cast<uint8_t>(byte(rng));
+      b(p, k) = static_cast<uint8_t>(byte(rng));
+    }
+  }
+  // The all-pairs scan, written out: GuidedMatches' inputs and test (descriptor_matching.cc).
+  const Eigen::Matrix3d Fn = F / F.norm();
+  const float e2 = static_cast<float>(max_error * max_error);
+  const Eigen::MatrixXf similarities = ReferenceSimilarities(a, b);
+  const int n = static_cast<int>(a.rows()), m = static_cast<int>(b.rows());
+  Eigen::MatrixXf candidates =
+      Eigen::MatrixXf::Constant(n, m, -std::numeric_limits<float>::infinity());
+  int num_candidates = 0;
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d l = Fn * Eigen::Vector3d(x1(i, 0), x1(i, 1), 1.0);
+    const float l0 = static_cast<float>(l.x()), l1 = static_cast<float>(l.y()),
+                l2 = static_cast<float>(l.z());
+    const float bound = e2 * (l0 * l0 + l1 * l1);
+    for (int j = 0; j < m; ++j) {
+      const Eigen::Vector3d x(x2(j, 0), x2(j, 1), 1.0);
+      const Eigen::Vector3d g = Fn.transpose() * x;
+      const float g2 = static_cast<float>(g.x() * g.x() + g.y() * g.y());
+      const float r =
+          std::fma(l0, static_cast<float>(x.x()), std::fma(l1, static_cast<float>(x.y()), l2));
+      if (r * r < std::fma(e2, g2, bound)) {
+        candidates(i, j) = similarities(i, j);
+        ++num_candidates;
+      }
+    }
+  }
+  const MatchList expected = RatioTestMatches(
+      ReferenceNeighbors(candidates), ReferenceNeighbors(candidates.transpose()), 0.8, 0.7, true);
+  EXPECT_GT(num_candidates, n);  // the band holds more than the true matches
+  EXPECT_GT(expected.rows(), num_points / 2);
+  std::vector<MatchKernel> kernels = {MatchKernel::kGemm};
+  if (CpuHasAvx2Fma()) kernels.push_back(MatchKernel::kAvx2);
+  for (const MatchKernel kernel : kernels) {
+    const MatchList got = GuidedMatches(a, b, x1, x2, F, max_error, 0.8, 0.7, true, kernel);
+    ASSERT_EQ(got.rows(), expected.rows()) << MatchKernelName(kernel);
+    EXPECT_TRUE(got == expected) << MatchKernelName(kernel);
+  }
+}
+
 TEST(MatchingKernel, RatioTestAndMutualCheck) {
   // Row 0 -> 0 is clear and mutual; row 1 -> 0 loses the mutual check; row 2 fails the ratio.
   NeighborList ab{{0, 0, 1}, {0.99f, 0.95f, 0.90f}, {0.2f, 0.1f, 0.89f}};
