@@ -83,14 +83,18 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
     int source_camera, target_camera, source_observation, target_observation;
   };
   std::vector<Linearized> group;
+  // Scratch reused across ray times and residuals: allocating these per ray time and per residual
+  // was most of the estimate's time.
+  SparseCameraBlocks<Eigen::Matrix<double, 6, 1>> h_tc;
+  CameraBlocks62 b;
   size_t begin = 0;
   while (begin < problem.residuals.size()) {
     const int t = problem.residuals[begin].ray_time;
     size_t end = begin;
     while (end < problem.residuals.size() && problem.residuals[end].ray_time == t) ++end;
     group.clear();
+    h_tc.clear();
     double h_tt = 0.0;
-    SparseCameraBlocks<Eigen::Matrix<double, 6, 1>> h_tc;
     for (size_t k = begin; k < end; ++k) {
       const RayTimeLmResidual& res = problem.residuals[k];
       Linearized lin;
@@ -141,7 +145,7 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
       // The reduced gradient's part of each residual, B = a (J − j_t H_tc / H_tt)ᵀ, carried to the
       // keypoints that move the residual.
       for (const Linearized& lin : group) {
-        CameraBlocks62 b;
+        b.clear();
         for (const auto& [c, v] : h_tc) {
           AddTo<Matrix62>(&b, c, -lin.a * v * lin.ray_time.transpose() / h_tt);
         }
