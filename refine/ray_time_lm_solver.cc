@@ -545,7 +545,12 @@ class Solver {
   void BuildReducedSystem(const ScaledArctanLoss& loss, double radius);
   // One chunk of ray times' share of it: their residuals linearized, reduced and summed into the
   // chunk's Partial, their couplings kept for the back-substitution.
-  void LinearizeChunk(const ScaledArctanLoss& loss, double radius, int chunk);
+  // Cloned for AVX2 (dispatched at load time): the compiler's own vectorization of the loops
+  // runs 4 doubles wide there instead of 2. No FMA in the clone, so nothing is contracted and the
+  // results are the default clone's to the bit. Fountain-P11 8°, 1 thread: linearization 1.22-1.25
+  // -> 1.11-1.14 s, the same final costs (three runs each).
+  __attribute__((target_clones("avx2", "default"))) void LinearizeChunk(
+      const ScaledArctanLoss& loss, double radius, int chunk);
   // From the cameras' step, the ray times' step (back-substitution from the couplings
   // BuildReducedSystem kept) and the model's predicted cost decrease -(gᵀδ + ½ δᵀJᵀJδ). The step
   // solves (JᵀJ + D)δ = -g, so δᵀJᵀJδ = -gᵀδ - δᵀDδ and the decrease is ½(δᵀDδ - gᵀδ): a sum of
@@ -574,7 +579,8 @@ class Solver {
   bool pattern_analyzed_ = false;
 };
 
-void Solver::LinearizeChunk(const ScaledArctanLoss& loss, double radius, int chunk) {
+__attribute__((target_clones("avx2", "default"))) void Solver::LinearizeChunk(
+    const ScaledArctanLoss& loss, double radius, int chunk) {
   const int num_variables = system_.num_variables();
   ReducedCameraSystem::Partial& partial = system_.partials()[chunk];
   partial.Reset(system_.num_blocks(), num_variables);
