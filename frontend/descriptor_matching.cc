@@ -1,5 +1,6 @@
 #include "frontend/descriptor_matching.h"
 
+#include <cpuid.h>
 #include <immintrin.h>
 
 #include <algorithm>
@@ -196,7 +197,7 @@ inline int32_t LoadQuad(const uint8_t* p) {
 // The byte tile, once per instruction set that has vpdpbusd on ymm registers: AVX-VNNI (VEX) and
 // AVX512-VNNI with AVX512-VL (EVEX). `dim` is a multiple of 4. The products of the signed bytes
 // fit in 16 bits and their sums of four in 32 (no saturation: vpdpbusd, not vpdpbusds).
-#define RAYTIME_DEFINE_VNNI_TILE(name, isa, dpwssd)                                            \
+#define RAYTIME_DEFINE_VNNI_TILE(name, isa, dpbusd)                                            \
   __attribute__((target(isa))) void name(const uint8_t* a, int dim, const int8_t* panel,       \
                                          float* out, int ld) {                                 \
     __m256i c00 = _mm256_setzero_si256(), c01 = _mm256_setzero_si256();                        \
@@ -210,23 +211,23 @@ inline int32_t LoadQuad(const uint8_t* p) {
       const __m256i b1 =                                                                       \
           _mm256_loadu_si256(reinterpret_cast<const __m256i*>(panel + 16 * k + 32));           \
       __m256i x = _mm256_set1_epi32(LoadQuad(a + k));                                          \
-      c00 = dpwssd(c00, x, b0);                                                                \
-      c01 = dpwssd(c01, x, b1);                                                                \
+      c00 = dpbusd(c00, x, b0);                                                                \
+      c01 = dpbusd(c01, x, b1);                                                                \
       x = _mm256_set1_epi32(LoadQuad(a + dim + k));                                            \
-      c10 = dpwssd(c10, x, b0);                                                                \
-      c11 = dpwssd(c11, x, b1);                                                                \
+      c10 = dpbusd(c10, x, b0);                                                                \
+      c11 = dpbusd(c11, x, b1);                                                                \
       x = _mm256_set1_epi32(LoadQuad(a + 2 * dim + k));                                        \
-      c20 = dpwssd(c20, x, b0);                                                                \
-      c21 = dpwssd(c21, x, b1);                                                                \
+      c20 = dpbusd(c20, x, b0);                                                                \
+      c21 = dpbusd(c21, x, b1);                                                                \
       x = _mm256_set1_epi32(LoadQuad(a + 3 * dim + k));                                        \
-      c30 = dpwssd(c30, x, b0);                                                                \
-      c31 = dpwssd(c31, x, b1);                                                                \
+      c30 = dpbusd(c30, x, b0);                                                                \
+      c31 = dpbusd(c31, x, b1);                                                                \
       x = _mm256_set1_epi32(LoadQuad(a + 4 * dim + k));                                        \
-      c40 = dpwssd(c40, x, b0);                                                                \
-      c41 = dpwssd(c41, x, b1);                                                                \
+      c40 = dpbusd(c40, x, b0);                                                                \
+      c41 = dpbusd(c41, x, b1);                                                                \
       x = _mm256_set1_epi32(LoadQuad(a + 5 * dim + k));                                        \
-      c50 = dpwssd(c50, x, b0);                                                                \
-      c51 = dpwssd(c51, x, b1);                                                                \
+      c50 = dpbusd(c50, x, b0);                                                                \
+      c51 = dpbusd(c51, x, b1);                                                                \
     }                                                                                          \
     _mm256_storeu_ps(out, _mm256_cvtepi32_ps(c00));                                            \
     _mm256_storeu_ps(out + 8, _mm256_cvtepi32_ps(c01));                                        \
@@ -246,7 +247,13 @@ RAYTIME_DEFINE_VNNI_TILE(MicroKernel6x16AvxVnni, "avx2,avxvnni", _mm256_dpbusd_a
 RAYTIME_DEFINE_VNNI_TILE(MicroKernel6x16Avx512Vnni, "avx2,avx512vnni,avx512vl", _mm256_dpbusd_epi32)
 #undef RAYTIME_DEFINE_VNNI_TILE
 
-bool CpuHasAvxVnni() { return CpuHasAvx2Fma() && __builtin_cpu_supports("avxvnni"); }
+// AVX-VNNI is CPUID leaf 7 sub-leaf 1, EAX bit 4: asked directly, as clang 14's
+// __builtin_cpu_supports does not know it (its VEX encoding needs only the AVX state the AVX2
+// check has confirmed).
+bool CpuHasAvxVnni() {
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  return CpuHasAvx2Fma() && __get_cpuid_count(7, 1, &eax, &ebx, &ecx, &edx) && (eax & (1u << 4));
+}
 bool CpuHasAvx512Vnni() {
   return CpuHasAvx2Fma() && __builtin_cpu_supports("avx512vnni") &&
          __builtin_cpu_supports("avx512vl");
