@@ -64,11 +64,11 @@ void ToNeighborList(const std::vector<Top2>& top, NeighborList* list) {
 // dot product of two rows is an integer below 128 * 255^2 < 2^24 and float arithmetic computes it
 // exactly in any order), and each row's inverse norm.
 struct Descriptors {
-  const float* values = nullptr;
   int rows = 0;
   int dim = 0;
-  std::vector<float> storage;
+  std::vector<float> storage;  // rows x dim, row-major
   std::vector<float> inverse_norm;
+  const float* values() const { return storage.data(); }
 };
 
 Descriptors Prepare(const ByteDescriptors& bytes) {
@@ -87,7 +87,6 @@ Descriptors Prepare(const ByteDescriptors& bytes) {
     d.inverse_norm[i] =
         sum > 0 ? static_cast<float>(1.0 / std::sqrt(static_cast<double>(sum))) : 0.0f;
   }
-  d.values = d.storage.data();
   return d;
 }
 
@@ -105,11 +104,11 @@ void FindNeighborsGemm(const Descriptors& a, const Descriptors& b, std::vector<T
   // enough that the block is scanned while still in the last-level cache.
   constexpr int kBlockRows = 256;
   const int n = a.rows, m = b.rows, dim = a.dim;
-  const cv::Mat b_mat(m, dim, CV_32F, const_cast<float*>(b.values));
+  const cv::Mat b_mat(m, dim, CV_32F, const_cast<float*>(b.values()));
   cv::Mat block;
   for (int r0 = 0; r0 < n; r0 += kBlockRows) {
     const int count = std::min(kBlockRows, n - r0);
-    const cv::Mat a_mat(count, dim, CV_32F, const_cast<float*>(a.values + size_t(r0) * dim));
+    const cv::Mat a_mat(count, dim, CV_32F, const_cast<float*>(a.values() + size_t(r0) * dim));
     cv::gemm(a_mat, b_mat, 1.0, cv::noArray(), 0.0, block, cv::GEMM_2_T);
     for (int r = 0; r < count; ++r) {
       const float* row = block.ptr<float>(r);
@@ -350,7 +349,7 @@ void FindNeighborsTiled(const Descriptors& a, const Descriptors& b,
   for (int j = 0; j < m; ++j) {
     B* panel = packed.data() + size_t(j / kPanelWidth) * dim * kPanelWidth;
     for (int k = 0; k < b.dim; ++k) {
-      panel[PanelOffset<B>(k, j % kPanelWidth)] = PanelValue<B>(b.values[size_t(j) * b.dim + k]);
+      panel[PanelOffset<B>(k, j % kPanelWidth)] = PanelValue<B>(b.values()[size_t(j) * b.dim + k]);
     }
   }
   const int n_padded = (n + kTileRows - 1) / kTileRows * kTileRows;
@@ -359,7 +358,7 @@ void FindNeighborsTiled(const Descriptors& a, const Descriptors& b,
   std::vector<float> row_offset(n, 0.0f);
   for (int i = 0; i < n; ++i) {
     for (int k = 0; k < a.dim; ++k) {
-      const float value = a.values[size_t(i) * a.dim + k];
+      const float value = a.values()[size_t(i) * a.dim + k];
       a_padded[size_t(i) * dim + k] = static_cast<A>(value);
       if constexpr (std::is_same_v<B, int8_t>) row_offset[i] += 128.0f * value;
     }
@@ -605,8 +604,8 @@ MatchList GuidedMatches(const ByteDescriptors& a_bytes, const ByteDescriptors& b
   // well inside float range.
   const Eigen::Matrix3d Fn = F / F.norm();
   GuidedInput in;
-  in.a = a.values;
-  in.b = b.values;
+  in.a = a.values();
+  in.b = b.values();
   in.inverse_norm_a = a.inverse_norm.data();
   in.inverse_norm_b = b.inverse_norm.data();
   in.n = n;
