@@ -291,6 +291,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   basin.max_matches_per_pair = options.basin_max_matches_per_pair;
   basin.orientation_weight = 0.0;
   basin.scales = options.StageScales();
+  basin.intermediate = true;  // and so its removal rounds and the probe, copied from it
   const PassState start = *state;
   summary->passes.push_back(RunPass(input, options, basin, prior, state));
 
@@ -305,6 +306,8 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   finish.scales = {options.loss_scale_px2};
   finish.orientation_weight = probe.kept ? options.orientation_weight : 0.0;
   finish.start_unsolved_at_closest_approach = true;
+  const double anneal_scale = FinishAnnealScale(options, probe.free_residual_median_px);
+  finish.intermediate = anneal_scale > 0;
   summary->passes.push_back(RunPass(*active, options, finish, prior, state));
   // The finish anneal (RefineOptions::finish_noise_multiple) keeps the finish's orientation prior
   // but not its anchor: after a λR = 0 finish none; after a finish that kept λR, the same λR
@@ -318,11 +321,11 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   // without it); RefineOptions::finish_anneal_hold_ratio weakens it (0.01 in auto). One stage,
   // straight to its scale: through the decade between, as GNC would, the same errors to 0.001° on
   // the four Strecha scenes at 0° and 8°, with 35 % more iterations.
-  const double anneal_scale = FinishAnnealScale(options, probe.free_residual_median_px);
   if (anneal_scale > 0) {
     PassSettings anneal = finish;
     anneal.name = "finish_anneal";
     anneal.scales = {anneal_scale};
+    anneal.intermediate = false;  // its solution is the answer
     anneal.orientation_weight = finish.orientation_weight * options.finish_anneal_hold_ratio;
     // Never from an earlier run's anneal: at its small scale which matches sit in the arctan's
     // flat tail depends on where the pass starts, so the path matters. The chair grown from 18 to

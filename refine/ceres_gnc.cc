@@ -29,8 +29,8 @@ class CeresStageBackend : public GncBackend {
  public:
   explicit CeresStageBackend(RayTimeProblem* problem) : problem_(problem) {}
 
-  GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
-                             GncProgress* progress) override {
+  GncStageSummary SolveStage(double scale_px2, double function_tolerance,
+                             const GncSettings& settings, GncProgress* progress) override {
     ceres::Solver::Options options;
     // §3.4: the reduced camera system after eliminating the 1x1 ray-time blocks, factorized by
     // sparse Cholesky; no ordering is given, so Ceres' automatic ordering picks the elimination
@@ -43,7 +43,7 @@ class CeresStageBackend : public GncBackend {
     options.max_num_line_search_step_size_iterations = 0;
     options.num_threads = settings.num_threads;
     options.max_num_iterations = settings.max_iterations;
-    options.function_tolerance = settings.function_tolerance;
+    options.function_tolerance = function_tolerance;
     options.logging_type = ceres::SILENT;
     options.minimizer_progress_to_stdout = false;
     CeresProgressCallback callback(progress);

@@ -43,6 +43,11 @@ std::vector<int> ResidualHistogram(const std::vector<double>& norms_px) {
   return counts;
 }
 
+double GncSettings::StageTolerance(int stage) const {
+  const bool last = stage + 1 == static_cast<int>(scales.size());
+  return last && ends_solve ? function_tolerance : intermediate_function_tolerance;
+}
+
 std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& settings) {
   std::vector<GncStageSummary> stages;
   const int num_stages = static_cast<int>(settings.scales.size());
@@ -52,8 +57,9 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
     {
       // Its progress line ends with the stage, before the stage's log line.
       GncProgress progress(s + 1, num_stages, scale);
-      stage = backend->SolveStage(scale, settings, &progress);
+      stage = backend->SolveStage(scale, settings.StageTolerance(s), settings, &progress);
     }
+    stage.function_tolerance = settings.StageTolerance(s);
     if (settings.residual_norms) {
       backend->Publish();
       stage.residual_histogram = ResidualHistogram(settings.residual_norms());

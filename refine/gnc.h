@@ -16,13 +16,23 @@ namespace raytime {
 struct GncSettings {
   std::vector<double> scales;  // arctan scales a, px², in solve order; the last is nominal
   int max_iterations = 100;    // per stage, accepted and rejected steps
+  // Relative cost-change tolerance of the stage whose solution is the solve's ...
   double function_tolerance = 1e-6;
+  // ... and of a stage whose solution only starts another one: the schedule's earlier scales, and
+  // every stage when `ends_solve` is false (the caller solves again from this solution). Their
+  // minimum is not the answer, so a looser tolerance costs the last stage nothing measurable
+  // (RefineOptions::intermediate_function_tolerance).
+  double intermediate_function_tolerance = 1e-6;
+  bool ends_solve = true;
   // The back-end's threads: the ray-time LM gives the same bits on any count; Ceres is
   // deterministic on 1 (RefineOptions::deterministic).
   int num_threads = 1;
   // The residual norms (pixels) at the back-end's current parameters, read after each stage for
   // its residual_histogram; empty: no histogram.
   std::function<std::vector<double>()> residual_norms;
+
+  // The tolerance of stage `stage` (0-based) of `scales`.
+  double StageTolerance(int stage) const;
 };
 
 // A long solve (hundreds of cameras, millions of residuals: minutes per stage) says it is alive:
@@ -46,10 +56,11 @@ class GncProgress {
 class GncBackend {
  public:
   virtual ~GncBackend() = default;
-  // Solves one stage at arctan scale `scale_px2` from the current parameters and leaves them at
-  // its solution; termination "FAILURE" ends the schedule.
-  virtual GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
-                                     GncProgress* progress) = 0;
+  // Solves one stage at arctan scale `scale_px2` from the current parameters, stopping at relative
+  // cost change `function_tolerance`, and leaves them at its solution; termination "FAILURE" ends
+  // the schedule.
+  virtual GncStageSummary SolveStage(double scale_px2, double function_tolerance,
+                                     const GncSettings& settings, GncProgress* progress) = 0;
   // For the stage's log line ("ray-time LM", "Ceres").
   virtual const char* Name() const = 0;
   // Writes the current parameters into the problem the back-end solves, where the caller (and

@@ -950,10 +950,9 @@ class RayTimeLmStageBackend : public GncBackend {
  public:
   RayTimeLmStageBackend(RayTimeLmProblem* problem, int num_threads)
       : problem_(problem), solver_(problem, num_threads) {}
-  GncStageSummary SolveStage(double scale_px2, const GncSettings& settings,
-                             GncProgress* progress) override {
-    return solver_.SolveStage(scale_px2, settings.max_iterations, settings.function_tolerance,
-                              progress);
+  GncStageSummary SolveStage(double scale_px2, double function_tolerance,
+                             const GncSettings& settings, GncProgress* progress) override {
+    return solver_.SolveStage(scale_px2, settings.max_iterations, function_tolerance, progress);
   }
   const char* Name() const override { return "ray-time LM"; }
   // The solver reads only the problem's sizes after it starts: storing into it mid-schedule is

@@ -103,6 +103,7 @@ void RunRecipe(const RefineInput& input, const RefineOptions& options,
     pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
     pass1.orientation_weight = options.stage1_orientation_weight;
     pass1.scales = options.StageScales();
+    pass1.intermediate = true;
     summary->passes.push_back(RunPass(input, options, pass1, prior, state));
     // ... pass 2 one warm solve at the nominal scale, priors re-anchored at the pass-1 poses.
     PassSettings pass2 = nominal;

@@ -262,6 +262,8 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   gnc.scales = settings.scales;
   gnc.max_iterations = options.max_iterations;
   gnc.function_tolerance = options.function_tolerance;
+  gnc.intermediate_function_tolerance = options.intermediate_function_tolerance;
+  gnc.ends_solve = !settings.intermediate;
   if (lm_problem) {
     gnc.residual_norms = [&] {
       return ResidualNorms(input, layout, lm_problem->world_from_cam, state->cameras,

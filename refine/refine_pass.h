@@ -31,6 +31,10 @@ struct PassSettings {
   // Starts from the input's RefineWarmStart for this pass's name, where it has one (the passes on
   // all matches after the recipe's decisions).
   bool warm_startable = false;
+  // The recipe solves again from this pass's solution (the basin, its rounds, the probe, a finish
+  // the anneal follows, staged pass 1): every stage stops at the intermediate tolerance
+  // (RefineOptions::intermediate_function_tolerance).
+  bool intermediate = false;
 };
 
 // State carried from one pass to the next (the staged recipe's warm start), and the last pass's

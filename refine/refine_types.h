@@ -149,6 +149,8 @@ struct GncStageSummary {
   double residual_seconds = 0.0;  // Ceres: residual-only evaluation
   double linear_solver_seconds = 0.0;
   int jacobian_evaluations = 0;
+  // The relative cost-change tolerance the stage stopped on (GncSettings::StageTolerance).
+  double function_tolerance = 0.0;
   std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
   std::string message;
   // The residual norms at the stage's solution binned by ResidualHistogramEdgesPx() (how the
@@ -158,7 +160,7 @@ struct GncStageSummary {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GncStageSummary, loss_scale_px2, iterations, successful_steps,
                                    initial_cost, final_cost, seconds, jacobian_seconds,
                                    residual_seconds, linear_solver_seconds, jacobian_evaluations,
-                                   termination, message, residual_histogram)
+                                   function_tolerance, termination, message, residual_histogram)
 
 struct RayTimeInitSummary {
   std::string mode;              // "auto" or "constant"

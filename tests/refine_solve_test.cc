@@ -407,6 +407,50 @@ TEST(RefineSolveTest, BasinFirstKeepsAnOrientationPriorTheMatchesAgreeWith) {
   EXPECT_TRUE(summary.guardrails.fired.empty());
 }
 
+// Only the stage whose solution is the answer (the anneal's) stops at function_tolerance; the
+// basin's stages, the probe and the finish the anneal starts from stop at the intermediate
+// tolerance. The answer is the same solve's to well below its noise, in fewer iterations.
+TEST(RefineSolveTest, OnlyTheAnswersStageStopsAtTheFinalTolerance) {
+  SyntheticScene scene = MakeSyntheticScene(NoisyScene());
+  scene.input.prior_world_from_cam = PerturbedPrior(scene, 4.0, 2);
+  RefineOptions options = BasinFirstOptions();
+  options.finish_noise_multiple = 2.0;
+  options.function_tolerance = 1e-8;
+  options.intermediate_function_tolerance = 1e-3;
+  RefineOutput output;
+  const RefineSummary summary = RefinePoses(scene.input, options, &output);
+  ASSERT_GE(summary.passes.size(), 3u);
+  EXPECT_EQ(summary.passes.back().name, "finish_anneal");
+  for (size_t p = 0; p < summary.passes.size(); ++p) {
+    const RefinePassSummary& pass = summary.passes[p];
+    for (size_t s = 0; s < pass.stages.size(); ++s) {
+      const bool answer = p + 1 == summary.passes.size() && s + 1 == pass.stages.size();
+      EXPECT_EQ(pass.stages[s].function_tolerance, answer ? 1e-8 : 1e-3)
+          << pass.name << " stage " << s;
+    }
+  }
+
+  options.intermediate_function_tolerance = options.function_tolerance;
+  RefineOutput tight;
+  const RefineSummary tight_summary = RefinePoses(scene.input, options, &tight);
+  EXPECT_LT(summary.total_iterations, tight_summary.total_iterations);
+  for (size_t i = 0; i < tight.world_from_cam.size(); ++i) {
+    EXPECT_LT(
+        RotationDistance(output.world_from_cam[i].rotation, tight.world_from_cam[i].rotation) *
+            180.0 / M_PI,
+        1e-3)
+        << "image " << i;
+  }
+
+  // Without the anneal the finish gives the answer, and its stage stops at function_tolerance.
+  options.finish_noise_multiple = 0.0;
+  options.intermediate_function_tolerance = 1e-3;
+  const RefineSummary no_anneal = RefinePoses(scene.input, options, &output);
+  EXPECT_EQ(no_anneal.passes.back().name, "finish");
+  EXPECT_EQ(no_anneal.passes.back().stages.back().function_tolerance, 1e-8);
+  EXPECT_EQ(no_anneal.passes.front().stages.back().function_tolerance, 1e-3);
+}
+
 // With a quarter of the matches on a copy 0.15 m away (9-23 px off), the nominal-scale finish
 // (a = 100 px²) is still pulled by them; the finish anneal (finish_noise_multiple) solves again at
 // (2 x the basin's median residual)² and discounts them (λR = 0 here: the probe drops this 4°
@@ -641,6 +685,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].stages[].residual_seconds",
       "passes[].stages[].linear_solver_seconds",
       "passes[].stages[].jacobian_evaluations",
+      "passes[].stages[].function_tolerance",
       "passes[].stages[].termination",
       "passes[].stages[].message",
       "passes[].stages[].residual_histogram",
