@@ -24,6 +24,9 @@ struct GncSettings {
   // (RefineOptions::intermediate_function_tolerance).
   double intermediate_function_tolerance = 1e-6;
   bool ends_solve = true;
+  // Ray-time LM only: after an accepted step whose actual decrease beat the model's by half, up
+  // to this many doublings of it while the cost keeps falling (RefineOptions::max_step_doublings).
+  int max_step_doublings = 3;
   // The back-end's threads: the ray-time LM gives the same bits on any count; Ceres is
   // deterministic on 1 (RefineOptions::deterministic).
   int num_threads = 1;

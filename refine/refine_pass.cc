@@ -264,6 +264,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   gnc.function_tolerance = options.function_tolerance;
   gnc.intermediate_function_tolerance = options.intermediate_function_tolerance;
   gnc.ends_solve = !settings.intermediate;
+  gnc.max_step_doublings = options.max_step_doublings;
   if (lm_problem) {
     gnc.residual_norms = [&] {
       return ResidualNorms(input, layout, lm_problem->world_from_cam, state->cameras,

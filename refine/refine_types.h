@@ -149,6 +149,7 @@ struct GncStageSummary {
   double residual_seconds = 0.0;  // Ceres: residual-only evaluation
   double linear_solver_seconds = 0.0;
   int jacobian_evaluations = 0;
+  int step_doublings = 0;  // ray-time LM: accepted doublings of an accepted step
   // The relative cost-change tolerance the stage stopped on (GncSettings::StageTolerance).
   double function_tolerance = 0.0;
   std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
@@ -160,7 +161,8 @@ struct GncStageSummary {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GncStageSummary, loss_scale_px2, iterations, successful_steps,
                                    initial_cost, final_cost, seconds, jacobian_seconds,
                                    residual_seconds, linear_solver_seconds, jacobian_evaluations,
-                                   function_tolerance, termination, message, residual_histogram)
+                                   step_doublings, function_tolerance, termination, message,
+                                   residual_histogram)
 
 struct RayTimeInitSummary {
   std::string mode;              // "auto" or "constant"

@@ -507,6 +507,108 @@ TEST(RayTimeLmSolverTest, AFarRayTimeDoesNotStopTheSolve) {
   EXPECT_LT(AngleBetween(a.rotation, b.rotation) * 180.0 / M_PI, 1e-3);
 }
 
+// A step that is a global similarity (the match term cannot see it) is taken as that similarity,
+// exactly, however large; the plain update is one only to first order. A camera outside the step
+// keeps its pose. For any small step the two updates agree to second order.
+TEST(RayTimeLmSolverTest, ASimilarityStepIsTakenAsASimilarity) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<Rigid3> poses(5);
+  for (Rigid3& pose : poses) {
+    pose.rotation = DrawQuaternion([&] { return u(rng); }).normalized();
+    pose.translation = 3.0 * DrawVector3([&] { return u(rng); });
+  }
+  const std::vector<int> variable = {0, 1, -1, 2, 3};
+  Eigen::Matrix<double, 7, 1> similarity;
+  similarity << 0.1, -0.05, 0.2, 0.1, 0.3, -0.2, 0.1;  // ω (rad), λ = log scale, τ
+  Eigen::VectorXd step(24);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    if (variable[i] >= 0) {
+      step.segment<6>(6 * variable[i]) = SimilarityTangent(poses[i].translation) * similarity;
+    }
+  }
+  EXPECT_LT((SimilarityPart(poses, variable, step) - similarity).norm(), 1e-12);
+
+  std::vector<Rigid3> moved = poses;
+  RetractPoses(variable, step, similarity, &moved);
+  const Eigen::Quaterniond rotation(
+      Eigen::AngleAxisd(similarity.head<3>().norm(), similarity.head<3>().normalized()));
+  const double scale = std::exp(similarity[3]);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    if (variable[i] < 0) {
+      EXPECT_EQ(moved[i].rotation.coeffs(), poses[i].rotation.coeffs());
+      EXPECT_EQ(moved[i].translation, poses[i].translation);
+      continue;
+    }
+    EXPECT_LT(AngleBetween(moved[i].rotation, rotation * poses[i].rotation), 1e-12) << i;
+    EXPECT_LT(
+        (moved[i].translation - (scale * (rotation * poses[i].translation) + similarity.tail<3>()))
+            .norm(),
+        1e-12)
+        << i;
+  }
+  std::vector<Rigid3> plain = poses;
+  RetractPoses(variable, step, Eigen::Matrix<double, 7, 1>::Zero(), &plain);
+  EXPECT_GT((plain[0].translation - moved[0].translation).norm(), 1e-2)
+      << "the plain update is a similarity only to first order";
+
+  Eigen::VectorXd small(24);
+  for (int k = 0; k < small.size(); ++k) small[k] = 1e-4 * u(rng);
+  std::vector<Rigid3> split = poses;
+  RetractPoses(variable, small, SimilarityPart(poses, variable, small), &split);
+  std::vector<Rigid3> linear = poses;
+  RetractPoses(variable, small, Eigen::Matrix<double, 7, 1>::Zero(), &linear);
+  for (size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_LT(AngleBetween(split[i].rotation, linear[i].rotation), 1e-7) << i;
+    EXPECT_LT((split[i].translation - linear[i].translation).norm(), 1e-7) << i;
+    if (variable[i] >= 0) {
+      EXPECT_GT((split[i].translation - poses[i].translation).norm(), 1e-5) << "it moved";
+    }
+  }
+}
+
+// Step doubling (GncSettings::max_step_doublings): at a small arctan scale with a third of the
+// points' matches up to 2 px off, the IRLS steps fall short of the minimum along their direction
+// (the plain solve took 28 steps at a = 1 px², the doubled one 16); the doubled steps reach the
+// same solution (up to the similarity the weak prior holds), a little further down.
+TEST(RayTimeLmSolverTest, DoubledStepsReachTheSameSolutionSooner) {
+  SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
+  const std::vector<Rigid3> start = JitterPoses(scene.ground_truth, 1.0, 0.05, 9);
+  RayTimeLmProblem problem = ExactProblem(scene, start, 2);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (RayTimeLmResidual& r : problem.residuals) {
+    if (r.ray_time % 3 == 0) r.target_undistorted += 2.0 * DrawVector2([&] { return u(rng); });
+  }
+  RayTimeLmProblem doubled = problem;
+  GncSettings settings;
+  settings.scales = {1e2, 1.0};
+  settings.function_tolerance = 1e-12;
+  settings.max_step_doublings = 0;
+  const std::vector<GncStageSummary> plain_stages = SolveGncRayTimeLm(&problem, settings);
+  settings.max_step_doublings = 3;
+  const std::vector<GncStageSummary> doubled_stages = SolveGncRayTimeLm(&doubled, settings);
+  int plain_iterations = 0;
+  int doubled_iterations = 0;
+  int doublings = 0;
+  for (const GncStageSummary& stage : plain_stages) {
+    plain_iterations += stage.iterations;
+    EXPECT_EQ(stage.step_doublings, 0);
+  }
+  for (const GncStageSummary& stage : doubled_stages) {
+    doubled_iterations += stage.iterations;
+    doublings += stage.step_doublings;
+  }
+  EXPECT_GT(doublings, 0);
+  EXPECT_LT(doubled_iterations, plain_iterations);
+  EXPECT_LE(doubled_stages.back().final_cost, plain_stages.back().final_cost * (1 + 1e-9));
+  for (size_t i = 1; i < start.size(); ++i) {
+    const Rigid3 a = doubled.world_from_cam[0].Inverse() * doubled.world_from_cam[i];
+    const Rigid3 b = problem.world_from_cam[0].Inverse() * problem.world_from_cam[i];
+    EXPECT_LT(AngleBetween(a.rotation, b.rotation) * 180.0 / M_PI, 1e-4) << "image " << i;
+  }
+}
+
 // Bit-identical on any thread count (fixed chunks summed in a fixed order), including the ray
 // times.
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {

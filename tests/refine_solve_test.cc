@@ -685,6 +685,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "passes[].stages[].residual_seconds",
       "passes[].stages[].linear_solver_seconds",
       "passes[].stages[].jacobian_evaluations",
+      "passes[].stages[].step_doublings",
       "passes[].stages[].function_tolerance",
       "passes[].stages[].termination",
       "passes[].stages[].message",
