@@ -4,6 +4,10 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include <Eigen/CholmodSupport>
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -15,6 +19,11 @@
 
 #include "core/timing.h"
 #include "refine/ray_geometry.h"
+
+#if defined(__x86_64__)
+// glibc's vector atan for AVX2 (libmvec, since 2.35).
+extern "C" __attribute__((target("avx2"))) __m256d _ZGVdN4v_atan(__m256d x);
+#endif
 
 namespace raytime {
 namespace {
@@ -383,19 +392,27 @@ double SquaredResidual(const RayTimeLmProblem& problem, const State& state,
 
 double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px2, int num_threads,
             const ReducedCameraSystem& system) {
-  const ScaledArctanLoss loss{scale_px2, problem.match_loss_weight};
   std::vector<double> chunk_sums(kNumChunks, 0.0);
   ForEachChunk(num_threads, [&](int chunk) {
+    // The squared norms a block at a time, then their arctans together (SumOfArctans).
+    constexpr int kBlock = 256;
+    double squared_norms[kBlock];
     double sum = 0.0;
     const int begin = system.residual_begin(system.chunk_begin(chunk));
     const int end = system.residual_begin(system.chunk_end(chunk));
-    for (int k = begin; k < end; ++k) {
-      sum += loss.Value(SquaredResidual(problem, state, problem.residuals[k]));
+    for (int block = begin; block < end; block += kBlock) {
+      const int size = std::min(kBlock, end - block);
+      for (int k = 0; k < size; ++k) {
+        squared_norms[k] = SquaredResidual(problem, state, problem.residuals[block + k]);
+      }
+      sum += SumOfArctans(squared_norms, size, scale_px2);
     }
     chunk_sums[chunk] = sum;
   });
   double cost = 0.0;
   for (const double sum : chunk_sums) cost += sum;
+  // ρ(s) = w·a·atan(s/a) (ScaledArctanLoss), summed.
+  cost *= problem.match_loss_weight * scale_px2;
   double prior = 0.0;
   for (const PriorLinearization& p : LinearizePriors(problem, state.world_from_cam)) {
     prior += p.rotation_residual.squaredNorm() + p.centre_residual.squaredNorm();
@@ -1000,6 +1017,39 @@ class RayTimeLmStageBackend : public GncBackend {
 };
 
 }  // namespace
+
+#if defined(__x86_64__)
+namespace {
+
+__attribute__((target("avx2"))) double SumOfArctansAvx2(const double* s, int n, double scale) {
+  const __m256d a = _mm256_set1_pd(scale);
+  __m256d sum = _mm256_setzero_pd();
+  int k = 0;
+  for (; k + 4 <= n; k += 4) {
+    sum = _mm256_add_pd(sum, _ZGVdN4v_atan(_mm256_div_pd(_mm256_loadu_pd(s + k), a)));
+  }
+  if (k < n) {
+    double rest[4] = {0.0, 0.0, 0.0, 0.0};  // atan(0) = 0
+    for (int j = 0; k + j < n; ++j) rest[j] = s[k + j];
+    sum = _mm256_add_pd(sum, _ZGVdN4v_atan(_mm256_div_pd(_mm256_loadu_pd(rest), a)));
+  }
+  double lanes[4];
+  _mm256_storeu_pd(lanes, sum);
+  return (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+}
+
+}  // namespace
+#endif
+
+double SumOfArctans(const double* s, int n, double scale) {
+#if defined(__x86_64__)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  if (avx2) return SumOfArctansAvx2(s, n, scale);
+#endif
+  double sum = 0.0;
+  for (int k = 0; k < n; ++k) sum += std::atan(s[k] / scale);
+  return sum;
+}
 
 Eigen::Matrix<double, 6, 7> SimilarityTangent(const Eigen::Vector3d& centre) {
   Eigen::Matrix<double, 6, 7> tangent = Eigen::Matrix<double, 6, 7>::Zero();

@@ -507,6 +507,24 @@ TEST(RayTimeLmSolverTest, AFarRayTimeDoesNotStopTheSolve) {
   EXPECT_LT(AngleBetween(a.rotation, b.rotation) * 180.0 / M_PI, 1e-3);
 }
 
+// The arctan loss's sum (the vector atan where the CPU has AVX2) against the scalar atan2 of the
+// loss as Ceres writes it: squared norms from 0 to 1e12 px², lengths that are not a multiple of 4.
+TEST(RayTimeLmSolverTest, SumOfArctansIsTheLossSum) {
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> exponent(-6.0, 12.0);
+  for (const int n : {0, 1, 3, 4, 5, 257}) {
+    std::vector<double> s(n);
+    for (double& v : s) v = std::pow(10.0, exponent(rng));
+    if (n > 2) s[1] = 0.0;
+    for (const double a : {0.25, 1.37, 100.0, 1e4}) {
+      double expected = 0.0;
+      for (const double v : s) expected += std::atan2(v, a);
+      EXPECT_NEAR(SumOfArctans(s.data(), n, a), expected, 1e-14 * std::max(1.0, expected))
+          << n << " values, a = " << a;
+    }
+  }
+}
+
 // A step that is a global similarity (the match term cannot see it) is taken as that similarity,
 // exactly, however large; the plain update is one only to first order. A camera outside the step
 // keeps its pose. For any small step the two updates agree to second order.
