@@ -66,6 +66,7 @@ struct PoseUncertaintySettings {
   double gauge_orientation_weight = 1e3;
   double sigma_px = 0.0;  // > 0: use this keypoint noise instead of estimating
   int max_cameras = 600;  // above, not computed (dense O((6n)³))
+  int num_threads = 1;    // the same bits on any count
 };
 
 // At the state held in `problem` (poses and ray times after the solve; the gauge polish applied or

@@ -358,6 +358,7 @@ PoseUncertaintySummary PoseUncertaintyOf(const RefineInput& input, const RefineO
   settings.gauge_position_weight = options.position_weight;
   settings.gauge_orientation_weight = options.gauge_orientation_weight;
   settings.max_cameras = options.uncertainty_max_cameras;
+  settings.num_threads = options.Threads();
   return EstimatePoseUncertainty(problem, settings);
 }
 

@@ -628,7 +628,7 @@ TEST(RayTimeLmSolverTest, DoubledStepsReachTheSameSolutionSooner) {
 }
 
 // Bit-identical on any thread count (fixed chunks summed in a fixed order), including the ray
-// times.
+// times and the pose uncertainty.
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
   SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 4.0, 0.4, 3);
@@ -657,6 +657,15 @@ TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
     for (Eigen::Index o = 0; o < first.solved_observations.ray_times.size(); ++o) {
       ASSERT_EQ(first.solved_observations.ray_times(o), again.solved_observations.ray_times(o))
           << "observation " << o;
+    }
+    // The pose uncertainty too (its two passes run over fixed chunks).
+    ASSERT_TRUE(reference.uncertainty.computed);
+    for (size_t i = 0; i < reference.uncertainty.cameras.size(); ++i) {
+      EXPECT_EQ(summary.uncertainty.cameras[i].rotation_deg,
+                reference.uncertainty.cameras[i].rotation_deg)
+          << threads << " threads, image " << i;
+      EXPECT_EQ(summary.uncertainty.cameras[i].centre, reference.uncertainty.cameras[i].centre)
+          << threads << " threads, image " << i;
     }
   }
 }
