@@ -1060,14 +1060,27 @@ Eigen::Matrix<double, 6, 7> SimilarityTangent(const Eigen::Vector3d& centre) {
   return tangent;
 }
 
+Eigen::Vector3d SimilarityPivot(const std::vector<Rigid3>& poses,
+                                const std::vector<int>& variable) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  int count = 0;
+  for (size_t i = 0; i < poses.size(); ++i) {
+    if (variable[i] < 0) continue;
+    sum += poses[i].translation;
+    ++count;
+  }
+  return count > 0 ? Eigen::Vector3d(sum / count) : sum;
+}
+
 Eigen::Matrix<double, 7, 1> SimilarityPart(const std::vector<Rigid3>& poses,
                                            const std::vector<int>& variable,
                                            const Eigen::VectorXd& step) {
+  const Eigen::Vector3d pivot = SimilarityPivot(poses, variable);
   Eigen::Matrix<double, 7, 7> normal = Eigen::Matrix<double, 7, 7>::Zero();
   Eigen::Matrix<double, 7, 1> rhs = Eigen::Matrix<double, 7, 1>::Zero();
   for (size_t i = 0; i < poses.size(); ++i) {
     if (variable[i] < 0) continue;
-    const Eigen::Matrix<double, 6, 7> tangent = SimilarityTangent(poses[i].translation);
+    const Eigen::Matrix<double, 6, 7> tangent = SimilarityTangent(poses[i].translation - pivot);
     normal.noalias() += tangent.transpose() * tangent;
     rhs.noalias() += tangent.transpose() * step.segment<6>(6 * variable[i]);
   }
@@ -1084,11 +1097,12 @@ void RetractPoses(const std::vector<int>& variable, const Eigen::VectorXd& step,
       angle > 0.0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, omega / angle))
                   : Eigen::Quaterniond::Identity();
   const double scale = std::exp(similarity[3]);
+  const Eigen::Vector3d pivot = SimilarityPivot(*poses, variable);
   for (size_t i = 0; i < poses->size(); ++i) {
     if (variable[i] < 0) continue;
     Rigid3& pose = (*poses)[i];
     const Eigen::Matrix<double, 6, 1> rest =
-        step.segment<6>(6 * variable[i]) - SimilarityTangent(pose.translation) * similarity;
+        step.segment<6>(6 * variable[i]) - SimilarityTangent(pose.translation - pivot) * similarity;
     const Eigen::Vector3d phi = rest.head<3>();
     const double phi_angle = phi.norm();
     if (phi_angle > 0.0) {
@@ -1097,7 +1111,8 @@ void RetractPoses(const std::vector<int>& variable, const Eigen::VectorXd& step,
     }
     pose.translation += rest.tail<3>();
     pose.rotation = (rotation * pose.rotation).normalized();
-    pose.translation = scale * (rotation * pose.translation) + similarity.tail<3>();
+    pose.translation =
+        pivot + scale * (rotation * (pose.translation - pivot)) + similarity.tail<3>();
   }
 }
 

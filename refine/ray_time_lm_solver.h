@@ -106,18 +106,24 @@ void PosePriorJacobian(const Rigid3& world_from_cam, const Rigid3& prior_world_f
 double SumOfArctans(const double* s, int n, double scale);
 
 // A camera's step (rotation φ, then centre) under an infinitesimal global similarity g = (ω, λ,
-// τ) of the scene: φ = ω, δO = ω × O + λ·O + τ.
-Eigen::Matrix<double, 6, 7> SimilarityTangent(const Eigen::Vector3d& centre);
+// τ) about a pivot, o the centre relative to it: φ = ω, δO = ω × o + λ·o + τ.
+Eigen::Matrix<double, 6, 7> SimilarityTangent(const Eigen::Vector3d& o);
 
-// The similarity part of a step of the cameras (6 per camera, at 6·variable[i]; variable[i] < 0:
-// not in the step): least squares over SimilarityTangent.
+// The centroid of the cameras in the step (variable[i] >= 0): the similarity's pivot, so that a
+// prior in far coordinates (a GPS prior's UTM metres) neither conditions the fit badly nor turns
+// the cameras on arcs about a distant origin.
+Eigen::Vector3d SimilarityPivot(const std::vector<Rigid3>& poses, const std::vector<int>& variable);
+
+// The similarity part (about SimilarityPivot) of a step of the cameras (6 per camera, at
+// 6·variable[i]; variable[i] < 0: not in the step): least squares over SimilarityTangent.
 Eigen::Matrix<double, 7, 1> SimilarityPart(const std::vector<Rigid3>& poses,
                                            const std::vector<int>& variable,
                                            const Eigen::VectorXd& step);
 
 // poses ⊕ step with the step's similarity part applied as a similarity: the rest taken as before
-// (rotation by its exponential, centre added), then R ← Exp(ω)·R, O ← e^λ·Exp(ω)·O + τ. To first
-// order this is the plain update; along the 7 directions no match sees it is exact. Why: the match
+// (rotation by its exponential, centre added), then R ← Exp(ω)·R, O ← p + e^λ·Exp(ω)·(O - p) + τ
+// with p the poses' SimilarityPivot. To first order this is the plain update; along the 7
+// directions no match sees it is exact. Why: the match
 // term is invariant under a global similarity (the ray times scaled with it), so along it only the
 // weak prior terms curve the cost, and a linear step along it bends the shape by its second order,
 // which the matches pull back: the solve crept along the similarity (Herz-Jesus-P8 8°: the anneal
