@@ -13,10 +13,8 @@
 #include "core/json_fields.h"
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "refine/fixed_chunks.h"
 #include "refine/ray_time_lm_solver.h"
-
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 namespace raytime {
 namespace {
@@ -96,7 +94,7 @@ Linearized Linearize(const RayTimeLmProblem& problem, const std::vector<Eigen::M
 }
 
 // Sums of 6x6 blocks of a 6n x 6n matrix, kept per block in the order first touched (a chunk's
-// share of S or M); Add(dense) adds them in that order, so a sum over chunks in chunk order is
+// share of S or M); AddTo(dense) adds them in that order, so a sum over chunks in chunk order is
 // the same whatever thread ran which chunk.
 class BlockSums {
  public:
@@ -124,32 +122,11 @@ class BlockSums {
   std::vector<Block> blocks_;
 };
 
-constexpr int kNoiseChunks = 8;
-
-// Splits [0, n) into kNoiseChunks ranges of about equal weight (weight_begin: prefix sums).
-std::vector<int> ChunkBounds(const std::vector<int>& weight_begin) {
-  const int n = static_cast<int>(weight_begin.size()) - 1;
-  std::vector<int> bounds(kNoiseChunks + 1, n);
-  bounds[0] = 0;
-  int i = 0;
-  for (int k = 1; k < kNoiseChunks; ++k) {
-    const double target = double(weight_begin[n]) * k / kNoiseChunks;
-    while (i < n && weight_begin[i] < target) ++i;
-    bounds[k] = i;
-  }
-  return bounds;
-}
-
-template <typename Body>
-void ForEachNoiseChunk(int num_threads, const Body& body) {
-  tbb::task_arena arena(std::max(1, num_threads));
-  arena.execute([&] { tbb::parallel_for(0, kNoiseChunks, [&](int chunk) { body(chunk); }); });
-}
-
-// Two passes, each over fixed chunks (the same bits on any thread count): over the ray times, S
-// and each ray time's couplings H_tc and curvature H_tt; then over the observations, each one's
-// noise blocks from the residuals it moves (as source and as target), and M. Residuals are sorted
-// by ray time (BuildRayTimeLmProblem).
+// Two passes, each over fixed chunks (fixed_chunks.h: the same bits on any thread count): over the
+// ray times, S and each ray time's couplings H_tc and curvature H_tt; then over the observations,
+// each one's noise blocks from the residuals it moves (as source and as target; each residual is
+// linearized again there, for its two observations, rather than kept: 45 doubles a residual), and
+// M. Residuals are sorted by ray time (BuildRayTimeLmProblem).
 ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
                                            const std::vector<int>& variable, int num_variable,
                                            double scale_px2, int num_threads) {
@@ -195,10 +172,10 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
     double weighted_squares = 0.0, weighted_expected = 0.0;
     int num_residuals = 0, num_ray_times = 0;
   };
-  std::vector<Sums> sums(kNoiseChunks);
-  std::vector<BlockSums> s_blocks(kNoiseChunks, BlockSums(num_variable));
-  const std::vector<int> group_chunks = ChunkBounds(group_begin);
-  ForEachNoiseChunk(num_threads, [&](int chunk) {
+  std::vector<Sums> sums(kNumFixedChunks);
+  std::vector<BlockSums> s_blocks(kNumFixedChunks, BlockSums(num_variable));
+  const std::vector<int> group_chunks = FixedChunkBounds(group_begin);
+  ForEachFixedChunk(num_threads, [&](int chunk) {
     Sums& sum = sums[chunk];
     BlockSums& S = s_blocks[chunk];
     for (int g = group_chunks[chunk]; g < group_chunks[chunk + 1]; ++g) {
@@ -257,9 +234,9 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
       observation_residual[next[residuals[k].target_observation]++] = k;
     }
   }
-  std::vector<BlockSums> m_blocks(kNoiseChunks, BlockSums(num_variable));
-  const std::vector<int> observation_chunks = ChunkBounds(observation_begin);
-  ForEachNoiseChunk(num_threads, [&](int chunk) {
+  std::vector<BlockSums> m_blocks(kNumFixedChunks, BlockSums(num_variable));
+  const std::vector<int> observation_chunks = FixedChunkBounds(observation_begin);
+  ForEachFixedChunk(num_threads, [&](int chunk) {
     BlockSums& M = m_blocks[chunk];
     CameraBlocks62 b;
     CameraBlocks62 noise;
@@ -295,7 +272,7 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
   const int n = 6 * num_variable;
   out.S = Eigen::MatrixXd::Zero(n, n);
   out.M = Eigen::MatrixXd::Zero(n, n);
-  for (int chunk = 0; chunk < kNoiseChunks; ++chunk) {
+  for (int chunk = 0; chunk < kNumFixedChunks; ++chunk) {
     s_blocks[chunk].AddTo(&out.S);
     m_blocks[chunk].AddTo(&out.M);
     out.weighted_squares += sums[chunk].weighted_squares;
@@ -318,8 +295,8 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
 }
 
 // The gauge polish, linearized: P = I − G·F with G the 7 similarity generators of the variable
-// cameras (rotation about the centroid, translation, scale) and F = (GᵀWG)⁺GᵀW the weighted fit of
-// a similarity to a displacement, W the polish's weights per camera.
+// cameras (SimilarityTangent about their centroid, SimilarityPivot) and F = (GᵀWG)⁺GᵀW the weighted
+// fit of a similarity to a displacement, W the polish's weights per camera.
 struct GaugeFit {
   Eigen::MatrixXd generators;  // G, 6n × 7
   Eigen::MatrixXd fit;         // F, 7 × 6n
@@ -328,24 +305,13 @@ struct GaugeFit {
 GaugeFit LinearizedGaugePolish(const RayTimeLmProblem& problem, const std::vector<int>& variable,
                                int num_variable, const PoseUncertaintySettings& settings) {
   const int n = 6 * num_variable;
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  for (size_t i = 0; i < variable.size(); ++i) {
-    if (variable[i] >= 0) centroid += problem.world_from_cam[i].translation;
-  }
-  centroid /= num_variable;
+  const Eigen::Vector3d pivot = SimilarityPivot(problem.world_from_cam, variable);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, 7);
   Eigen::VectorXd w(n);
   for (size_t i = 0; i < variable.size(); ++i) {
     const int c = variable[i];
     if (c < 0) continue;
-    const Eigen::Vector3d o = problem.world_from_cam[i].translation - centroid;
-    for (int j = 0; j < 3; ++j) {
-      const Eigen::Vector3d axis = Eigen::Vector3d::Unit(j);
-      G.block<3, 1>(6 * c, j) = axis;               // δφ = ω
-      G.block<3, 1>(6 * c + 3, j) = axis.cross(o);  // δO = ω × O
-      G.block<3, 1>(6 * c + 3, 3 + j) = axis;       // δO = τ
-    }
-    G.block<3, 1>(6 * c + 3, 6) = o;  // δO = s·O
+    G.middleRows<6>(6 * c) = SimilarityTangent(problem.world_from_cam[i].translation - pivot);
     w.segment<3>(6 * c).setConstant(settings.gauge_orientation_weight);
     w.segment<3>(6 * c + 3).setConstant(settings.gauge_position_weight);
   }

@@ -1,8 +1,6 @@
 #include "refine/ray_time_lm_solver.h"
 
 #include <spdlog/spdlog.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #if defined(__x86_64__)
 #include <immintrin.h>
@@ -18,6 +16,7 @@
 #include <string>
 
 #include "core/timing.h"
+#include "refine/fixed_chunks.h"
 #include "refine/ray_geometry.h"
 
 #if defined(__x86_64__)
@@ -47,10 +46,8 @@ constexpr double kGradientTolerance = 1e-10;
 // factor: 1 is a model that is exact along the step, 2 a cost that is linear along it.
 constexpr double kStepDoublingMinRelativeDecrease = 1.5;
 constexpr double kParameterTolerance = 1e-8;
-// The linearization is split into this many chunks of ray times whatever the thread count, each
-// summed into its own copy of the reduced system, and the copies are added in chunk order: the
-// sums, hence the solve, are bit-identical on any number of threads.
-constexpr int kNumChunks = 8;
+// The linearization, the cost and the back-substitution run over fixed chunks of ray times
+// (fixed_chunks.h), each linearization chunk into its own copy of the reduced system.
 
 Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   Eigen::Matrix3d m;
@@ -211,16 +208,8 @@ class ReducedCameraSystem {
     }
 
     // Chunks of ray times of about equal residual counts.
-    const size_t num_residuals = problem.residuals.size();
-    chunk_begin_.assign(kNumChunks + 1, num_ray_times);
-    chunk_begin_[0] = 0;
-    int t = 0;
-    for (int k = 1; k < kNumChunks; ++k) {
-      const size_t target = num_residuals * k / kNumChunks;
-      while (t < num_ray_times && static_cast<size_t>(residual_begin_[t]) < target) ++t;
-      chunk_begin_[k] = t;
-    }
-    partials_.resize(kNumChunks);
+    chunk_begin_ = FixedChunkBounds(residual_begin_);
+    partials_.resize(kNumFixedChunks);
   }
 
   int num_variables() const { return num_variables_; }
@@ -320,12 +309,6 @@ class ReducedCameraSystem {
   std::vector<Partial> partials_;
 };
 
-template <typename Body>
-void ForEachChunk(int num_threads, const Body& body) {
-  tbb::task_arena arena(std::max(1, num_threads));
-  arena.execute([&] { tbb::parallel_for(0, kNumChunks, [&](int chunk) { body(chunk); }); });
-}
-
 // The current point: poses (with their rotation matrices, row-major, and centres as plain arrays
 // for the hot loops) and ray times.
 struct State {
@@ -392,8 +375,8 @@ double SquaredResidual(const RayTimeLmProblem& problem, const State& state,
 
 double Cost(const RayTimeLmProblem& problem, const State& state, double scale_px2, int num_threads,
             const ReducedCameraSystem& system) {
-  std::vector<double> chunk_sums(kNumChunks, 0.0);
-  ForEachChunk(num_threads, [&](int chunk) {
+  std::vector<double> chunk_sums(kNumFixedChunks, 0.0);
+  ForEachFixedChunk(num_threads, [&](int chunk) {
     // The squared norms a block at a time, then their arctans together (SumOfArctans).
     constexpr int kBlock = 256;
     double squared_norms[kBlock];
@@ -759,7 +742,7 @@ void Solver::BuildReducedSystem(const ScaledArctanLoss& loss, double radius) {
   couplings_.resize(system_.num_group_entries());
   ray_time_gradient_.resize(state_.ray_times.size());
   ray_time_hessian_.resize(state_.ray_times.size());
-  ForEachChunk(num_threads_, [&](int chunk) { LinearizeChunk(loss, radius, chunk); });
+  ForEachFixedChunk(num_threads_, [&](int chunk) { LinearizeChunk(loss, radius, chunk); });
 
   total_.Reset(system_.num_blocks(), num_variables);
   for (const ReducedCameraSystem::Partial& partial : partials) {
@@ -809,8 +792,8 @@ double Solver::BackSubstitute(double radius, const Eigen::VectorXd& camera_step,
                               std::vector<double>* ray_time_step) const {
   ray_time_step->resize(state_.ray_times.size());
   const double* steps = camera_step.data();
-  std::vector<double> chunk_sums(kNumChunks, 0.0);
-  ForEachChunk(num_threads_, [&](int chunk) {
+  std::vector<double> chunk_sums(kNumFixedChunks, 0.0);
+  ForEachFixedChunk(num_threads_, [&](int chunk) {
     double sum = 0.0;  // Σ (D_t δt² - g_t δt)
     for (int t = system_.chunk_begin(chunk); t < system_.chunk_end(chunk); ++t) {
       const int* group = system_.group_begin(t);

@@ -123,11 +123,11 @@ Eigen::Matrix<double, 7, 1> SimilarityPart(const std::vector<Rigid3>& poses,
 // poses ⊕ step with the step's similarity part applied as a similarity: the rest taken as before
 // (rotation by its exponential, centre added), then R ← Exp(ω)·R, O ← p + e^λ·Exp(ω)·(O - p) + τ
 // with p the poses' SimilarityPivot. To first order this is the plain update; along the 7
-// directions no match sees it is exact. Why: the match
-// term is invariant under a global similarity (the ray times scaled with it), so along it only the
-// weak prior terms curve the cost, and a linear step along it bends the shape by its second order,
-// which the matches pull back: the solve crept along the similarity (Herz-Jesus-P8 8°: the anneal
-// took 40 steps, each 99.8 % similarity, at a tenth of the model's length).
+// directions no match sees it is exact. Why: the match term is invariant under a global
+// similarity (the ray times scaled with it), so along it only the weak prior terms curve the
+// cost, and a linear step along it bends the shape by its second order, which the matches pull
+// back: the solve crept along the similarity (Herz-Jesus-P8 8°: the anneal took 40 steps, each
+// 99.8 % similarity, at a tenth of the model's length).
 void RetractPoses(const std::vector<int>& variable, const Eigen::VectorXd& step,
                   const Eigen::Matrix<double, 7, 1>& similarity, std::vector<Rigid3>* poses);
 
