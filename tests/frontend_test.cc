@@ -54,20 +54,37 @@ ByteDescriptors RandomByteDescriptors(int rows, int dim, std::mt19937* rng) {
 // (descriptor_matching.h: dot · 1/|a| · 1/|b| in float, a from the first image, for both
 // directions).
 Eigen::MatrixXf ReferenceSimilarities(const ByteDescriptors& a, const ByteDescriptors& b) {
-  const auto inverse_norm = [](const ByteDescriptors& d, int i) {
-    const int64_t sum = d.row(i).cast<int64_t>().squaredNorm();
+  // Plain loops over the bytes with each row's norm computed once: the reference runs unoptimized
+  // under the sanitizers, where Eigen expressions per pair took a minute.
+  const auto squared_norms = [](const ByteDescriptors& d) {
+    std::vector<int64_t> out(d.rows(), 0);
+    for (int i = 0; i < d.rows(); ++i) {
+      for (int k = 0; k < d.cols(); ++k) out[i] += int64_t{d(i, k)} * d(i, k);
+    }
+    return out;
+  };
+  const auto inverse_norm = [](int64_t sum) {
     return sum > 0 ? static_cast<float>(1.0 / std::sqrt(static_cast<double>(sum))) : 0.0f;
   };
+  const std::vector<int64_t> a2 = squared_norms(a), b2 = squared_norms(b);
+  const int dim = static_cast<int>(a.cols());
   Eigen::MatrixXf out(a.rows(), b.rows());
+  double worst = 0.0;  // the float similarity against the cosine in double
   for (int i = 0; i < a.rows(); ++i) {
+    const uint8_t* ai = &a(i, 0);
     for (int j = 0; j < b.rows(); ++j) {
-      const int64_t dot = a.row(i).cast<int64_t>().dot(b.row(j).cast<int64_t>());
-      out(i, j) = static_cast<float>(dot) * inverse_norm(a, i) * inverse_norm(b, j);
-      // The similarity is the cosine of the two descriptors to float precision.
-      const double norms = a.row(i).cast<double>().norm() * b.row(j).cast<double>().norm();
-      EXPECT_NEAR(out(i, j), norms > 0 ? static_cast<double>(dot) / norms : 0.0, 1e-6);
+      const uint8_t* bj = &b(j, 0);
+      int64_t dot = 0;
+      for (int k = 0; k < dim; ++k) dot += int64_t{ai[k]} * bj[k];
+      out(i, j) = static_cast<float>(dot) * inverse_norm(a2[i]) * inverse_norm(b2[j]);
+      const double norms =
+          std::sqrt(static_cast<double>(a2[i])) * std::sqrt(static_cast<double>(b2[j]));
+      const double cosine = norms > 0 ? static_cast<double>(dot) / norms : 0.0;
+      worst = std::max(worst, std::abs(out(i, j) - cosine));
     }
   }
+  // The similarity is the cosine of the two descriptors to float precision.
+  EXPECT_LT(worst, 1e-6);
   return out;
 }
 
@@ -176,6 +193,14 @@ TEST(MatchingKernel, GuidedMatchingFindsTheAllPairsMatches) {
   const int n = static_cast<int>(a.rows()), m = static_cast<int>(b.rows());
   Eigen::MatrixXf candidates =
       Eigen::MatrixXf::Constant(n, m, -std::numeric_limits<float>::infinity());
+  // Each second-view point's gradient term, once (the scan runs unoptimized under the sanitizers).
+  std::vector<float> g2(m), u2(m), v2(m);
+  for (int j = 0; j < m; ++j) {
+    const Eigen::Vector3d g = Fn.transpose() * Eigen::Vector3d(x2(j, 0), x2(j, 1), 1.0);
+    g2[j] = static_cast<float>(g.x() * g.x() + g.y() * g.y());
+    u2[j] = static_cast<float>(x2(j, 0));
+    v2[j] = static_cast<float>(x2(j, 1));
+  }
   int num_candidates = 0;
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector3d l = Fn * Eigen::Vector3d(x1(i, 0), x1(i, 1), 1.0);
@@ -183,12 +208,8 @@ TEST(MatchingKernel, GuidedMatchingFindsTheAllPairsMatches) {
                 l2 = static_cast<float>(l.z());
     const float bound = e2 * (l0 * l0 + l1 * l1);
     for (int j = 0; j < m; ++j) {
-      const Eigen::Vector3d x(x2(j, 0), x2(j, 1), 1.0);
-      const Eigen::Vector3d g = Fn.transpose() * x;
-      const float g2 = static_cast<float>(g.x() * g.x() + g.y() * g.y());
-      const float r =
-          std::fma(l0, static_cast<float>(x.x()), std::fma(l1, static_cast<float>(x.y()), l2));
-      if (r * r < std::fma(e2, g2, bound)) {
+      const float r = std::fma(l0, u2[j], std::fma(l1, v2[j], l2));
+      if (r * r < std::fma(e2, g2[j], bound)) {
         candidates(i, j) = similarities(i, j);
         ++num_candidates;
       }
