@@ -6,6 +6,9 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
+#include "core/error.h"
+#include "formats/capture.h"
+
 namespace raytime {
 
 std::string HtmlEscape(const std::string& text) {
@@ -93,10 +96,23 @@ std::string Base64(const std::vector<unsigned char>& bytes) {
 }  // namespace
 
 std::string ThumbnailDataUri(const std::string& path, int width) {
-  cv::Mat image = cv::imread(path, cv::IMREAD_REDUCED_COLOR_4);
-  if (image.empty() || width <= 0) return std::string();
-  // A small image (a render at a quarter of the photo's size) is read whole instead.
-  if (image.cols < width) image = cv::imread(path, cv::IMREAD_COLOR);
+  if (width <= 0) return std::string();
+  // The strongest reduction the decoder offers (a JPEG's DCT scaling by 1/2, 1/4 or 1/8) that
+  // still leaves `width` pixels: a 1920-pixel frame decodes at 1/8, a 720-pixel one at 1/4, a
+  // small render whole.
+  int reduction = 1;
+  try {
+    const int full_width = ReadImageSize(path).width;
+    while (reduction < 8 && full_width / (2 * reduction) >= width) reduction *= 2;
+  } catch (const InputError&) {
+    return std::string();
+  }
+  const int flag = reduction == 8   ? cv::IMREAD_REDUCED_COLOR_8
+                   : reduction == 4 ? cv::IMREAD_REDUCED_COLOR_4
+                   : reduction == 2 ? cv::IMREAD_REDUCED_COLOR_2
+                                    : cv::IMREAD_COLOR;
+  cv::Mat image = cv::imread(path, flag);
+  if (image.empty()) return std::string();
   if (image.cols > width) {
     const int height = std::max(
         1, static_cast<int>(std::lround(static_cast<double>(image.rows) * width / image.cols)));

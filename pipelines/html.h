@@ -30,8 +30,9 @@ std::string JsonText(const nlohmann::json& json, const char* key,
                      const std::string& otherwise = std::string());
 
 // The image at `path` scaled to `width` pixels wide, as a JPEG data URI ("" when it cannot be
-// read: the page says so instead of failing). Decoded at a quarter of its size first (a JPEG's
-// DCT scaling: a 1920×1440 frame in a few milliseconds), whole when that is narrower than `width`.
+// read: the page says so instead of failing). Decoded at the smallest of 1/8, 1/4, 1/2 and full
+// size that is at least `width` wide (a JPEG's DCT scaling: a 1920×1440 frame in a few
+// milliseconds).
 std::string ThumbnailDataUri(const std::string& path, int width);
 
 // The CSS every raytime page shares (tables, status colours).

@@ -1,6 +1,7 @@
 #include "pipelines/run_report.h"
 
 #include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
@@ -189,10 +190,14 @@ RunPage ReadRunPage(const std::string& workdir, const json& run) {
   page.names.assign(unique.begin(), unique.end());
   std::sort(page.names.begin(), page.names.end(), NaturalNameLess);
   if (!page.images.image_root.empty()) {
-    for (const std::string& name : page.names) {
-      page.thumbnails[name] =
-          ThumbnailDataUri((fs::path(page.images.image_root) / name).string(), kThumbnailWidth);
-    }
+    // Decoding is most of a page's time (a rerun with nothing to do: 0.6 of its 1.1 s on the
+    // 193-frame desk), one image per task.
+    std::vector<std::string> uris(page.names.size());
+    tbb::parallel_for(size_t{0}, page.names.size(), [&](size_t i) {
+      uris[i] = ThumbnailDataUri((fs::path(page.images.image_root) / page.names[i]).string(),
+                                 kThumbnailWidth);
+    });
+    for (size_t i = 0; i < page.names.size(); ++i) page.thumbnails[page.names[i]] = uris[i];
   }
   return page;
 }

@@ -10,12 +10,16 @@
 #include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "pipelines/campaign_report.h"
+#include "pipelines/html.h"
 #include "pipelines/sweep_row.h"
+#include "tests/temp_dir.h"
 
 namespace raytime {
 namespace {
@@ -526,6 +530,53 @@ TEST_F(SweepFileTest, SplatResultsSurviveTheRoundTrip) {
   EXPECT_NE(ReadError(Write(R"([{"run": "r", "status": "ok", "splat": {"splat": {"prior": 3}}}])"))
                 .find("splat.splat.prior is not an object"),
             std::string::npos);
+}
+
+// The run page's thumbnails: `width` wide at the image's aspect whichever reduction the decoder
+// used (1/8 of a 1920-pixel frame, 1/4 of a 720-pixel one, whole for a small image, which is not
+// enlarged), the colours kept, and "" for a file that is no image.
+TEST(RunPageThumbnail, WidthAspectAndColourWhateverTheDecodersReduction) {
+  TempDir dir("thumbnail");
+  const auto decode = [](const std::string& uri) {
+    const std::string prefix = "data:image/jpeg;base64,";
+    EXPECT_EQ(uri.rfind(prefix, 0), 0u);
+    std::string base64 = uri.substr(prefix.size());
+    const std::string alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::vector<unsigned char> bytes;
+    unsigned value = 0;
+    int bits = 0;
+    for (const char c : base64) {
+      if (c == '=') break;
+      value = (value << 6) | static_cast<unsigned>(alphabet.find(c));
+      bits += 6;
+      if (bits >= 8) {
+        bits -= 8;
+        bytes.push_back(static_cast<unsigned char>((value >> bits) & 0xFF));
+      }
+    }
+    return cv::imdecode(bytes, cv::IMREAD_COLOR);
+  };
+  for (const auto& [width, height] : {std::pair{1920, 1440}, {720, 960}, {100, 50}}) {
+    SCOPED_TRACE(std::to_string(width) + "x" + std::to_string(height));
+    // Blue-green-red (OpenCV's order): a thumbnail decoded in the wrong channel order or from the
+    // wrong file fails the colour check.
+    const cv::Mat image(height, width, CV_8UC3, cv::Scalar(200, 120, 40));
+    const std::string path = dir / (std::to_string(width) + ".jpg");
+    ASSERT_TRUE(cv::imwrite(path, image));
+    const cv::Mat thumbnail = decode(ThumbnailDataUri(path, 160));
+    ASSERT_FALSE(thumbnail.empty());
+    const int expected_width = std::min(width, 160);
+    EXPECT_EQ(thumbnail.cols, expected_width);
+    EXPECT_NEAR(thumbnail.rows, static_cast<double>(height) * expected_width / width, 0.5);
+    const cv::Scalar mean = cv::mean(thumbnail);
+    EXPECT_NEAR(mean[0], 200, 6);
+    EXPECT_NEAR(mean[1], 120, 6);
+    EXPECT_NEAR(mean[2], 40, 6);
+  }
+  const std::string text = dir / "notes.jpg";
+  std::ofstream(text) << "not an image";
+  EXPECT_EQ(ThumbnailDataUri(text, 160), "");
+  EXPECT_EQ(ThumbnailDataUri(dir / "missing.jpg", 160), "");
 }
 
 }  // namespace
