@@ -99,13 +99,13 @@ std::string ThumbnailDataUri(const std::string& path, int width) {
   if (width <= 0) return std::string();
   // The strongest reduction the decoder offers (a JPEG's DCT scaling by 1/2, 1/4 or 1/8) that
   // still leaves `width` pixels: a 1920-pixel frame decodes at 1/8, a 720-pixel one at 1/4, a
-  // small render whole.
+  // small render whole. A file whose header ReadImageSize does not know (neither JPEG nor PNG) is
+  // left to the decoder whole.
   int reduction = 1;
   try {
     const int full_width = ReadImageSize(path).width;
     while (reduction < 8 && full_width / (2 * reduction) >= width) reduction *= 2;
   } catch (const InputError&) {
-    return std::string();
   }
   const int flag = reduction == 8   ? cv::IMREAD_REDUCED_COLOR_8
                    : reduction == 4 ? cv::IMREAD_REDUCED_COLOR_4

@@ -534,7 +534,8 @@ TEST_F(SweepFileTest, SplatResultsSurviveTheRoundTrip) {
 
 // The run page's thumbnails: `width` wide at the image's aspect whichever reduction the decoder
 // used (1/8 of a 1920-pixel frame, 1/4 of a 720-pixel one, whole for a small image, which is not
-// enlarged), the colours kept, and "" for a file that is no image.
+// enlarged), the colours kept, another format than JPEG and PNG decoded whole, and "" for a file
+// that is no image.
 TEST(RunPageThumbnail, WidthAspectAndColourWhateverTheDecodersReduction) {
   TempDir dir("thumbnail");
   const auto decode = [](const std::string& uri) {
@@ -573,6 +574,14 @@ TEST(RunPageThumbnail, WidthAspectAndColourWhateverTheDecodersReduction) {
     EXPECT_NEAR(mean[1], 120, 6);
     EXPECT_NEAR(mean[2], 40, 6);
   }
+  // A format whose header ReadImageSize does not read is decoded whole.
+  const cv::Mat small(30, 40, CV_8UC3, cv::Scalar(200, 120, 40));
+  const std::string bitmap = dir / "small.bmp";
+  ASSERT_TRUE(cv::imwrite(bitmap, small));
+  const cv::Mat bitmap_thumbnail = decode(ThumbnailDataUri(bitmap, 160));
+  ASSERT_FALSE(bitmap_thumbnail.empty());
+  EXPECT_EQ(bitmap_thumbnail.cols, 40);
+  EXPECT_EQ(bitmap_thumbnail.rows, 30);
   const std::string text = dir / "notes.jpg";
   std::ofstream(text) << "not an image";
   EXPECT_EQ(ThumbnailDataUri(text, 160), "");
