@@ -946,10 +946,11 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
         // Doubling it while the cost keeps falling goes that way in one iteration; each try costs
         // one cost evaluation, a quarter of an iteration.
         if (relative_decrease > kStepDoublingMinRelativeDecrease) {
+          const State& step_start = candidate;  // swapped out above: the point the step left
           double alpha = 1.0;
           for (int d = 0; d < max_step_doublings; ++d) {
             alpha *= 2.0;
-            StepFrom(candidate, camera_step, similarity, ray_time_step, alpha, &trial);
+            StepFrom(step_start, camera_step, similarity, ray_time_step, alpha, &trial);
             const double trial_cost = timed_cost(trial);
             if (!(trial_cost < cost)) break;
             std::swap(state_, trial);
