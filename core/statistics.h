@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <utility>
 #include <vector>
 
@@ -55,6 +56,16 @@ inline double FiniteMean(const std::vector<double>& values) {
     }
   }
   return count ? sum / count : 0.0;
+}
+
+// The nearest-rank q-quantile (0 < q <= 1): the ceil(q n)-th smallest value; if_empty for none.
+inline double NearestRankQuantile(std::vector<double> values, double q, double if_empty) {
+  if (values.empty()) return if_empty;
+  const double rank = std::ceil(q * static_cast<double>(values.size()));
+  const size_t index = static_cast<size_t>(std::clamp(rank, 1.0, double(values.size()))) - 1;
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(index),
+                   values.end());
+  return values[index];
 }
 
 }  // namespace raytime

@@ -24,6 +24,12 @@ struct Warning {
   static Warning FromJson(const nlohmann::json& json);
 };
 
+// ToJson / FromJson for nlohmann's conversions (a summary struct holding Warnings).
+inline void to_json(nlohmann::json& json, const Warning& warning) { json = warning.ToJson(); }
+inline void from_json(const nlohmann::json& json, Warning& warning) {
+  warning = Warning::FromJson(json);
+}
+
 using Warnings = std::vector<Warning>;
 
 nlohmann::json WarningsToJson(const Warnings& warnings);

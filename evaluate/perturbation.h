@@ -35,8 +35,9 @@ struct PerturbationOptions {
     v("level_deg", level_deg, "Rotation per frame, degrees (§4.8 ladder: 1, 2, 4, ... 64)",
       NonNegative(), AtMost(180));
     v("translation_per_deg", translation_per_deg,
-      "Centre displacement per degree, in translation_unit (1.25 % of the scene per degree)",
-      NonNegative());
+      "Centre displacement per degree, in translation_unit (1.25 % of the scene per degree; at "
+      "most 1 scene distance or 1 km per degree)",
+      NonNegative(), AtMost(1000));
     v("translation_unit", translation_unit,
       "Unit of translation_per_deg: fraction of the camera-to-scene distance, or metres",
       OneOf({"scene_fraction", "metres"}));
@@ -44,6 +45,13 @@ struct PerturbationOptions {
       "Median camera-to-scene distance, metres; 0 estimates it from the ground truth",
       NonNegative());
     v("seed", seed, "Seed of the perturbation draws");
+  }
+  // A perturbation beyond a scene distance per degree moves the cameras out of the scene: no
+  // prior, and at 1e308 not even a number.
+  void CheckRelations(const Requirement& require) const {
+    require(translation_unit != "scene_fraction" || translation_per_deg <= 1.0,
+            "translation_per_deg " + std::to_string(translation_per_deg) +
+                " scene distances per degree moves every camera out of the scene (at most 1)");
   }
 };
 

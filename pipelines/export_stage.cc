@@ -38,24 +38,19 @@ struct ExportStageOptions {
   // protocol initializes every source from the same random points, §4.5); else a pose set name.
   std::string points_from = "auto";
   TrainerExportOptions trainer;
-  // A refined set's images most of whose pairs its solve left unexplained (the inconsistent-pairs
-  // guardrail names them): a trainer given a frame the solve did not place learns a wrong view.
-  bool leave_out_unexplained_images = true;
-  // A refined set's frames that moved far more than the others and fit their matches worse
-  // (frame_doubts: wrong intrinsics, say), and the images of parts of the match graph the pair
-  // removal nearly cut loose (loose_parts): their poses are likely wrong.
+  // A refined set's frames the refine stage doubted (refine/frame_verdicts.h: its matches do not
+  // hold it and no trusted prior places it, its pairs are unexplained, its intrinsics look wrong,
+  // ...): a trainer given a frame the solve did not place learns a wrong view. Frames no solve
+  // refined, or whose pose a guardrail returned as the prior's, are never exported as refined.
   bool leave_out_doubted_images = true;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("poses", poses, "Pose sets to write (e.g. refined)", NonEmpty());
-    v("leave_out_unexplained_images", leave_out_unexplained_images,
-      "Leave out of a refined set's export the images most of whose pairs the solve left "
-      "unexplained (inconsistent_pairs names them: their poses are likely wrong)");
     v("leave_out_doubted_images", leave_out_doubted_images,
-      "Leave out of a refined set's export the frames the refine stage doubted: moved far more "
-      "than the others and fit their matches worse (frame_doubts), or not held to the rest by the "
-      "matches (loose_parts)");
+      "Leave out of a refined set's export the frames the refine stage doubted (their verdict's "
+      "reason says why: not held by the matches nor placed by a trusted prior, pairs "
+      "unexplained, wrong intrinsics, ...); frames no solve refined are left out always");
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
@@ -96,70 +91,77 @@ std::string ImagePrefixFor(const std::string& path, const std::string& image_roo
   return prefix.back() == '/' ? prefix : prefix + "/";
 }
 
-// Erases the images listed in `reader`'s JSON document `key` from `poses`; the erased names.
-std::vector<std::string> EraseListed(const Hdf5Reader& reader, const char* key, PoseSet* poses) {
-  std::vector<std::string> erased;
-  if (!reader.HasJson(key)) return erased;
-  for (const auto& entry : reader.ReadJson(key)) {
-    const std::string image = entry.get<std::string>();
-    if (poses->world_from_cam.erase(image)) erased.push_back(image);
-  }
-  return erased;
+// Verdict reasons of frames no solve refined: their pose, if any, is the prior's.
+bool NotRefined(const std::string& reason) {
+  return reason == "returned_prior" || reason == "unmatched" || reason == "not_solved" ||
+         reason == "non_finite";
 }
 
-// The poses of set `name` that may be exported under its name. A refined set leaves out the
-// images a guardrail returned unrefined (users train on these files, and a prior pose under the
-// name "refined" is a quiet wrong answer) and, when asked, those most of whose pairs its solve
-// left unexplained. Each left-out image is named in a warning; a set with nothing left is an
-// error, so the run fails instead of writing an empty model.
+// The refine stage's frame verdicts beside pose set `name` (kFrameVerdictsJson), by image name;
+// empty for a set without them (not refined).
+nlohmann::json VerdictsOf(const Hdf5Reader& reader) {
+  if (!reader.HasJson(kFrameVerdictsJson)) return nlohmann::json::object();
+  const nlohmann::json verdicts = reader.ReadJson(kFrameVerdictsJson);
+  if (!verdicts.is_object()) {
+    throw InputError(reader.path() + ": /json/" + kFrameVerdictsJson +
+                     " is not an object of frame verdicts; run the refine stage again");
+  }
+  return verdicts;
+}
+
+// The poses of set `name` that may be exported under its name, and `verdicts` its frame verdicts
+// (for the files beside them). A refined set leaves out the frames no solve refined (a prior pose
+// under the name "refined" is a quiet wrong answer) and, when asked, the doubted ones; each
+// left-out frame is named in a warning, with its reason. A set with nothing left is an error, so
+// the run fails instead of writing an empty model; a non-finite pose is an error whatever its set.
 PoseSet ExportablePoses(const StageContext& context, const std::string& name,
-                        bool leave_out_unexplained, bool leave_out_doubted, Warnings* warnings) {
+                        bool leave_out_doubted, nlohmann::json* verdicts, Warnings* warnings) {
   const Hdf5Reader reader(context.Require(PoseArtifact(name)));
   PoseRole role = PoseRole::kPrior;
   PoseSet poses = reader.ReadPoseSet(name, &role);
-  if (role != PoseRole::kRefined) return poses;
-  const std::vector<std::string> unrefined = EraseListed(reader, kUnrefinedImagesJson, &poses);
-  const std::vector<std::string> unexplained =
-      leave_out_unexplained ? EraseListed(reader, kUnexplainedImagesJson, &poses)
-                            : std::vector<std::string>();
-  const std::vector<std::string> doubted = leave_out_doubted
-                                               ? EraseListed(reader, kDoubtedImagesJson, &poses)
-                                               : std::vector<std::string>();
-  const std::vector<std::string> loose = leave_out_doubted
-                                             ? EraseListed(reader, kLooseImagesJson, &poses)
-                                             : std::vector<std::string>();
-  if (unrefined.empty() && unexplained.empty() && doubted.empty() && loose.empty()) return poses;
+  *verdicts = role == PoseRole::kRefined ? VerdictsOf(reader) : nlohmann::json::object();
+  Warning unrefined{"unrefined_not_exported", "", {}, {}, {{"pose_set", name}}};
+  Warning doubted{"doubted_not_exported", "", {}, {}, {{"pose_set", name}}};
+  for (const auto& [image, verdict] : verdicts->items()) {
+    const std::string reason = verdict.value("reason", "");
+    const bool left_out =
+        NotRefined(reason) || (leave_out_doubted && verdict.value("verdict", "") == "doubted");
+    if (!left_out || !poses.world_from_cam.erase(image)) continue;
+    Warning& warning = NotRefined(reason) ? unrefined : doubted;
+    warning.images.push_back(image);
+    warning.details["reasons"][image] = reason;
+  }
+  std::vector<std::string> non_finite;
+  for (const auto& [image, pose] : poses.world_from_cam) {
+    if (!pose.rotation.coeffs().allFinite() || !pose.translation.allFinite()) {
+      non_finite.push_back(image);
+    }
+  }
+  if (!non_finite.empty()) {
+    throw InputError("export: pose set '" + name + "' holds " + std::to_string(non_finite.size()) +
+                     " non-finite pose(s) (" + non_finite.front() +
+                     (non_finite.size() > 1 ? ", ..." : "") +
+                     "); nothing is written. Its stage's summary says what went wrong");
+  }
+  if (unrefined.images.empty() && doubted.images.empty()) return poses;
   if (poses.world_from_cam.empty()) {
     throw InputError("export: no pose of '" + name +
-                     "' is left to export (a guardrail returned the prior, found most pairs "
-                     "unexplained or doubted the frame, for every image; see the refine stage's "
-                     "warnings). Export the pose set 'prior' explicitly if that is what you want "
-                     "to train on");
+                     "' is left to export (every frame was doubted or not refined; see the refine "
+                     "stage's warnings and frame verdicts). Export the pose set 'prior' "
+                     "explicitly if that is what you want to train on");
   }
-  // `option`: the export option that chose to leave them out, if one did.
-  const auto warn = [&](const char* code, const std::vector<std::string>& left_out,
-                        const std::string& why, const std::string& option) {
-    if (left_out.empty()) return;
-    warnings->push_back({code,
-                         std::to_string(left_out.size()) + " image(s) of '" + name + "' " + why +
-                             " and are left out of its export" +
-                             (option.empty() ? "" : " (" + option + ")"),
-                         left_out,
-                         {},
-                         {{"pose_set", name}}});
-  };
-  warn("unrefined_not_exported", unrefined, "kept the prior's pose (guardrail)", "");
-  warn("unexplained_not_exported", unexplained,
-       "leave most of their pairs unexplained (inconsistent_pairs: their poses are likely wrong)",
-       "leave_out_unexplained_images");
-  warn("doubted_not_exported", doubted,
-       "moved far more than the others and fit their matches worse (frame_doubts: their poses "
-       "are likely wrong)",
-       "leave_out_doubted_images");
-  warn("loose_not_exported", loose,
-       "are not held to the rest of the match graph by the matches (loose_parts, or a component "
-       "placed by a coarse prior: their placement may be wrong)",
-       "leave_out_doubted_images");
+  if (!unrefined.images.empty()) {
+    unrefined.message = std::to_string(unrefined.images.size()) + " image(s) of '" + name +
+                        "' were not refined (no verified pair, or a guardrail kept the prior's "
+                        "pose) and are left out of its export";
+    warnings->push_back(unrefined);
+  }
+  if (!doubted.images.empty()) {
+    doubted.message = std::to_string(doubted.images.size()) + " image(s) of '" + name +
+                      "' were doubted by the refine stage (details.reasons; its warnings say "
+                      "why) and are left out of its export (leave_out_doubted_images)";
+    warnings->push_back(doubted);
+  }
   return poses;
 }
 
@@ -181,16 +183,38 @@ nlohmann::json UncertaintyOf(const StageContext& context, const std::string& nam
           {"cameras", exported}};
 }
 
-// Per image name, its σ as fields of its transforms.json frame (raytime_ keys: trainers ignore
-// them).
-nlohmann::json UncertaintyFrameFields(const nlohmann::json& uncertainty) {
+// Per image name, raytime's fields of its transforms.json frame (raytime_ keys: trainers ignore
+// them): its σ, and its verdict with the reason where it is not held.
+nlohmann::json RaytimeFrameFields(const nlohmann::json& uncertainty,
+                                  const nlohmann::json& verdicts) {
   nlohmann::json fields = nlohmann::json::object();
-  if (uncertainty.is_null()) return fields;
-  for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
-    fields[image] = {{"raytime_rotation_sigma_deg", sigma["rotation_deg"]},
-                     {"raytime_centre_sigma", sigma["centre"]}};
+  if (!uncertainty.is_null()) {
+    for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
+      fields[image] = {{"raytime_rotation_sigma_deg", sigma["rotation_deg"]},
+                       {"raytime_centre_sigma", sigma["centre"]}};
+    }
+  }
+  for (const auto& [image, verdict] : verdicts.items()) {
+    fields[image]["raytime_verdict"] = verdict.value("verdict", "");
+    if (verdict.value("verdict", "") != "held") {
+      fields[image]["raytime_verdict_reason"] = verdict.value("reason", "");
+    }
   }
   return fields;
+}
+
+// frame_verdicts.json inside an exported folder, for a refined set: every frame's verdict, the
+// ones left out of the folder's model included (so a user finds why a frame is missing).
+void WriteVerdictsInto(const std::string& folder, const nlohmann::json& verdicts) {
+  if (verdicts.empty()) return;
+  const nlohmann::json document = {
+      {"about",
+       "per frame: held (its matches fix it), held_by_prior (they do not; a trusted prior places "
+       "it and agrees) or doubted (left out unless leave_out_doubted_images is false), with the "
+       "reason (raytime README, 'Frame verdicts')"},
+      {"frames", verdicts}};
+  WriteTextFileAtomically((fs::path(folder) / "frame_verdicts.json").string(),
+                          document.dump(2) + "\n");
 }
 
 // pose_uncertainty.json inside an exported folder, when the pose set has it.
@@ -233,9 +257,11 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     Warnings warnings;
     std::map<std::string, PoseSet> exportable;
     std::map<std::string, nlohmann::json> uncertainty_of;  // per pose set, null when it has none
+    std::map<std::string, nlohmann::json> verdicts_of;     // per pose set, {} when it has none
     for (const auto& name : options_.poses) {
-      const PoseSet poses = ExportablePoses(context, name, options_.leave_out_unexplained_images,
-                                            options_.leave_out_doubted_images, &warnings);
+      nlohmann::json& verdicts = verdicts_of[name];
+      const PoseSet poses =
+          ExportablePoses(context, name, options_.leave_out_doubted_images, &verdicts, &warnings);
       exportable[name] = poses;
       const nlohmann::json& uncertainty = uncertainty_of[name] =
           UncertaintyOf(context, name, poses);
@@ -245,9 +271,11 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
         if (format == "colmap_text") {
           WriteColmapModelText(ToColmapModel(images, poses), path);
           WriteUncertaintyInto(path, uncertainty);
+          WriteVerdictsInto(path, verdicts);
         } else if (format == "colmap_binary") {
           WriteColmapModelBinary(ToColmapModel(images, poses), path);
           WriteUncertaintyInto(path, uncertainty);
+          WriteVerdictsInto(path, verdicts);
         } else if (format == "transforms_json") {
           std::string prefix = "images/";
           if (images.image_root.empty()) {
@@ -264,7 +292,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
             prefix = ImagePrefixFor(path, images.image_root);
           }
           WriteTransformsJson(path, images, poses, prefix, nlohmann::json::object(),
-                              UncertaintyFrameFields(uncertainty));
+                              RaytimeFrameFields(uncertainty, verdicts));
         } else {
           WriteTumTrajectory(path, poses);
         }
@@ -278,6 +306,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
       for (size_t k = 0; k < summary.directories.size(); ++k) {
         const std::string& name = summary.pose_sets[k];
         WriteUncertaintyInto(summary.directories[k], uncertainty_of.at(name));
+        WriteVerdictsInto(summary.directories[k], verdicts_of.at(name));
         written.push_back(summary.directories[k]);
       }
       result["written"] = written;

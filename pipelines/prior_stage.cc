@@ -48,6 +48,11 @@ struct PriorOptions {
   // Images without a prior pose, and prior poses without an image, are reported and left out
   // (warnings missing_prior, missing_frames); strict makes either an error.
   bool strict = false;
+  // The prior's accuracy per frame as its maker knows it (a survey, a phone's tracking quality):
+  // the refine stage trusts a prior stated so to place the frames its matches do not hold, when
+  // they agree with it within 3 sigma (refine/frame_verdicts.h). 0 = not stated.
+  double sigma_deg = 0.0;
+  double sigma_m = 0.0;
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
@@ -74,9 +79,18 @@ struct PriorOptions {
       Positive());
     v("strict", strict,
       "Refuse a prior that lacks some images or has poses of images not in the dataset");
+    v("sigma_deg", sigma_deg,
+      "Stated accuracy of the prior's rotations per frame, degrees: trusted to place frames the "
+      "matches do not hold (0 = not stated)",
+      NonNegative(), AtMost(180));
+    v("sigma_m", sigma_m,
+      "Stated accuracy of the prior's centres per frame, in its length unit: trusted to place "
+      "frames the matches do not hold (0 = not stated)",
+      NonNegative());
     perturbation.VisitFields(v);  // flat keys: prior.level_deg, prior.seed, ...
   }
   void CheckRelations(const Requirement& require) const {
+    perturbation.CheckRelations(require);
     require(source != "file" || !path.empty(), "prior.source is 'file' but prior.path is not set");
     require(source != "pose_set" || !pose_set.empty(),
             "prior.source is 'pose_set' but prior.pose_set is not set");
@@ -150,6 +164,18 @@ class PriorStage : public StageWithOptions<PriorOptions> {
         " images have no prior pose (source " + options_.source + ") and will not be refined";
     if (options_.strict) throw InputError("prior (strict): " + message);
     warnings->push_back({"missing_prior", message, join.only_right, {}, {}});
+  }
+
+  // A pose that is not finite (a file with nan or inf, or a perturbation beyond floating point)
+  // is refused with its name: a solve started from it returns NaN poses.
+  void RefuseNonFinite(const PoseSet& prior) const {
+    for (const auto& [name, pose] : prior.world_from_cam) {
+      if (pose.rotation.coeffs().allFinite() && pose.translation.allFinite()) continue;
+      const std::string message = "the prior pose of " + name + " (from " + SourceName() +
+                                  ") is not finite; every pose must be finite numbers";
+      if (options_.source == "file") ThrowInput(options_.path, 0, message);
+      throw InputError("prior: " + message);
+    }
   }
 
   // `poses` read in options_.convention.
@@ -290,6 +316,7 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       }
     }
     ReportImagesWithoutPose(images, prior, &warnings);
+    RefuseNonFinite(prior);
     Hdf5Writer writer(context.output_path);
     writer.WritePoseSet(context.OutputPoseSetName("prior"), prior, PoseRole::kPrior,
                         MakeProvenance(*this));
@@ -299,6 +326,10 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       nlohmann::json record = summary["repair"];
       record["pose_set"] = context.OutputPoseSetName("prior");
       writer.WriteJson(kPriorRepairJson, record);
+    }
+    if (options_.sigma_deg > 0 || options_.sigma_m > 0) {
+      summary["accuracy"] = {{"sigma_deg", options_.sigma_deg}, {"sigma_m", options_.sigma_m}};
+      writer.WriteJson(kPriorAccuracyJson, summary["accuracy"]);
     }
     writer.Commit();
     summary["num_poses"] = prior.size();

@@ -22,13 +22,10 @@
 
 #include "core/camera.h"
 #include "core/error.h"
-#include "core/graph.h"
 #include "core/hdf5_store.h"
 #include "core/json_fields.h"
 #include "core/warnings.h"
 #include "pipelines/stages.h"
-#include "refine/camera_blocks.h"
-#include "refine/frame_doubt.h"
 #include "refine/prior_convention.h"
 #include "refine/refine.h"
 
@@ -46,10 +43,6 @@ struct RefineStageOptions {
   // Refuse a prior that the matches' own relative poses say is in another convention (inverted,
   // OpenGL camera axes): refined as given it becomes a wrong answer that looks converged.
   bool check_prior_convention = true;
-  // Name, and keep out of the refined export, a frame whose correction stands out and whose
-  // matches fit worse than the others' (refine/frame_doubt.h: wrong intrinsics, say).
-  bool check_frame_doubts = true;
-  FrameDoubtOptions frame_doubt;
   // Start the passes on all matches from this stage's solution at its previous run in the work
   // directory (issue 34: a capture that grew or lost frames); the capped passes that decide and
   // the anneal run as without it. Off by default: measured on two grown captures it saves little
@@ -70,15 +63,10 @@ struct RefineStageOptions {
     v("check_prior_convention", check_prior_convention,
       "Refuse a prior that another pose convention (inverted, flipped camera axes) explains far "
       "better than as given, judged by the verified pairs' own relative poses");
-    v("check_frame_doubts", check_frame_doubts,
-      "Name, and leave out of the refined export, frames that moved far more than the others and "
-      "fit their matches worse (wrong intrinsics, a frame the solve could not place); not for a "
-      "prior made from the match graph");
     v("warm_start", warm_start,
       "Start the all-match finish from this work directory's previous refine solution (frames "
       "added or removed since; fewer iterations, a result that depends on that history)");
-    frame_doubt.VisitFields(v);  // flat keys: refine.frame_doubt_residual_ratio, ...
-    refine.VisitFields(v);       // flat keys: refine.max_matches_per_pair, ...
+    refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
   void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
@@ -112,49 +100,6 @@ fs::path PresetPath(const std::string& name) {
   return path;
 }
 
-// Images with a prior pose joined by verified pairs, as connected components (largest first,
-// image indices ascending). Images with a prior but no verified pair to another such image are
-// reported as `unmatched_cameras`: no match constrains them, so they are not refined.
-std::vector<std::vector<int>> MatchedComponents(const ImageSet& images,
-                                                const std::vector<PairMatches>& matches,
-                                                const PoseSet& prior, Warnings* warnings) {
-  const int n = static_cast<int>(images.images.size());
-  std::vector<std::pair<int, int>> edges;
-  std::vector<bool> matched(n, false);
-  for (const PairMatches& pair : matches) {
-    if (pair.geometry.inlier_matches.rows() == 0 || pair.image1 == pair.image2) continue;
-    if (!prior.Has(images.images.at(pair.image1).name) ||
-        !prior.Has(images.images.at(pair.image2).name)) {
-      continue;
-    }
-    edges.emplace_back(pair.image1, pair.image2);
-    matched[pair.image1] = matched[pair.image2] = true;
-  }
-  const std::vector<int> labels = ConnectedComponents(n, edges);
-  std::vector<std::vector<int>> components;
-  Warning unmatched{"unmatched_cameras", "", {}, {}, {}};
-  for (int i = 0; i < n; ++i) {
-    if (!prior.Has(images.images[i].name)) continue;
-    if (!matched[i]) {
-      unmatched.images.push_back(images.images[i].name);
-      continue;
-    }
-    if (labels[i] >= static_cast<int>(components.size())) components.resize(labels[i] + 1);
-    components[labels[i]].push_back(i);
-  }
-  // Labels count the unmatched singletons too; keep the matched components in label order.
-  components.erase(std::remove_if(components.begin(), components.end(),
-                                  [](const std::vector<int>& c) { return c.empty(); }),
-                   components.end());
-  if (!unmatched.images.empty()) {
-    unmatched.message = std::to_string(unmatched.images.size()) +
-                        " image(s) with a prior pose have no verified pair with another: they are "
-                        "not refined and not in the refined poses";
-    warnings->push_back(unmatched);
-  }
-  return components;
-}
-
 // Whether a prior pose set's rotations were made from the match graph: the bootstrap's own
 // poses, a prior stage that took them (`source: bootstrap`), or a prior whose repair replaced
 // them (kPriorRepairJson beside it says a mode other than "none").
@@ -174,29 +119,46 @@ bool RotationsFromMatches(const Hdf5Reader& reader, const std::string& pose_set,
   return repair["pose_set"] == pose_set && repair["mode"] != "none";
 }
 
-// The refiner's input for one component: its images (in image-list order), their cameras (the
-// image set's camera list, indexed as there), keypoints and prior poses, and the verified pairs
-// between them; `names` receives the images' names.
-RefineInput ComponentInput(const ImageSet& images, const std::vector<ImageFeatures>& features,
-                           const std::vector<PairMatches>& matches, const PoseSet& prior,
-                           const std::vector<int>& component, std::vector<std::string>* names) {
+// The refiner's input: every image with a prior pose (in image-list order), their cameras (the
+// image set's camera list, indexed as there), keypoints and prior poses, the verified pairs between
+// them; `names` receives the images' names.
+RefineInput RefineInputOf(const ImageSet& images, const std::vector<ImageFeatures>& features,
+                          const std::vector<PairMatches>& matches, const PoseSet& prior,
+                          std::vector<std::string>* names) {
   RefineInput input;
   input.cameras = images.cameras;
   std::vector<int> refine_index(images.images.size(), -1);
-  for (int i : component) {
+  for (size_t i = 0; i < images.images.size(); ++i) {
+    const ImageInfo& image = images.images[i];
+    if (!prior.Has(image.name)) continue;
     refine_index[i] = static_cast<int>(names->size());
-    names->push_back(images.images[i].name);
-    input.camera_index.push_back(images.images[i].camera_index);
-    input.prior_world_from_cam.push_back(prior.world_from_cam.at(images.images[i].name));
+    names->push_back(image.name);
+    input.camera_index.push_back(image.camera_index);
+    input.prior_world_from_cam.push_back(prior.world_from_cam.at(image.name));
     input.keypoints.push_back(features[i].keypoints.leftCols<2>().cast<double>());
   }
   for (const PairMatches& pair : matches) {
     const int i = refine_index.at(pair.image1);
     const int j = refine_index.at(pair.image2);
-    if (i < 0 || j < 0 || pair.geometry.inlier_matches.rows() == 0) continue;
+    if (i < 0 || j < 0 || i == j || pair.geometry.inlier_matches.rows() == 0) continue;
     input.pairs.push_back({i, j, pair.geometry.inlier_matches});
   }
+  input.names = *names;
   return input;
+}
+
+// The accuracy the prior's maker states (kPriorAccuracyJson beside its pose set), if any.
+StatedPriorAccuracy StatedAccuracyOf(const Hdf5Reader& reader) {
+  StatedPriorAccuracy stated;
+  if (!reader.HasJson(kPriorAccuracyJson)) return stated;
+  const nlohmann::json accuracy = reader.ReadJson(kPriorAccuracyJson);
+  if (!accuracy.is_object()) {
+    throw InputError(reader.path() + ": /json/" + kPriorAccuracyJson +
+                     " is not an object {sigma_deg, sigma_m}; run the prior stage again");
+  }
+  if (accuracy.value("sigma_deg", 0.0) > 0) stated.rotation_deg = accuracy["sigma_deg"];
+  if (accuracy.value("sigma_m", 0.0) > 0) stated.centre = accuracy["sigma_m"];
+  return stated;
 }
 
 // `images` with the refined cameras (indexed as images.cameras); cameras that became equal (the
@@ -412,142 +374,6 @@ std::vector<MeasuredRelativePose> MeasuredRelativePoses(const ImageSet& images,
   return out;
 }
 
-// refine/frame_doubt.h's verdict on one returned solve (images as indices into the solve's).
-FrameDoubtVerdict FrameDoubtsOf(const RefineInput& input, const RefineOutput& output,
-                                const FrameDoubtOptions& options) {
-  const SolvedObservations& solved = output.solved_observations;
-  const Eigen::Index n = solved.observations.rows();
-  Eigen::VectorXi image(n);
-  Eigen::Matrix<double, Eigen::Dynamic, 2> pixel(n, 2);
-  for (Eigen::Index o = 0; o < n; ++o) {
-    image(o) = solved.observations(o, 0);
-    pixel.row(o) = input.keypoints[image(o)].row(solved.observations(o, 1));
-  }
-  std::vector<CameraIntrinsics> intrinsics;
-  for (size_t i = 0; i < input.prior_world_from_cam.size(); ++i) {
-    intrinsics.push_back(output.cameras.at(input.camera_index[i]));
-  }
-  return CheckFrameDoubts(input.prior_world_from_cam, output.world_from_cam, intrinsics, image,
-                          pixel, solved.ray_times, solved.matches, options);
-}
-
-// The frame_doubts warning: the doubted frames by name, with the numbers that doubted them.
-void AddFrameDoubtWarning(const FrameDoubtVerdict& verdict, const std::vector<std::string>& names,
-                          Warnings* warnings) {
-  if (verdict.images.empty()) return;
-  Warning warning{"frame_doubts", "", {}, {}, nlohmann::json::object()};
-  double worst_change = 0.0, worst_ratio = 0.0;
-  for (const int image : verdict.images) {
-    warning.images.push_back(names.at(image));
-    warning.details["centre_change"][names.at(image)] = verdict.centre_change[image];
-    warning.details["residual_ratio"][names.at(image)] = verdict.residual_ratio[image];
-    worst_change = std::max(worst_change, verdict.centre_change[image]);
-    worst_ratio = std::max(worst_ratio, verdict.residual_ratio[image]);
-  }
-  warning.details["median_centre_change"] = verdict.median_centre_change;
-  warning.details["centre_change_threshold"] = verdict.centre_change_threshold;
-  warning.message = fmt::format(
-      "{} frame(s) moved far more than the others (up to {:.3g} against a median {:.3g}, length "
-      "units of the prior) and fit their matches worse (up to {:.2f}x the median pair's "
-      "residual): wrong intrinsics, or a frame the solve could not place: {}",
-      verdict.images.size(), worst_change, verdict.median_centre_change, worst_ratio,
-      fmt::join(warning.images, ", "));
-  warnings->push_back(warning);
-}
-
-// A guardrail that returned the prior, or flagged unexplained pairs, is a warning: the poses are
-// written (the campaign reports score them), but never as if the solve had succeeded quietly.
-void AddGuardrailWarnings(const RefineSummary& summary, const std::vector<std::string>& names,
-                          Warnings* warnings) {
-  if (summary.guardrails.returned_prior) {
-    // The trust region fires when the matches pull the solution far from the prior: most often a
-    // prior several degrees off, which the basin configuration is for (§4.8).
-    const bool trust_region = summary.guardrails.fired.front() == "trust_region";
-    warnings->push_back(
-        {"returned_prior",
-         "guardrail " + summary.guardrails.fired.front() +
-             " fired: the refined poses of these images are the prior's, "
-             "unrefined" +
-             (trust_region ? std::string("; for a prior more than ~2° off, refine with "
-                                         "preset auto (basin solve first, no trust region)")
-                           : std::string()),
-         names,
-         {},
-         {{"fired", summary.guardrails.fired}}});
-  }
-  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
-  if (pairs.fired) {
-    Warning warning{"inconsistent_pairs",
-                    std::to_string(pairs.num_inconsistent) + " of " +
-                        std::to_string(pairs.num_pairs) +
-                        " image pairs keep matches the solution does not explain (wrong pairs, "
-                        "e.g. repeated structure, may have pulled it off)",
-                    {},
-                    {},
-                    {{"fraction", pairs.fraction},
-                     {"fraction_threshold", pairs.fraction_threshold},
-                     {"pair_threshold_px", pairs.pair_threshold_px}}};
-    for (const PairResidual& pair : pairs.pairs) {
-      warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
-    }
-    // Most of these images' pairs are unexplained: a frame the solve did not place, whose pose a
-    // trainer should not be given as refined.
-    for (const int image : pairs.images_mostly_inconsistent) {
-      warning.images.push_back(names.at(image));
-    }
-    if (!warning.images.empty()) {
-      constexpr size_t kNamed = 5;
-      std::string named;
-      for (size_t i = 0; i < std::min(kNamed, warning.images.size()); ++i) {
-        named += (i == 0 ? "" : ", ") + warning.images[i];
-      }
-      if (warning.images.size() > kNamed) {
-        named += " and " + std::to_string(warning.images.size() - kNamed) + " more";
-      }
-      warning.message +=
-          "; most pairs of " + named + " are among them: the pose(s) are likely wrong";
-    }
-    warnings->push_back(warning);
-  }
-  // Frames all (or most, three and more) of whose pairs are unexplained, where too few pairs are
-  // for the test above to fire: named and left out all the same.
-  if (!pairs.fired && !pairs.images_mostly_inconsistent.empty()) {
-    Warning warning{
-        "unexplained_images", "", {}, {}, {{"pair_threshold_px", pairs.pair_threshold_px}}};
-    for (const int image : pairs.images_mostly_inconsistent) {
-      warning.images.push_back(names.at(image));
-    }
-    for (const PairResidual& pair : pairs.pairs) {
-      warning.pairs.emplace_back(names.at(pair.image1), names.at(pair.image2));
-    }
-    warning.message = fmt::format(
-        "the solution leaves all or most pairs of {} frame(s) unexplained (above {:.3g} px): "
-        "their poses are likely wrong: {}",
-        warning.images.size(), pairs.pair_threshold_px, fmt::join(warning.images, ", "));
-    warnings->push_back(warning);
-  }
-  const LoosePartsVerdict& loose = summary.guardrails.loose_parts;
-  if (!loose.images.empty()) {
-    Warning warning{"loose_parts", "", {}, {}, {{"cuts", nlohmann::json::array()}}};
-    for (const int image : loose.images) warning.images.push_back(names.at(image));
-    int fewest_left = std::numeric_limits<int>::max();
-    for (const LooseCut& cut : loose.cuts) {
-      fewest_left = std::min(fewest_left, cut.pairs_across - cut.pairs_removed);
-      nlohmann::json named = cut;
-      named["images"] = nlohmann::json::array();
-      for (const int image : cut.images) named["images"].push_back(names.at(image));
-      warning.details["cuts"].push_back(named);
-    }
-    warning.message = fmt::format(
-        "the matches do not hold the placement of {} image(s): they hang on the rest of the match "
-        "graph by {} pair(s) or few matches, or the pair removal took most of the pairs that held "
-        "them (see details.cuts); a misplaced part looks consistent there. Left out of the "
-        "refined export: {}",
-        warning.images.size(), fewest_left, fmt::join(warning.images, ", "));
-    warnings->push_back(warning);
-  }
-}
-
 class RefineStage : public StageWithOptions<RefineStageOptions> {
  public:
   std::string type() const override { return "refine"; }
@@ -599,80 +425,32 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     // the prior: missing_prior) and counted here.
     size_t num_without_prior = 0;
     for (const ImageInfo& image : images.images) num_without_prior += !prior.Has(image.name);
-    Solves solves;
-    solves.cameras = images.cameras;
-    const std::vector<std::vector<int>> components =
-        MatchedComponents(images, matches, prior, &solves.warnings);
-    if (components.empty()) {
+    std::vector<std::string> names;
+    RefineInput input = RefineInputOf(images, features, matches, prior, &names);
+    if (input.pairs.empty()) {
       throw InputError("refine: no verified image pair joins two images with a prior pose (" +
                        std::to_string(matches.size()) + " pairs in " + context.Require("matches") +
                        "): nothing to refine. Check the matches stage's summary (verified "
                        "pairs, min_num_inliers).");
     }
-    // A self-calibrated camera must come from one solve: only the largest component then.
-    const size_t num_solved = options_.refine.SelfCalibrates() ? 1 : components.size();
-    if (components.size() > 1) {
-      solves.warnings.push_back(DisconnectedGraphWarning(
-          images, components, num_solved, prior_rotations_from_matches, &solves.loose));
+    input.prior_rotations_from_matches = prior_rotations_from_matches;
+    input.stated_prior = StatedAccuracyOf(prior_reader);
+    if (options_.warm_start) {
+      const EarlierSolution earlier =
+          ReadEarlierSolution(context, context.OutputPoseSetName("refined"));
+      if (!earlier.empty()) input.warm_start = WarmStartOf(earlier, input, names);
     }
-    const EarlierSolution earlier =
-        options_.warm_start ? ReadEarlierSolution(context, context.OutputPoseSetName("refined"))
-                            : EarlierSolution();
-    for (size_t c = 0; c < num_solved; ++c) {
-      SolveComponent(images, features, matches, prior, components[c], c == 0,
-                     prior_rotations_from_matches, earlier, &solves);
-    }
-    // One verdict over the components: a check that fired anywhere is reported.
-    nlohmann::json& result = solves.result;
-    result["guardrails"]["fired"] =
-        std::vector<std::string>(solves.fired.begin(), solves.fired.end());
-    result["guardrails"]["returned_prior"] = solves.returned_prior;
-    if (components.size() > 1) result["components"] = solves.component_summaries;
+    RefineOutput output;
+    const RefineSummary summary = RefinePoses(input, options_.refine, &output);
+    nlohmann::json result = summary.ToJson();
     result["preset"] = options_.preset;
     result["prior_convention"] = convention;
-    if (options_.check_frame_doubts) result["frame_doubts"] = solves.frame_doubts;
     result["num_images_without_prior"] = num_without_prior;
-    // By image name, over every component whose solve was returned.
-    result["uncertainty"]["cameras"] = solves.uncertainty;
-    Write(context, images, &solves);
+    Write(context, images, input, summary, output, &result);
     return result;
   }
 
  private:
-  // What the component solves gather: the refined poses, the first (largest) component's summary
-  // and cameras, the verdicts over all, and the images the export leaves out.
-  struct Solves {
-    PoseSet refined;
-    nlohmann::json result;  // the largest component's summary, then the stage's
-    nlohmann::json component_summaries = nlohmann::json::array();
-    std::set<std::string> fired;
-    bool returned_prior = false;
-    Warnings warnings;
-    // Images whose "refined" pose is the prior's (a guardrail returned it): the export leaves
-    // them out of a refined model rather than hand them to a trainer as refined.
-    std::vector<std::string> unrefined;
-    // Images most of whose pairs a solve that was returned left unexplained: likely wrong poses,
-    // which the export leaves out too (leave_out_unexplained_images).
-    std::vector<std::string> unexplained;
-    // Frames that moved far more than the others and fit worse (FrameDoubtsOf), left out too.
-    std::vector<std::string> doubted;
-    // Images of parts the matches do not hold to the rest (loose_parts; and, after a prior the
-    // bootstrap repaired, the smaller components), left out of the export.
-    std::vector<std::string> loose;
-    FrameDoubtVerdict frame_doubts;  // of the largest component
-    // Per image name, σ of its rotation and centre at the solution (refine/pose_uncertainty.h).
-    nlohmann::json uncertainty = nlohmann::json::object();
-    // Every solve's fit per image and per pair, by image name (kSolveDiagnosticsJson).
-    nlohmann::json diagnostics = {{"images", nlohmann::json::object()},
-                                  {"pairs", nlohmann::json::array()},
-                                  {"removed", nlohmann::json::array()}};
-    std::vector<CameraIntrinsics> cameras;
-    // Where each solve put its observations, for the solves whose poses are returned.
-    RayTimeObservations rays;
-    // The same solves' poses at the end of each pass (kPassPosesJson).
-    nlohmann::json pass_poses = nlohmann::json::object();
-  };
-
   // The prior against the matches' relative poses (prior_convention.h); refused with the reason.
   PriorConventionVerdict CheckConvention(const ImageSet& images,
                                          const std::vector<ImageFeatures>& features,
@@ -702,147 +480,65 @@ class RefineStage : public StageWithOptions<RefineStageOptions> {
     return convention;
   }
 
-  // disconnected_graph; after a prior repaired from the matches as coarse, the smaller
-  // components' images are added to `loose`.
-  static Warning DisconnectedGraphWarning(const ImageSet& images,
-                                          const std::vector<std::vector<int>>& components,
-                                          size_t num_solved, bool prior_rotations_from_matches,
-                                          std::vector<std::string>* loose) {
-    Warning warning;
-    warning.code = "disconnected_graph";
-    std::string sizes;
-    for (size_t c = 0; c < components.size(); ++c) {
-      sizes += (c ? ", " : "") + std::to_string(components[c].size());
-      for (int i : components[c]) {
-        if (c > 0) warning.images.push_back(images.images[i].name);
-      }
-    }
-    warning.message =
-        "the match graph has " + std::to_string(components.size()) + " connected components (" +
-        sizes + " images); " +
-        (num_solved == 1 ? "only the largest is refined (self-calibration needs one solve); "
-                           "the images of the others are not in the refined poses"
-                         : "each is refined in its own gauge, anchored to the prior only: "
-                           "their relative placement is the prior's");
-    // A prior the prior stage found coarse and repaired from the match graph (or the bootstrap's
-    // own) places the smaller components by the coarse poses it kept for them (the bootstrap
-    // reaches the largest only): nothing holds them to the largest one.
-    if (num_solved > 1 && prior_rotations_from_matches) {
-      warning.message +=
-          ", and that prior was repaired from the matches as coarse: the smaller components' "
-          "images are left out of the refined export";
-      loose->insert(loose->end(), warning.images.begin(), warning.images.end());
-    }
-    warning.details = {{"component_sizes", nlohmann::json::array()},
-                       {"refined_components", num_solved}};
-    for (const auto& component : components) {
-      warning.details["component_sizes"].push_back(component.size());
-    }
-    return warning;
+  // Whether the frame's pose is in the refined pose set: a frame no solve refined (no verified
+  // pair, or a component a self-calibrating run does not solve) is not.
+  static bool InRefinedSet(const FrameVerdict& verdict) {
+    return verdict.reason != "unmatched" && verdict.reason != "not_solved";
   }
 
-  // One component's solve, its warnings and verdicts into `solves`.
-  void SolveComponent(const ImageSet& images, const std::vector<ImageFeatures>& features,
-                      const std::vector<PairMatches>& matches, const PoseSet& prior,
-                      const std::vector<int>& component, bool largest,
-                      bool prior_rotations_from_matches, const EarlierSolution& earlier,
-                      Solves* solves) const {
-    std::vector<std::string> names;
-    RefineInput input = ComponentInput(images, features, matches, prior, component, &names);
-    input.prior_rotations_from_matches = prior_rotations_from_matches;
-    input.names = names;
-    if (!earlier.empty()) input.warm_start = WarmStartOf(earlier, input, names);
-    RefineOutput output;
-    const RefineSummary summary = RefinePoses(input, options_.refine, &output);
+  // The refined pose set, its ray times, (self-calibrating) the refined cameras, the frame
+  // verdicts, the uncertainty and the diagnostics by image name, in one HDF5 commit; the summary's
+  // per-image lists by name.
+  void Write(const StageContext& context, const ImageSet& images, const RefineInput& input,
+             const RefineSummary& summary, const RefineOutput& output, nlohmann::json* result) {
+    const std::vector<std::string>& names = input.names;
+    PoseSet refined;
+    nlohmann::json verdicts = nlohmann::json::object();
+    nlohmann::json uncertainty = nlohmann::json::object();
+    nlohmann::json pass_poses = nlohmann::json::object();
     for (size_t k = 0; k < names.size(); ++k) {
-      solves->refined.world_from_cam[names[k]] = output.world_from_cam[k];
-    }
-    AddGuardrailWarnings(summary, names, &solves->warnings);
-    if (summary.cameras.cameras_differ) {
-      solves->warnings.push_back(
-          {"cameras_shared",
-           "intrinsics_sharing 'shared' refined one set of intrinsics for images whose given "
-           "cameras differ from it by up to " +
-               fmt::format("{:.3g}", summary.cameras.max_start_disagreement_px) +
-               " px on the image; their per-image intrinsics were replaced",
-           names,
-           {},
-           {{"num_cameras", summary.cameras.num_cameras},
-            {"max_start_disagreement_px", summary.cameras.max_start_disagreement_px},
-            {"tolerance_px", kSharedCameraTolerancePx}}});
-    }
-    AddDiagnostics(output.diagnostics, summary.pair_removal, names, &solves->diagnostics);
-    solves->fired.insert(summary.guardrails.fired.begin(), summary.guardrails.fired.end());
-    solves->returned_prior = solves->returned_prior || summary.guardrails.returned_prior;
-    if (summary.guardrails.returned_prior) {
-      solves->unrefined.insert(solves->unrefined.end(), names.begin(), names.end());
-    } else {
-      for (const int image : summary.guardrails.inconsistent_pairs.images_mostly_inconsistent) {
-        solves->unexplained.push_back(names.at(image));
-      }
-      for (const int image : summary.guardrails.loose_parts.images)
-        solves->loose.push_back(names.at(image));
-      // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
-      // independent measurement to stand out from: its own errors (a translation-averaging drift
-      // at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
-      if (options_.check_frame_doubts && !prior_rotations_from_matches) {
-        const FrameDoubtVerdict verdict = FrameDoubtsOf(input, output, options_.frame_doubt);
-        AddFrameDoubtWarning(verdict, names, &solves->warnings);
-        for (const int image : verdict.images) solves->doubted.push_back(names.at(image));
-        if (largest) solves->frame_doubts = verdict;
-      }
-      AppendRayTimes(input, output.solved_observations, names, &solves->rays);
-      for (const auto& [pass, poses] : output.pass_world_from_cam) {
-        for (size_t k = 0; k < names.size(); ++k) {
-          solves->pass_poses[pass][names[k]] = PoseJson(poses[k]);
-        }
-      }
-      for (size_t k = 0; k < names.size() && summary.uncertainty.computed; ++k) {
-        solves->uncertainty[names[k]] = summary.uncertainty.cameras[k];
+      const FrameVerdict& verdict = summary.frame_verdicts[k];
+      verdicts[names[k]] = verdict;
+      if (!InRefinedSet(verdict)) continue;
+      refined.world_from_cam[names[k]] = output.world_from_cam[k];
+      if (verdict.reason == "returned_prior") continue;
+      if (k < summary.uncertainty.cameras.size() &&
+          std::isfinite(summary.uncertainty.cameras[k].rotation_deg)) {
+        uncertainty[names[k]] = summary.uncertainty.cameras[k];
       }
     }
-    if (largest) {
-      solves->result = summary.ToJson();
-      solves->cameras = output.cameras;
+    for (const auto& [pass, poses] : output.pass_world_from_cam) {
+      for (size_t k = 0; k < names.size() && k < poses.size(); ++k) {
+        if (poses[k]) pass_poses[pass][names[k]] = PoseJson(*poses[k]);
+      }
     }
-    solves->component_summaries.push_back({{"num_images", names.size()},
-                                           {"first_image", names.front()},
-                                           {"total_iterations", summary.total_iterations},
-                                           {"final_cost", summary.final_cost},
-                                           {"guardrails_fired", summary.guardrails.fired},
-                                           {"returned_prior", summary.guardrails.returned_prior}});
-    spdlog::info(
-        fmt::format("refine: {} poses, {} iterations in {:.2f} s{}", names.size(),
-                    summary.total_iterations, summary.timings.total_seconds,
-                    summary.guardrails.returned_prior ? " (guardrail fired: prior returned)" : ""));
-  }
+    RayTimeObservations rays;
+    AppendRayTimes(input, output.solved_observations, names, &rays);
+    nlohmann::json diagnostics = {{"images", nlohmann::json::object()},
+                                  {"pairs", nlohmann::json::array()},
+                                  {"removed", nlohmann::json::array()}};
+    AddDiagnostics(output.diagnostics, summary.pair_removal, names, &diagnostics);
 
-  // The refined pose set, its ray times, (self-calibrating) the refined cameras, the summary and
-  // the lists of images the export leaves out, in one HDF5 commit.
-  void Write(const StageContext& context, const ImageSet& images, Solves* solves) {
-    nlohmann::json& result = solves->result;
     const std::string pose_set = context.OutputPoseSetName("refined");
     Hdf5Writer writer(context.output_path);
-    writer.WritePoseSet(pose_set, solves->refined, PoseRole::kRefined, MakeProvenance(*this));
-    writer.WriteRayTimes(pose_set, solves->rays);
-    result["pose_set"] = pose_set;
-    result["num_refined"] = solves->refined.size();
+    writer.WritePoseSet(pose_set, refined, PoseRole::kRefined, MakeProvenance(*this));
+    writer.WriteRayTimes(pose_set, rays);
+    (*result)["pose_set"] = pose_set;
+    (*result)["num_refined"] = refined.size();
+    (*result)["frame_verdicts"] = verdicts;
+    (*result)["uncertainty"]["cameras"] = uncertainty;
     if (options_.refine.SelfCalibrates()) {
       // One solve when self-calibrating: its cameras are refined, the others' as given.
-      const ImageSet refined_images = WithRefinedCameras(images, solves->cameras);
+      const ImageSet refined_images = WithRefinedCameras(images, output.cameras);
       writer.WriteImages(refined_images);
-      result["refined_intrinsics"] = RefinedIntrinsicsJson(refined_images, solves->refined);
-      writer.WriteJson("refined_intrinsics", result["refined_intrinsics"]);
+      (*result)["refined_intrinsics"] = RefinedIntrinsicsJson(refined_images, refined);
+      writer.WriteJson("refined_intrinsics", (*result)["refined_intrinsics"]);
     }
-    result["warnings"] = WarningsToJson(solves->warnings);
-    writer.WriteJson("refine_summary", result);
-    writer.WriteJson(kUnrefinedImagesJson, solves->unrefined);
-    writer.WriteJson(kUnexplainedImagesJson, solves->unexplained);
-    writer.WriteJson(kDoubtedImagesJson, solves->doubted);
-    writer.WriteJson(kLooseImagesJson, solves->loose);
-    writer.WriteJson(kPoseUncertaintyJson, solves->uncertainty);
-    writer.WriteJson(kSolveDiagnosticsJson, solves->diagnostics);
-    writer.WriteJson(kPassPosesJson, solves->pass_poses);
+    writer.WriteJson("refine_summary", *result);
+    writer.WriteJson(kFrameVerdictsJson, verdicts);
+    writer.WriteJson(kPoseUncertaintyJson, uncertainty);
+    writer.WriteJson(kSolveDiagnosticsJson, diagnostics);
+    writer.WriteJson(kPassPosesJson, pass_poses);
     writer.Commit();
   }
 };

@@ -230,6 +230,15 @@ std::string VerdictSection(const RunPage& page) {
     const json fired = JsonArray(JsonObject(s, "guardrails"), "fired");
     html +=
         fired.empty() ? ", no guardrail fired" : ", guardrails fired: " + HtmlEscape(fired.dump());
+    std::map<std::string, int> verdicts;
+    for (const auto& [name, verdict] : JsonObject(s, "frame_verdicts").items()) {
+      ++verdicts[JsonText(verdict, "verdict")];
+    }
+    if (!verdicts.empty()) {
+      html += "; frames: " + std::to_string(verdicts["held"]) + " held by their matches, " +
+              std::to_string(verdicts["held_by_prior"]) + " placed by the trusted prior, " +
+              std::to_string(verdicts["doubted"]) + " doubted";
+    }
     const json u = JsonObject(s, "uncertainty");
     if (JsonAt(u, "computed") == true) {
       html += "; keypoint noise " + HtmlNumber(u["sigma_px"]) + " px, median σ " +
@@ -448,7 +457,18 @@ std::string CamerasSection(const RunPage& page) {
 struct CameraNumbers {
   std::string rotation = "–", centre = "–", sigma_rotation, sigma_centre, residual, pairs, matches;
   std::string flags;
+  // The refine stage's frame verdict (held, held_by_prior, doubted), its reason and the sentence
+  // that says why; empty for an image without one.
+  std::string verdict, reason, detail;
 };
+
+// The verdict as a table cell: the word, the reason beside it, the sentence on hover.
+std::string VerdictCell(const CameraNumbers& n) {
+  if (n.verdict.empty()) return "–";
+  return "<span class=\"verdict " + HtmlEscape(n.verdict) + "\" title=\"" + HtmlEscape(n.detail) +
+         "\">" + HtmlEscape(n.verdict) +
+         (n.reason.empty() ? "" : " (" + HtmlEscape(n.reason) + ")") + "</span>";
+}
 
 CameraNumbers NumbersOf(const RunPage& page, const std::string& name) {
   CameraNumbers n;
@@ -459,6 +479,10 @@ CameraNumbers NumbersOf(const RunPage& page, const std::string& name) {
         DegreesFromRadians(RotationDistance(prior->second.rotation, solved->second.rotation)));
     n.centre = HtmlNumber((prior->second.translation - solved->second.translation).norm());
   }
+  const json verdict = JsonObject(JsonObject(page.summary, "frame_verdicts"), name.c_str());
+  n.verdict = JsonText(verdict, "verdict");
+  n.reason = JsonText(verdict, "reason");
+  n.detail = JsonText(verdict, "detail");
   const json sigma = JsonObject(JsonObject(page.summary, "uncertainty"), "cameras");
   const json s = JsonObject(sigma, name.c_str());
   n.sigma_rotation = HtmlNumber(JsonAt(s, "rotation_deg"));
@@ -482,13 +506,13 @@ std::string CameraTable(const RunPage& page) {
   if (page.stage_id.empty()) return "";
   std::string html =
       "<section id=\"camera-section\"><h2>Per camera</h2><table id=\"camera-table\">" +
-      HtmlRow({"image", "rotation correction (°)", "centre correction", "σ rotation (°)",
+      HtmlRow({"image", "verdict", "rotation correction (°)", "centre correction", "σ rotation (°)",
                "σ centre", "residual median (px)", "pairs", "matches", "flags"},
               "th");
   for (const std::string& name : page.names) {
     const CameraNumbers n = NumbersOf(page, name);
-    html += HtmlRow({CameraLink(name), n.rotation, n.centre, n.sigma_rotation, n.sigma_centre,
-                     n.residual, n.pairs, n.matches, HtmlEscape(n.flags)},
+    html += HtmlRow({CameraLink(name), VerdictCell(n), n.rotation, n.centre, n.sigma_rotation,
+                     n.sigma_centre, n.residual, n.pairs, n.matches, HtmlEscape(n.flags)},
                     "td", "row-" + name);
   }
   return html + "</table></section>";
@@ -642,14 +666,18 @@ std::string CameraPanels(const RunPage& page) {
     const auto unit = [](const std::string& number, const char* unit_text) {
       return number == "–" ? number : number + unit_text;
     };
-    html += "<table>" + HtmlRow({"rotation correction", unit(n.rotation, "°")}) +
-            HtmlRow({"centre correction", n.centre}) +
-            HtmlRow({"σ rotation", unit(n.sigma_rotation, "°")}) +
-            HtmlRow({"σ centre", n.sigma_centre}) +
-            HtmlRow({"residual median", unit(n.residual, " px")}) +
-            HtmlRow({"pairs / matches", n.pairs + " / " + n.matches}) +
-            HtmlRow({"flags", HtmlEscape(n.flags.empty() ? "none" : n.flags)}) +
-            "</table><p><a href=\"#row-" + HtmlEscape(name) + "\">its row</a></p>";
+    html +=
+        "<table>" +
+        HtmlRow({"verdict", VerdictCell(n) +
+                                (n.detail.empty() ? std::string() : ": " + HtmlEscape(n.detail))}) +
+        HtmlRow({"rotation correction", unit(n.rotation, "°")}) +
+        HtmlRow({"centre correction", n.centre}) +
+        HtmlRow({"σ rotation", unit(n.sigma_rotation, "°")}) +
+        HtmlRow({"σ centre", n.sigma_centre}) +
+        HtmlRow({"residual median", unit(n.residual, " px")}) +
+        HtmlRow({"pairs / matches", n.pairs + " / " + n.matches}) +
+        HtmlRow({"flags", HtmlEscape(n.flags.empty() ? "none" : n.flags)}) +
+        "</table><p><a href=\"#row-" + HtmlEscape(name) + "\">its row</a></p>";
     auto& list = pairs_of[name];
     std::sort(list.begin(), list.end(),
               [](const auto& a, const auto& b) { return a.first > b.first; });
@@ -757,7 +785,8 @@ const char* RunPageStyle() {
          "overflow:auto;background:#fff;border-left:2px solid #888;padding:0.5em 1em;"
          "box-shadow:-4px 0 8px rgba(0,0,0,.2)}.panel:target{display:block}"
          ".panel .close{float:right}.panel table td{text-align:left}img.thumb{margin:2px}"
-         "tr:target{background:#ffd}.histogram{margin:2px}";
+         "tr:target{background:#ffd}.histogram{margin:2px}.verdict.doubted{color:#b00;"
+         "font-weight:bold}.verdict.held_by_prior{color:#a60}";
 }
 
 }  // namespace

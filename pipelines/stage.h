@@ -23,22 +23,14 @@ namespace raytime {
 // wrote it last.
 inline constexpr const char* kArtifactImages = "images";
 inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
-// JSON document beside a refined pose set: the names whose pose a guardrail returned unrefined
-// (the prior's). Written by refine, read by export ("never a silent wrong result").
-inline constexpr const char* kUnrefinedImagesJson = "unrefined_images";
-// JSON document beside a refined pose set: the names most of whose pairs the solve left
-// unexplained when the inconsistent-pairs guardrail fired (their poses are likely wrong). Written
-// by refine, read by export.
-inline constexpr const char* kUnexplainedImagesJson = "unexplained_images";
-// JSON document beside a refined pose set: the names of frames that moved far more than the others
-// and fit their matches worse (refine/frame_doubt.h: wrong intrinsics, a frame the solve could
-// not place). Written by refine, read by export.
-inline constexpr const char* kDoubtedImagesJson = "doubted_images";
-// JSON document beside a refined pose set: the names of the images whose placement the matches do
-// not hold (refine/loose_parts.h: parts hanging on a pair or two, or whose pairs the wrong-pair
-// removal took; and, after a prior repaired as coarse, the smaller components of the match
-// graph). Written by refine, read by export.
-inline constexpr const char* kLooseImagesJson = "loose_images";
+// JSON document beside a refined pose set: per image name (every image with a prior pose), its
+// verdict {verdict: held | held_by_prior | doubted, reason, detail} (refine/frame_verdicts.h).
+// Written by refine; the export leaves the doubted frames out (never a silent wrong result) and
+// writes the verdicts beside the poses.
+inline constexpr const char* kFrameVerdictsJson = "frame_verdicts";
+// JSON document beside a prior pose set: the accuracy its maker states, {sigma_deg, sigma_m} per
+// frame (prior stage options sigma_deg, sigma_m; absent when none is stated). Read by refine.
+inline constexpr const char* kPriorAccuracyJson = "prior_accuracy";
 // JSON document beside a refined pose set: per image name, σ of its rotation (degrees) and centre
 // (prior length units) at the solution (refine/pose_uncertainty.h). Written by refine.
 inline constexpr const char* kPoseUncertaintyJson = "pose_uncertainty";

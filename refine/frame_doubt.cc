@@ -119,24 +119,51 @@ FrameDoubtVerdict CheckFrameDoubts(
     if (std::isfinite(value)) pair.values.push_back(value);
   }
   std::vector<double> all_pairs;
-  std::vector<std::vector<double>> of_image(n);
+  std::vector<std::vector<std::pair<int, double>>> of_image(n);  // (other image, pair median)
   for (const auto& [images, sample] : pairs) {
     if (sample.values.empty()) continue;
     const double median = Median(sample.values, 0.0);
     all_pairs.push_back(median);
-    of_image[images.first].push_back(median);
-    of_image[images.second].push_back(median);
+    of_image[images.first].emplace_back(images.second, median);
+    of_image[images.second].emplace_back(images.first, median);
   }
   if (all_pairs.empty()) return verdict;
   verdict.checked = true;
   verdict.median_pair_residual_px = Median(all_pairs, 0.0);
-  for (int i = 0; i < n; ++i) {
-    if (of_image[i].empty() || !(verdict.median_pair_residual_px > 0)) continue;
-    verdict.residual_ratio[i] = Median(of_image[i], 0.0) / verdict.median_pair_residual_px;
-    if (verdict.centre_change[i] > verdict.centre_change_threshold &&
-        verdict.residual_ratio[i] > options.residual_ratio) {
-      verdict.images.push_back(i);
+  if (!(verdict.median_pair_residual_px > 0)) return verdict;
+  // A frame's ratio over its pairs with frames not in `out`.
+  const auto ratio = [&](int i, const std::vector<bool>& out) {
+    std::vector<double> medians;
+    for (const auto& [other, median] : of_image[i]) {
+      if (!out[other]) medians.push_back(median);
     }
+    return medians.empty() ? std::numeric_limits<double>::quiet_NaN()
+                           : Median(medians, 0.0) / verdict.median_pair_residual_px;
+  };
+  std::vector<bool> none(n, false), doubted(n, false);
+  for (int i = 0; i < n; ++i) {
+    verdict.residual_ratio[i] = ratio(i, none);
+    doubted[i] = verdict.centre_change[i] > verdict.centre_change_threshold &&
+                 verdict.residual_ratio[i] > options.residual_ratio;
+  }
+  // Fitting far worse alone, worst first: a frame's pairs with a frame already doubted do not
+  // count against it (a neighbour of a misplaced frame fits its pairs with it badly too).
+  while (true) {
+    int worst = -1;
+    double worst_ratio = options.far_residual_ratio;
+    for (int i = 0; i < n; ++i) {
+      if (doubted[i]) continue;
+      const double r = ratio(i, doubted);
+      if (r > worst_ratio) {
+        worst = i;
+        worst_ratio = r;
+      }
+    }
+    if (worst < 0) break;
+    doubted[worst] = true;
+  }
+  for (int i = 0; i < n; ++i) {
+    if (doubted[i]) verdict.images.push_back(i);
   }
   return verdict;
 }

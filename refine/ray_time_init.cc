@@ -1,6 +1,7 @@
 #include "refine/ray_time_init.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "core/camera.h"
 #include "core/statistics.h"
@@ -123,6 +124,16 @@ int StartRayTimesAtClosestApproach(const ProblemLayout& layout, const RefineInpu
     ++started;
   }
   return started;
+}
+
+double PriorDepthScale(const RefineInput& input, const std::vector<Rigid3>& world_from_cam,
+                       const CameraBlocks& cameras, int max_matches_per_pair, int seed) {
+  const ProblemLayout layout = BuildPerObservationLayout(input, max_matches_per_pair, seed);
+  RayTimeInitSummary summary;
+  InitialRayTimes(layout, input, world_from_cam, cameras, "auto", 1.0, &summary);
+  return summary.num_depth_samples > 0 && summary.median_depth > 0
+             ? summary.median_depth
+             : std::numeric_limits<double>::quiet_NaN();
 }
 
 }  // namespace raytime

@@ -27,6 +27,12 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
                                     const CameraBlocks& cameras, const std::string& mode,
                                     double constant, RayTimeInitSummary* summary);
 
+// The prior's depth scale: the median over the images of their "auto" start (above) at
+// `world_from_cam`, on at most `max_matches_per_pair` matches per pair; NaN without a sample (no
+// pair of rays meets in front of both cameras: a prior whose centres coincide).
+double PriorDepthScale(const RefineInput& input, const std::vector<Rigid3>& world_from_cam,
+                       const CameraBlocks& cameras, int max_matches_per_pair, int seed);
+
 // The finish of the basin-first solve (RefineOptions::basin_first) starts from poses an earlier
 // pass solved on capped matches, and adds the observations the cap left out. Started at their
 // image's depth scale, many of them would begin hundreds of pixels off, where the nominal arctan

@@ -1,33 +1,31 @@
-// RefinePoses: the intrinsics blocks, then a recipe of passes (refine_pass.h: layout → ray-time
-// initialization → problem → GNC → gauge polish): one pass, the two of the staged room recipe
-// (§4.3) or the basin-first recipe (basin_first.h); then the posterior guardrails (§3.6, §4.3,
-// and the checks beyond the paper: inconsistent pairs, loose parts) and the summary.
+// RefinePoses: the match graph's components, each solved on its own (refine/connected_solve.h:
+// intrinsics blocks -> recipe of passes -> uncertainty -> guardrails -> frame checks), then one
+// verdict per frame from all the evidence (refine/frame_verdicts.h) and the warnings that name
+// what is not simply held (refine/refine_warnings.h).
 #include "refine/refine.h"
 
+#include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
-#include <optional>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numeric>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
 #include "core/options.h"
+#include "core/statistics.h"
 #include "core/timing.h"
-#include "refine/basin_first.h"
-#include "refine/camera_blocks.h"
-#include "refine/guardrails.h"
-#include "refine/refine_pass.h"
+#include "refine/components.h"
+#include "refine/connected_solve.h"
+#include "refine/refine_warnings.h"
 
 namespace raytime {
 namespace {
-
-std::vector<std::string> Labels(const RefineInput& input, const std::vector<int>& images) {
-  std::vector<std::string> labels;
-  for (const int image : images) labels.push_back(input.Label(image));
-  return labels;
-}
 
 void ValidateInput(const RefineInput& input) {
   const size_t n = input.prior_world_from_cam.size();
@@ -55,218 +53,156 @@ void ValidateInput(const RefineInput& input) {
   }
 }
 
-// The intrinsics blocks (refine/camera_blocks.h): one shared set only when self-calibrating one,
-// else the images' own cameras. Every pass of the run uses the same blocks.
-void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& options, PassState* state,
-                           CameraBlocksSummary* cameras) {
-  cameras->sharing = options.intrinsics_sharing;
-  std::vector<bool> camera_in_use(input.cameras.size(), false);
-  for (const int camera : input.camera_index) camera_in_use[camera] = true;
-  cameras->num_cameras =
-      static_cast<int>(std::count(camera_in_use.begin(), camera_in_use.end(), true));
-  if (options.intrinsics_sharing != "shared") {
-    state->cameras = PerCameraBlocks(input);
-    return;
-  }
-  // Self-calibrating (RefineOptions relations).
-  state->cameras = SharedBlock(input, &cameras->max_start_disagreement_px);
-  cameras->cameras_differ = cameras->max_start_disagreement_px > kSharedCameraTolerancePx;
-  if (cameras->cameras_differ) {
-    spdlog::warn(fmt::format(
-        "refine: {} cameras differ by up to {:.3g} px on the image from the shared intrinsics "
-        "started at their median (intrinsics_sharing: shared); their per-image values are "
-        "replaced by one refined set",
-        cameras->num_cameras, cameras->max_start_disagreement_px));
-  }
+// Before any solve: every image at its prior, the input's cameras, nothing solved.
+RefineOutput UnsolvedOutput(const RefineInput& input) {
+  RefineOutput output;
+  output.world_from_cam = input.prior_world_from_cam;
+  for (Rigid3& pose : output.world_from_cam) pose.rotation.normalize();
+  output.solved_world_from_cam = output.world_from_cam;
+  output.cameras = output.solved_cameras = input.cameras;
+  output.diagnostics.image_residual_median_px.assign(input.prior_world_from_cam.size(),
+                                                     std::numeric_limits<double>::quiet_NaN());
+  return output;
 }
 
-// The recipe's passes: the staged room recipe (§4.3), basin-first (basin_first.h) or one pass.
-// `pruned` receives the input less the pairs a basin-first solve removed.
-void RunRecipe(const RefineInput& input, const RefineOptions& options,
-               const std::vector<Rigid3>& prior, PassState* state, RefineSummary* summary,
-               std::optional<RefineInput>* pruned) {
-  PassSettings nominal;
-  nominal.name = "solve";
-  nominal.max_matches_per_pair = options.max_matches_per_pair;
-  nominal.orientation_weight = options.orientation_weight;
-  nominal.scales = options.StageScales();
-  nominal.refine_focal = options.refine_focal;
-  nominal.refine_principal_point = options.refine_principal_point;
-  nominal.refine_distortion = options.refine_distortion;
-  // The passes on the nominal settings (and the basin-first finish and anneal copied from them)
-  // may start from an earlier run's solution; the capped passes that decide never do.
-  nominal.warm_startable = true;
-  if (options.staged) {
-    // §4.3: pass 1 poses only, light orientation anchor, capped matches, full GNC schedule ...
-    PassSettings pass1;
-    pass1.name = "pass1_poses";
-    pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
-    pass1.orientation_weight = options.stage1_orientation_weight;
-    pass1.scales = options.StageScales();
-    pass1.intermediate = true;
-    summary->passes.push_back(RunPass(input, options, pass1, prior, state));
-    // ... pass 2 one warm solve at the nominal scale, priors re-anchored at the pass-1 poses.
-    PassSettings pass2 = nominal;
-    pass2.name = "pass2_self_calibration";
-    pass2.scales = {options.loss_scale_px2};
-    const std::vector<Rigid3> pass1_poses = state->world_from_cam;
-    summary->passes.push_back(RunPass(input, options, pass2, pass1_poses, state));
-  } else if (options.basin_first) {
-    RunBasinFirst(input, options, nominal, prior, state, summary, pruned);
-  } else {
-    summary->passes.push_back(RunPass(input, options, nominal, prior, state));
-  }
+// Why the images of a component or outside every component were not refined.
+void NotRefined(const std::vector<int>& images, const std::string& reason,
+                const std::string& detail, FrameEvidence* evidence) {
+  for (const int image : images) evidence->findings.push_back({image, reason, detail});
 }
 
-// Iterations, times, costs and failure over the passes.
-void AddUpPasses(RefineSummary* summary) {
-  for (const RefinePassSummary& pass : summary->passes) {
-    summary->timings.build_seconds += pass.build_seconds;
-    summary->timings.solve_seconds += pass.solve_seconds;
-    for (const GncStageSummary& stage : pass.stages) {
-      summary->total_iterations += stage.iterations;
-      summary->timings.jacobian_seconds += stage.jacobian_seconds;
-      summary->guardrails.solver_failed =
-          summary->guardrails.solver_failed || stage.termination == "FAILURE";
+// A smaller component's summary into the whole run's (the largest's): its guardrails fired, its
+// removed pairs, its frames' uncertainty and intrinsics tests.
+void AddComponent(const RefineSummary& part, const std::vector<int>& images,
+                  RefineSummary* summary) {
+  for (const std::string& check : part.guardrails.fired) {
+    if (std::find(summary->guardrails.fired.begin(), summary->guardrails.fired.end(), check) ==
+        summary->guardrails.fired.end()) {
+      summary->guardrails.fired.push_back(check);
     }
   }
-  summary->initial_cost = summary->passes.front().stages.front().initial_cost;
-  const RefinePassSummary& last = summary->passes.back();
-  summary->final_cost = last.stages.back().final_cost -
-                        (last.gauge_polish.prior_cost_before - last.gauge_polish.prior_cost_after);
+  summary->guardrails.returned_prior =
+      summary->guardrails.returned_prior || part.guardrails.returned_prior;
+  summary->pair_removal.removed.insert(summary->pair_removal.removed.end(),
+                                       part.pair_removal.removed.begin(),
+                                       part.pair_removal.removed.end());
+  for (const int image : images) {
+    summary->uncertainty.cameras.at(image) = part.uncertainty.cameras.at(image);
+  }
+  summary->frame_intrinsics.insert(summary->frame_intrinsics.end(), part.frame_intrinsics.begin(),
+                                   part.frame_intrinsics.end());
 }
 
-// The posterior guardrails (§3.6, §4.3 and beyond the paper) and the decision they make.
-void ApplyGuardrails(const RefineInput& input, const RefineOptions& options,
-                     const std::vector<Rigid3>& prior, const PassState& state,
-                     const std::vector<PairResidual>& pair_residuals, RefineSummary* summary) {
-  // Against the original prior: these return it.
-  if (summary->guardrails.solver_failed) summary->guardrails.fired.push_back("solver_failure");
-  if (options.trust_region) {
-    summary->guardrails.trust_region =
-        CheckTrustRegion(prior, state.world_from_cam, options.trust_region_rotation_deg,
-                         options.trust_region_translation_m * options.length_unit_m);
-    if (summary->guardrails.trust_region.fired) summary->guardrails.fired.push_back("trust_region");
+// Whether the poses' centres all coincide (to 1e-9 of their distance from the origin): a prior
+// from a gyro, or any rotation-only one. Such a prior has no baseline and no scale; refined as
+// given, the solve found the right shape but the position prior and the gauge fit held it at the
+// one point (the sample from such a prior: every camera within 1e-7 m, "accepted").
+bool CentresCoincide(const std::vector<Rigid3>& poses) {
+  if (poses.size() < 2) return false;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const Rigid3& pose : poses) centroid += pose.translation / static_cast<double>(poses.size());
+  double spread = 0.0;
+  for (const Rigid3& pose : poses) spread = std::max(spread, (pose.translation - centroid).norm());
+  return spread <= 1e-9 * centroid.norm();
+}
+
+// A prior without baseline gets its centres from the matches: a first solve from it finds the
+// shape at the scale the coinciding centres leave, and its centres, scaled to a median ray time
+// of 1, become the prior's (its rotations kept) for the solve that is returned. The result's
+// scale is arbitrary, as the prior's was. False when the first solve gives no scale.
+bool SeedCentresFromMatches(const RefineOptions& options, RefineInput* part) {
+  RefineOutput first;
+  std::vector<FrameFinding> ignored;
+  spdlog::info(
+      "refine: the prior's centres all coincide (no baseline): a first solve takes the "
+      "centres from the matches");
+  SolveConnected(*part, options, &first, &ignored);
+  std::vector<double> ray_times;
+  for (Eigen::Index o = 0; o < first.solved_observations.ray_times.size(); ++o) {
+    const double t = first.solved_observations.ray_times(o);
+    if (std::isfinite(t) && t > 0) ray_times.push_back(t);
   }
-  if (options.wander_test) {
-    summary->guardrails.wander =
-        CheckWander(prior, state.world_from_cam, options.wander_expected_m * options.length_unit_m,
-                    options.wander_factor);
-    if (summary->guardrails.wander.fired) summary->guardrails.fired.push_back("wander");
+  const double depth = Median(ray_times, 0.0);
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const Rigid3& pose : first.solved_world_from_cam) {
+    centroid += pose.translation / static_cast<double>(first.solved_world_from_cam.size());
   }
-  summary->guardrails.returned_prior = !summary->guardrails.fired.empty();
-  // Against the solve's own matches (prior-independent), flag only.
-  if (options.inconsistent_pairs_test) {
-    summary->guardrails.inconsistent_pairs = CheckInconsistentPairs(
-        pair_residuals, options.inconsistent_pair_px, options.inconsistent_pair_median_multiple,
-        options.max_inconsistent_pair_fraction);
-    if (summary->guardrails.inconsistent_pairs.fired) {
-      summary->guardrails.fired.push_back("inconsistent_pairs");
+  if (!(depth > 0) || !std::isfinite(depth)) return false;
+  for (size_t k = 0; k < part->prior_world_from_cam.size(); ++k) {
+    part->prior_world_from_cam[k].translation =
+        (first.solved_world_from_cam[k].translation - centroid) / depth;
+  }
+  return true;
+}
+
+// One component's solve, its output merged into *output and its evidence into *evidence; its
+// summary in the input's indices.
+RefineSummary SolveComponent(const RefineInput& input, const RefineOptions& options,
+                             const std::vector<int>& images, bool largest, RefineOutput* output,
+                             FrameEvidence* evidence, Warnings* warnings) {
+  RefineInput part = ComponentInput(input, images);
+  if (CentresCoincide(part.prior_world_from_cam) && SeedCentresFromMatches(options, &part)) {
+    std::vector<std::string> names;
+    for (size_t k = 0; k < images.size(); ++k) {
+      evidence->prior[images[k]].translation = part.prior_world_from_cam[k].translation;
+      names.push_back(input.Label(images[k]));
     }
+    warnings->push_back(
+        {"prior_without_baseline",
+         "the prior's centres all coincide (a rotation-only prior): the centres were taken from "
+         "the matches (a first solve), at an arbitrary scale (median ray time 1); the prior's "
+         "rotations are kept",
+         names,
+         {},
+         nlohmann::json::object()});
   }
-  // A part resting on a pair or two nothing else checks looks consistent whether they are right or
-  // not (its poses simply follow them), as does one whose disagreeing pairs the removal took.
-  summary->guardrails.loose_parts = CheckLooseParts(
-      input, summary->pair_removal, state, options,
-      options.inconsistent_pairs_test ? summary->guardrails.inconsistent_pairs.pair_threshold_px
-                                      : options.inconsistent_pair_px);
-  if (!summary->guardrails.loose_parts.images.empty())
-    summary->guardrails.fired.push_back("loose_parts");
-
-  if (summary->guardrails.returned_prior) {
-    summary->decision = "returned_prior";
-  } else if (!summary->guardrails.fired.empty()) {
-    summary->decision = "flagged";
-  } else if (!summary->pair_removal.removed.empty()) {
-    summary->decision = "re_solved";
-  } else {
-    summary->decision = "accepted";
-  }
-}
-
-void LogGuardrailMeasures(const RefineSummary& summary) {
-  if (summary.guardrails.trust_region.enabled) {
-    spdlog::info(
-        fmt::format("refine: trust region: moved at most {:.3f}° / {:.4g} (thresholds {:.3g}° / "
-                    "{:.4g}){}",
-                    summary.guardrails.trust_region.max_rotation_deg,
-                    summary.guardrails.trust_region.max_translation,
-                    summary.guardrails.trust_region.rotation_threshold_deg,
-                    summary.guardrails.trust_region.translation_threshold,
-                    summary.guardrails.trust_region.fired ? ": FIRED" : ""));
-  }
-  if (summary.guardrails.wander.enabled) {
-    spdlog::info(fmt::format(
-        "refine: wander test: median Sim(3)-aligned displacement {:.4g} (threshold "
-        "{:.4g}){}",
-        summary.guardrails.wander.median_displacement, summary.guardrails.wander.threshold,
-        summary.guardrails.wander.fired ? ": FIRED" : ""));
-  }
-  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
-  if (pairs.enabled) {
-    spdlog::info(fmt::format(
-        "refine: inconsistent pairs: {} of {} pairs above {:.3g} px (median pair {:.3g} px), "
-        "fraction {:.3f} (threshold {:.3g}){}",
-        pairs.num_inconsistent, pairs.num_pairs, pairs.pair_threshold_px, pairs.median_pair_px,
-        pairs.fraction, pairs.fraction_threshold, pairs.fired ? ": FIRED" : ""));
-  }
+  RefineOutput part_output;
+  std::vector<FrameFinding> findings;
+  RefineSummary summary = SolveConnected(part, options, &part_output, &findings);
+  const int n = static_cast<int>(input.prior_world_from_cam.size());
+  ToInputIndices(images, n, &summary);
+  MergeComponentOutput(images, part_output, largest, !summary.guardrails.returned_prior, output);
   if (summary.guardrails.returned_prior) {
-    spdlog::warn(fmt::format("refine: guardrail fired ({}): returning the prior",
-                             summary.guardrails.fired.front()));
+    NotRefined(images, "returned_prior",
+               fmt::format("guardrail {} of its solve fired: its pose is the prior's, not refined",
+                           summary.guardrails.fired.front()),
+               evidence);
+    return summary;
   }
-  const PairRemovalSummary& removal = summary.pair_removal;
-  if (removal.enabled) {
-    spdlog::info(
-        fmt::format("refine: pair removal: {} pair(s) removed in {} round(s), stopped: {}{}",
-                    removal.removed.size(), removal.rounds, removal.stop_reason,
-                    removal.kept.empty()
-                        ? std::string()
-                        : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
-                                      removal.kept.size())));
+  for (FrameFinding finding : findings) {
+    finding.image = images.at(finding.image);
+    evidence->findings.push_back(finding);
   }
+  evidence->loose_cuts.insert(evidence->loose_cuts.end(),
+                              summary.guardrails.loose_parts.cuts.begin(),
+                              summary.guardrails.loose_parts.cuts.end());
+  return summary;
 }
 
-// The loose parts (the outermost of nested ones: the others are in the summary), the decision and
-// the inconsistent pairs, by image name.
-void LogVerdicts(const RefineInput& input, const RefineSummary& summary) {
-  const auto& cuts = summary.guardrails.loose_parts.cuts;
-  for (const LooseCut& cut : cuts) {
-    const auto holds = [&](const LooseCut& other) {
-      return other.images.size() > cut.images.size() &&
-             std::includes(other.images.begin(), other.images.end(), cut.images.begin(),
-                           cut.images.end());
-    };
-    if (std::any_of(cuts.begin(), cuts.end(), holds)) continue;
-    spdlog::warn(fmt::format(
-        "refine: guardrail fired (loose_parts): {} image(s) held to the rest by {} pair(s) of "
-        "{} matches{}; the matches do not hold their placement: {}",
-        cut.images.size(), cut.pairs_across - cut.pairs_removed,
-        cut.matches_across - cut.matches_removed,
-        cut.pairs_removed == 0 ? std::string()
-                               : fmt::format(" (the pair removal took {} of {} pairs across)",
-                                             cut.pairs_removed, cut.pairs_across),
-        fmt::join(Labels(input, cut.images), ", ")));
+void LogFrameVerdicts(const RefineInput& input, const RefineSummary& summary) {
+  const PriorTrust& trust = summary.prior_trust;
+  spdlog::info(fmt::format(
+      "refine: prior {} ({}): the {} frames the matches hold agree with it to {:.3g}° / {:.3g} "
+      "(median)",
+      trust.trusted ? "trusted" : "not trusted", trust.source, trust.num_reference_frames,
+      trust.median_rotation_deg, trust.median_centre));
+  std::map<std::string, std::vector<std::string>> by_verdict;
+  for (size_t i = 0; i < summary.frame_verdicts.size(); ++i) {
+    const FrameVerdict& verdict = summary.frame_verdicts[i];
+    if (verdict.verdict == kVerdictHeld) continue;
+    by_verdict[verdict.verdict + " (" + verdict.reason + ")"].push_back(
+        input.Label(static_cast<int>(i)));
   }
-  spdlog::info(fmt::format("refine: decision: {}", summary.decision));
-  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
-  if (!pairs.fired) return;
-  // The first few in the log; all of them in the summary.
-  constexpr size_t kLogged = 8;
-  std::string listed;
-  for (size_t p = 0; p < std::min(kLogged, pairs.pairs.size()); ++p) {
-    listed +=
-        fmt::format("{}({}, {}) {:.1f} px", p == 0 ? "" : ", ", input.Label(pairs.pairs[p].image1),
-                    input.Label(pairs.pairs[p].image2), pairs.pairs[p].median_px);
+  const size_t held =
+      summary.frame_verdicts.size() -
+      std::accumulate(by_verdict.begin(), by_verdict.end(), size_t{0},
+                      [](size_t sum, const auto& entry) { return sum + entry.second.size(); });
+  spdlog::info(fmt::format("refine: frames: {} held by their matches", held));
+  for (const auto& [what, names] : by_verdict) {
+    const bool doubted = what.rfind(kVerdictDoubted, 0) == 0;
+    spdlog::log(doubted ? spdlog::level::warn : spdlog::level::info,
+                fmt::format("refine: frames {}: {}", what, fmt::join(names, ", ")));
   }
-  if (pairs.pairs.size() > kLogged) listed += ", ...";
-  spdlog::warn(fmt::format(
-      "refine: guardrail fired (inconsistent_pairs): the solution leaves {} of {} image pairs' "
-      "matches unexplained (wrong pairs, e.g. repeated structure, may have pulled it off): {}{}",
-      pairs.num_inconsistent, pairs.num_pairs, listed,
-      pairs.images_mostly_inconsistent.empty()
-          ? std::string()
-          : fmt::format("; most pairs of image(s) {} are among them: their poses are likely wrong",
-                        fmt::join(Labels(input, pairs.images_mostly_inconsistent), ", "))));
 }
 
 }  // namespace
@@ -276,44 +212,68 @@ RefineSummary RefinePoses(const RefineInput& input, const RefineOptions& options
   const auto start = std::chrono::steady_clock::now();
   ValidateOptions(options, "refine");
   ValidateInput(input);
-  RefineSummary summary;
-
-  std::vector<Rigid3> prior = input.prior_world_from_cam;
-  for (Rigid3& pose : prior) pose.rotation.normalize();
-  PassState state;
-  state.world_from_cam = prior;
-  SetUpIntrinsicsBlocks(input, options, &state, &summary.cameras);
-  std::optional<RefineInput> pruned;
-  RunRecipe(input, options, prior, &state, &summary, &pruned);
-  AddUpPasses(&summary);
-  CountBlocks(state, &summary.cameras);
-  spdlog::info(fmt::format(
-      "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: {}",
-      summary.cameras.num_cameras, summary.cameras.num_blocks,
-      options.SelfCalibrates() ? "self-calibrated, " : "fixed",
-      options.SelfCalibrates() ? options.intrinsics_sharing : "",
-      summary.cameras.min_block_observations));
-  summary.uncertainty = PoseUncertaintyOf(input, options, state, summary.passes.back(), prior);
-  if (summary.uncertainty.computed) {
-    spdlog::info(fmt::format(
-        "refine: uncertainty at the solution (keypoint noise {:.3g} px): median σ {:.3g}° "
-        "rotation, {:.3g} centre ({:.2f} s)",
-        summary.uncertainty.sigma_px, summary.uncertainty.median_rotation_deg,
-        summary.uncertainty.median_centre, summary.uncertainty.seconds));
+  const int n = static_cast<int>(input.prior_world_from_cam.size());
+  // 1. The match graph's components; images no pair with matches touches are not solved.
+  const MatchComponents split = SplitMatchComponents(input);
+  if (split.components.empty()) {
+    throw InputError("refine: no image pair with matches joins two of the " + std::to_string(n) +
+                     " images: nothing to refine");
   }
-  output->diagnostics.pairs = SolvedPairResiduals(pruned ? *pruned : input, state);
-  output->diagnostics.image_residual_median_px = state.image_residual_median_px;
-  ApplyGuardrails(input, options, prior, state, output->diagnostics.pairs, &summary);
-
-  output->solved_world_from_cam = state.world_from_cam;
-  output->solved_cameras = InputCameras(input, state.cameras);
-  output->solved_observations = SolvedObservationsOf(state);
-  output->pass_world_from_cam = state.pass_world_from_cam;
-  output->world_from_cam = summary.guardrails.returned_prior ? prior : state.world_from_cam;
-  output->cameras = summary.guardrails.returned_prior ? input.cameras : output->solved_cameras;
+  *output = UnsolvedOutput(input);
+  FrameEvidence evidence;
+  evidence.prior = output->world_from_cam;
+  evidence.component.assign(n, -1);
+  evidence.stated = input.stated_prior;
+  evidence.prior_from_matches = input.prior_rotations_from_matches;
+  for (int i = 0; i < n; ++i) evidence.labels.push_back(input.Label(i));
+  NotRefined(split.unmatched, "unmatched",
+             "no verified pair joins it to another image: not refined", &evidence);
+  // 2. Each component solved (a self-calibrated camera comes from one solve: the largest only).
+  RefineSummary summary;
+  Warnings warnings;
+  for (size_t c = 0; c < split.components.size(); ++c) {
+    const std::vector<int>& images = split.components[c];
+    for (const int image : images) evidence.component[image] = static_cast<int>(c);
+    ComponentSummary record;
+    record.num_images = static_cast<int>(images.size());
+    record.first_image = input.Label(images.front());
+    if (c > 0 && options.SelfCalibrates()) {
+      NotRefined(images, "not_solved",
+                 "its component is not the largest, and a self-calibrating run refines one solve: "
+                 "not refined",
+                 &evidence);
+      summary.components.push_back(record);
+      continue;
+    }
+    if (split.components.size() > 1) {
+      spdlog::info(fmt::format("refine: component {} of {}: {} images from {}", c + 1,
+                               split.components.size(), images.size(), record.first_image));
+    }
+    RefineSummary part =
+        SolveComponent(input, options, images, c == 0, output, &evidence, &warnings);
+    AddSolveWarnings(input, part, images, &warnings);
+    record.solved = true;
+    record.total_iterations = part.total_iterations;
+    record.final_cost = part.final_cost;
+    record.guardrails_fired = part.guardrails.fired;
+    record.returned_prior = part.guardrails.returned_prior;
+    if (c == 0) {
+      summary = std::move(part);
+      const OrientationPriorProbe& probe = summary.orientation_prior;
+      evidence.probe_run = probe.enabled && !probe.prior_from_matches && probe.weight > 0;
+      evidence.probe_kept = evidence.probe_run && probe.kept;
+    } else {
+      AddComponent(part, images, &summary);
+    }
+    summary.components.push_back(record);
+  }
+  // 3. One verdict per frame from all of it; the warnings that name the frames not held.
+  evidence.solution = output->world_from_cam;
+  summary.frame_verdicts = JudgeFrames(evidence, &summary.prior_trust);
+  AddFrameWarnings(input, summary.frame_verdicts, summary.components, split.components, &warnings);
+  summary.warnings = std::move(warnings);
   summary.timings.total_seconds = SecondsSince(start);
-  LogGuardrailMeasures(summary);
-  LogVerdicts(input, summary);
+  LogFrameVerdicts(input, summary);
   return summary;
 }
 

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "core/options.h"
+#include "refine/frame_doubt.h"
 
 namespace raytime {
 
@@ -23,7 +24,9 @@ struct RefineOptions {
   // plain solve.
   std::vector<double> gnc_scales = {1e4, 1e3, 1e2};
 
-  // λp, weight of the position prior λp/N Σ |O_i - O_i^prior|², 1/length² (§3.3).
+  // λp, weight of the position prior λp/N Σ |O_i - O_i^prior|² / D² (§3.3), D the prior's depth
+  // scale (refine/connected_solve.cc): per length² in the paper, whose captures have D ~ 1 m; per
+  // D² the result does not depend on the prior's unit (issue 46).
   double position_weight = 1e-2;
   // λR, weight of the orientation prior λR/N Σ |Log(R_i^prior^-1 R_i)|², 1/rad² (§3.3, §3.6).
   double orientation_weight = 1e3;
@@ -209,6 +212,14 @@ struct RefineOptions {
   // unchanged in agreement; the whole desk moves 0.070° (λR = 0: 0.196°).
   double finish_anneal_hold_ratio = 1.0;
 
+  // Frame checks after the solve (issue 46, refine/frame_verdicts.h): a frame that moved far more
+  // than the others and fits worse (refine/frame_doubt.h; not for a prior whose rotations came
+  // from the matches: its own errors are no independent measure), and a frame whose matches other
+  // intrinsics explain far better (refine/frame_intrinsics.h). A frame either names is doubted.
+  bool check_frame_doubts = true;
+  FrameDoubtOptions frame_doubt;
+  bool check_frame_intrinsics = true;
+
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("parameterization", parameterization,
@@ -221,8 +232,10 @@ struct RefineOptions {
       "GNC schedule of arctan scales solved in order, px² (§3.5); loss_scale_px2 is appended "
       "last; [] = plain solve",
       Positive());
-    v("position_weight", position_weight, "λp, weight of the position prior, 1/length² (§3.3)",
-      NonNegative());
+    v("position_weight", position_weight,
+      "λp, weight of the position prior per squared depth scale of the prior (§3.3; 1/m² at a "
+      "1 m deep scene)",
+      NonNegative(), AtMost(1e8));
     v("orientation_weight", orientation_weight,
       "λR, weight of the orientation prior, 1/rad² (§3.3)", NonNegative());
     v("gauge_orientation_weight", gauge_orientation_weight,
@@ -328,6 +341,12 @@ struct RefineOptions {
     v("finish_anneal_hold_ratio", finish_anneal_hold_ratio,
       "The finish anneal's λR towards the finish's rotations, as a multiple of the finish's λR",
       NonNegative());
+    v("check_frame_doubts", check_frame_doubts,
+      "Doubt frames that moved far more than the others and fit their matches worse (wrong "
+      "intrinsics, a frame the solve could not place); not for a prior made from the match graph");
+    frame_doubt.VisitFields(v);  // flat keys: frame_doubt_residual_ratio, ...
+    v("check_frame_intrinsics", check_frame_intrinsics,
+      "Doubt frames whose matches another focal length or principal point explains far better");
     v("max_pair_removal_rounds", max_pair_removal_rounds,
       "Basin-first: times the pairs the basin solve leaves above inconsistent_pair_px are removed "
       "and the basin solve rerun; 0 keeps every pair",

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -15,6 +16,9 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "core/warnings.h"
+#include "refine/frame_doubt.h"
+#include "refine/frame_verdicts.h"
 #include "refine/gauge_polish.h"
 #include "refine/loose_parts.h"
 #include "refine/pose_uncertainty.h"
@@ -66,6 +70,9 @@ struct RefineInput {
   // the log says indices.
   std::vector<std::string> names;
   RefineWarmStart warm_start;  // empty: every pass starts as the recipe says
+  // The prior's accuracy per frame as the user states it (prior.sigma_deg / prior.sigma_m): a
+  // prior trusted to place the frames its matches do not hold (refine/frame_verdicts.h).
+  StatedPriorAccuracy stated_prior;
 
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
   // names[image], or its index when there are no names.
@@ -121,8 +128,9 @@ struct RefineOutput {
   // At solved_world_from_cam and solved_cameras (so not the returned poses when a guardrail fired).
   SolvedObservations solved_observations;
   SolveDiagnostics diagnostics;  // at the solve, as solved_observations
-  // Per pass name, the poses at its end: a later run's RefineWarmStart.
-  std::map<std::string, std::vector<Rigid3>> pass_world_from_cam;
+  // Per pass name, the poses at its end (none for an image no solve of that pass had): a later
+  // run's RefineWarmStart.
+  std::map<std::string, std::vector<std::optional<Rigid3>>> pass_world_from_cam;
 };
 
 // The bins of a GNC stage's residual histogram (GncStageSummary::residual_histogram): norms of the
@@ -370,6 +378,21 @@ struct RefineGuardrails {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineGuardrails, fired, returned_prior, solver_failed,
                                    trust_region, wander, inconsistent_pairs, loose_parts)
 
+// One connected component of the match graph and its solve (refine/components.h).
+struct ComponentSummary {
+  int num_images = 0;
+  std::string first_image;  // its first image's label
+  bool solved = false;      // false: self-calibration refines one component, the largest
+  int total_iterations = 0;
+  double final_cost = 0.0;
+  std::vector<std::string> guardrails_fired;
+  bool returned_prior = false;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ComponentSummary, num_images, first_image, solved,
+                                   total_iterations, final_cost, guardrails_fired, returned_prior)
+
+// The passes, checks and verdicts of a run: the largest component's solve, and over all
+// components the guardrails fired, the components, the frame verdicts and the warnings.
 struct RefineSummary {
   std::vector<RefinePassSummary> passes;
   CameraBlocksSummary cameras;
@@ -391,11 +414,29 @@ struct RefineSummary {
   PoseUncertaintySummary uncertainty;
   // The bins of every GNC stage's residual_histogram (ResidualHistogramEdgesPx()).
   std::vector<double> residual_histogram_edges_px = ResidualHistogramEdgesPx();
+  // D, the prior's depth scale the position prior is measured in (λp/N Σ|ΔO|²/D²; prior length
+  // units; null when the prior gave no depth sample and λp was used as given).
+  double prior_depth = std::numeric_limits<double>::quiet_NaN();
+  // The match graph's components (largest first), each with its solve's totals.
+  std::vector<ComponentSummary> components;
+  // The frame-doubt check of the largest component (refine/frame_doubt.h), and every solved
+  // frame's intrinsics test (refine/frame_intrinsics.h).
+  FrameDoubtVerdict frame_doubts;
+  std::vector<FrameIntrinsicsTest> frame_intrinsics;
+  // Per image: held, held_by_prior or doubted, and why (refine/frame_verdicts.h); how the prior
+  // was judged.
+  std::vector<FrameVerdict> frame_verdicts;
+  PriorTrust prior_trust;
+  // What deserves a second look, by image name (core/warnings.h): doubted and held_by_prior
+  // frames, guardrails that fired, a graph in pieces.
+  Warnings warnings;
 
   nlohmann::json ToJson() const;  // the fields by name
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineSummary, passes, cameras, total_iterations, initial_cost,
                                    final_cost, timings, orientation_prior, pair_removal, decision,
-                                   guardrails, uncertainty, residual_histogram_edges_px)
+                                   guardrails, uncertainty, residual_histogram_edges_px,
+                                   prior_depth, components, frame_doubts, frame_intrinsics,
+                                   frame_verdicts, prior_trust, warnings)
 
 }  // namespace raytime

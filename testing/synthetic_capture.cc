@@ -11,8 +11,18 @@
 // perturbed by the ladder protocol (evaluate/perturbation.h: i.i.d., --level degrees per frame,
 // 1.25 % of the 4.5 m median depth per degree). Deterministic for a seed.
 //
+// For the fault-injection benchmark (issue 46, bench/fault_injection.py): --weak_link K leaves of
+// the pairs across frame positions K-1 | K only (K-1, K), with --weak_link_matches of its matches
+// (a corridor's doorway: the frames past it hang on the rest by one pair), and one fault of the
+// image set may be injected: --focal_fault I:F (image I's camera given F times its focal length),
+// --principal_fault I:DX:DY (its principal point moved), --swap I:J (the two images' content
+// swapped: their keypoints and pairs change places, their names and priors do not), --foreign I
+// (image I shows another scene: its pairs are two spurious ones of 25 random matches).
+//
 //   synthetic_capture --cameras N [--keypoints K] [--window W] [--laps L] [--noise PX]
-//                     [--outliers F] [--level DEG] [--seed S] --out DIR
+//                     [--outliers F] [--level DEG] [--seed S] [--weak_link K]
+//                     [--weak_link_matches M] [--focal_fault I:F | --principal_fault I:DX:DY |
+//                     --swap I:J | --foreign I] --out DIR
 //
 // Writes DIR/dataset.h5 (images, cameras, ground_truth), DIR/features.h5 (keypoints, no
 // descriptors), DIR/matches.h5 (verified inlier matches) and DIR/prior.h5 (pose set "prior"), so
@@ -26,6 +36,9 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "core/features.h"
@@ -45,6 +58,9 @@ struct CaptureOptions {
   double outliers = 0.05;
   double level_deg = 2.0;
   int seed = 0;
+  int weak_link = 0;  // frame position; 0: none
+  int weak_link_matches = 40;
+  std::string focal_fault, principal_fault, swap, foreign;
   std::string out;
 };
 
@@ -56,6 +72,124 @@ constexpr double kNearDepth = 3.0;  // metres
 constexpr double kFarDepth = 6.0;
 constexpr double kWallHalfHeight = 1.5;
 constexpr double kMedianDepth = 0.5 * (kNearDepth + kFarDepth);
+
+// Numbers of a fault option "A:B:C".
+std::vector<double> FaultNumbers(const std::string& value, size_t count, const char* option) {
+  std::vector<double> numbers;
+  std::stringstream in(value);
+  std::string token;
+  while (std::getline(in, token, ':')) numbers.push_back(std::stod(token));
+  if (numbers.size() != count) {
+    throw std::invalid_argument(std::string(option) + " '" + value + "': expected " +
+                                std::to_string(count) + " numbers separated by ':'");
+  }
+  return numbers;
+}
+
+// Of the pairs across frame positions weak_link - 1 | weak_link only that pair, with at most
+// weak_link_matches of its matches.
+template <typename Position>
+void KeepOnePairAcross(const CaptureOptions& o, const Position& position,
+                       std::vector<PairMatches>* pairs) {
+  std::vector<PairMatches> kept;
+  for (PairMatches& pair : *pairs) {
+    const int a = std::min(position(pair.image1), position(pair.image2));
+    const int b = std::max(position(pair.image1), position(pair.image2));
+    if (a < o.weak_link && b >= o.weak_link) {
+      if (a != o.weak_link - 1 || b != o.weak_link) continue;
+      const Eigen::Index n = std::min<Eigen::Index>(o.weak_link_matches, pair.matches.rows());
+      pair.matches.conservativeResize(n, 2);
+      pair.geometry.inlier_matches = pair.matches;
+    }
+    kept.push_back(std::move(pair));
+  }
+  *pairs = std::move(kept);
+}
+
+// Each verified pair's relative pose as the front end's essential matrix gives it (the prior
+// convention check reads them): the true one, its baseline a unit direction.
+void SetRelativePoses(const ImageSet& images, const PoseSet& ground_truth,
+                      std::vector<PairMatches>* pairs) {
+  for (PairMatches& pair : *pairs) {
+    const Rigid3& a = ground_truth.world_from_cam.at(images.images[pair.image1].name);
+    const Rigid3& b = ground_truth.world_from_cam.at(images.images[pair.image2].name);
+    Rigid3 relative = b.Inverse() * a;
+    relative.translation.normalize();
+    pair.geometry.cam2_from_cam1 = relative;
+  }
+}
+
+// The one fault of the image set the options ask for (the file's comment).
+void InjectFault(const CaptureOptions& o, ImageSet* images, std::vector<ImageFeatures>* features,
+                 std::vector<PairMatches>* pairs, std::mt19937_64* rng) {
+  const int n = static_cast<int>(images->images.size());
+  const auto frame = [&](double value) {
+    const int i = static_cast<int>(value);
+    if (i < 0 || i >= n) throw std::invalid_argument("fault frame out of range");
+    return i;
+  };
+  const auto own_camera = [&](int i) {
+    images->cameras.push_back(images->cameras[images->images[i].camera_index]);
+    images->images[i].camera_index = static_cast<int>(images->cameras.size()) - 1;
+    return &images->cameras.back();
+  };
+  if (!o.focal_fault.empty()) {
+    const std::vector<double> f = FaultNumbers(o.focal_fault, 2, "--focal_fault");
+    CameraIntrinsics* camera = own_camera(frame(f[0]));
+    camera->params[kFx] *= f[1];
+    camera->params[kFy] *= f[1];
+  }
+  if (!o.principal_fault.empty()) {
+    const std::vector<double> p = FaultNumbers(o.principal_fault, 3, "--principal_fault");
+    CameraIntrinsics* camera = own_camera(frame(p[0]));
+    camera->params[kCx] += p[1];
+    camera->params[kCy] += p[2];
+  }
+  if (!o.swap.empty()) {
+    const std::vector<double> s = FaultNumbers(o.swap, 2, "--swap");
+    const int i = frame(s[0]), j = frame(s[1]);
+    std::swap((*features)[i], (*features)[j]);
+    for (PairMatches& pair : *pairs) {
+      for (int* image : {&pair.image1, &pair.image2}) {
+        *image = *image == i ? j : *image == j ? i : *image;
+      }
+      if (pair.image1 > pair.image2) {
+        std::swap(pair.image1, pair.image2);
+        pair.matches.col(0).swap(pair.matches.col(1));
+        pair.geometry.inlier_matches = pair.matches;
+        pair.geometry.cam2_from_cam1 = pair.geometry.cam2_from_cam1.Inverse();
+        pair.geometry.cam2_from_cam1.translation.normalize();
+      }
+    }
+  }
+  if (!o.foreign.empty()) {
+    const int i = frame(FaultNumbers(o.foreign, 1, "--foreign")[0]);
+    std::uniform_int_distribution<int> pick(0, n - 1);
+    pairs->erase(
+        std::remove_if(pairs->begin(), pairs->end(),
+                       [&](const PairMatches& p) { return p.image1 == i || p.image2 == i; }),
+        pairs->end());
+    for (int k = 0; k < 2; ++k) {
+      int other = pick(*rng);
+      while (other == i) other = pick(*rng);
+      PairMatches pair;
+      pair.image1 = std::min(i, other);
+      pair.image2 = std::max(i, other);
+      pair.matches.resize(25, 2);
+      for (Eigen::Index m = 0; m < 25; ++m) {
+        for (const int c : {0, 1}) {
+          const int image = c == 0 ? pair.image1 : pair.image2;
+          std::uniform_int_distribution<int> keypoint(
+              0, static_cast<int>((*features)[image].keypoints.rows()) - 1);
+          pair.matches(m, c) = static_cast<uint32_t>(keypoint(*rng));
+        }
+      }
+      pair.geometry.config = TwoViewConfig::kCalibrated;
+      pair.geometry.inlier_matches = pair.matches;
+      pairs->push_back(std::move(pair));
+    }
+  }
+}
 
 int Main(int argc, char** argv) {
   CaptureOptions o;
@@ -76,6 +210,19 @@ int Main(int argc, char** argv) {
   app.add_option("--level", o.level_deg, "Prior perturbation, degrees per frame (i.i.d.)")
       ->check(CLI::Range(0.0, 180.0));
   app.add_option("--seed", o.seed, "Seed of the scene, noise, outliers and prior");
+  app.add_option("--weak_link", o.weak_link,
+                 "Frame position K: of the pairs across K-1 | K only (K-1, K) is kept; 0 = none")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--weak_link_matches", o.weak_link_matches,
+                 "Matches the weak link's one pair keeps")
+      ->check(CLI::PositiveNumber);
+  auto* faults = app.add_option_group("fault", "One fault of the image set (issue 46)");
+  faults->add_option("--focal_fault", o.focal_fault, "I:F: image I's focal length given F times");
+  faults->add_option("--principal_fault", o.principal_fault,
+                     "I:DX:DY: image I's principal point given DX, DY px off");
+  faults->add_option("--swap", o.swap, "I:J: the two images' content swapped");
+  faults->add_option("--foreign", o.foreign, "I: image I shows another scene");
+  faults->require_option(0, 1);
   app.add_option("--out", o.out, "Output directory")->required();
   CLI11_PARSE(app, argc, argv);
 
@@ -185,6 +332,12 @@ int Main(int argc, char** argv) {
     }
   }
 
+  if (o.weak_link > 0) KeepOnePairAcross(o, position, &pairs);
+  SetRelativePoses(images, ground_truth, &pairs);
+  InjectFault(o, &images, &features, &pairs, &rng);
+  num_matches = 0;
+  for (const PairMatches& pair : pairs) num_matches += pair.matches.rows();
+
   PerturbationOptions perturbation;
   perturbation.level_deg = o.level_deg;
   perturbation.translation_unit = "metres";
@@ -195,10 +348,19 @@ int Main(int argc, char** argv) {
   std::filesystem::create_directories(o.out);
   Provenance provenance;
   provenance.stage = "synthetic_capture";
-  provenance.options = {{"cameras", o.cameras},     {"keypoints", o.keypoints},
-                        {"window", o.window},       {"laps", o.laps},
-                        {"noise_px", o.noise_px},   {"outliers", o.outliers},
-                        {"level_deg", o.level_deg}, {"seed", o.seed}};
+  provenance.options = {{"cameras", o.cameras},
+                        {"keypoints", o.keypoints},
+                        {"window", o.window},
+                        {"laps", o.laps},
+                        {"noise_px", o.noise_px},
+                        {"outliers", o.outliers},
+                        {"level_deg", o.level_deg},
+                        {"seed", o.seed},
+                        {"weak_link", o.weak_link},
+                        {"focal_fault", o.focal_fault},
+                        {"principal_fault", o.principal_fault},
+                        {"swap", o.swap},
+                        {"foreign", o.foreign}};
   {
     Hdf5Writer writer(o.out + "/dataset.h5");
     writer.WriteImages(images);

@@ -24,8 +24,8 @@ RefineInput TinyInput() {
   input.camera_index = {0, 0, 0};
   input.prior_world_from_cam.resize(3);
   input.keypoints.assign(3, Keypoints::Zero(4, 2));
-  input.pairs = {MakePairMatches(0, 1, {{0, 1}}), MakePairMatches(1, 2, {{1, 2}}), MakePairMatches(0, 2, {{1, 0}}),
-                 MakePairMatches(1, 1, {{0, 3}})};
+  input.pairs = {MakePairMatches(0, 1, {{0, 1}}), MakePairMatches(1, 2, {{1, 2}}),
+                 MakePairMatches(0, 2, {{1, 0}}), MakePairMatches(1, 1, {{0, 3}})};
   return input;
 }
 

@@ -17,26 +17,12 @@
 #include "evaluate/pose_errors.h"
 #include "formats/colmap_model.h"
 #include "pipelines/stage.h"
+#include "refine_stage_util.h"
 #include "temp_dir.h"
 #include "testing/synthetic_scene.h"
 
 namespace raytime {
 namespace {
-
-// The refine stage's inputs.
-struct SceneInputs {
-  ImageSet images;
-  std::vector<ImageFeatures> features;
-  std::vector<PairMatches> matches;
-  PoseSet ground_truth;
-  PoseSet prior;
-};
-
-std::string Name(int i) {
-  char name[16];
-  std::snprintf(name, sizeof(name), "%04d.jpg", i);
-  return name;
-}
 
 // Two synthetic scenes side by side in one image list (A: images 0-4, B: images 5-7) and, when
 // asked, a ninth image with keypoints but no verified pair.
@@ -128,48 +114,11 @@ SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
   return out;
 }
 
-// Writes the scene's HDF5 inputs and runs the refine stage (by default preset plain, one thread;
-// no trust region: its thresholds are object-scale, these scenes are 16 m deep).
-nlohmann::json RunRefine(
-    const SceneInputs& scene, const TempDir& dir, PoseSet* refined,
-    const std::string& options = "{preset: plain, num_threads: 1, trust_region: false}",
-    const Provenance& prior_provenance = Provenance{"test", {}, "", ""},
-    const nlohmann::json& prior_repair = nullptr) {
-  {
-    Hdf5Writer writer(dir / "inputs.h5");
-    writer.WriteImages(scene.images);
-    writer.WritePoseSet("prior", scene.prior, PoseRole::kPrior, prior_provenance);
-    if (!prior_repair.is_null()) writer.WriteJson(kPriorRepairJson, prior_repair);
-    writer.WriteFeatures(scene.features, Provenance{"test", {}, "", ""});
-    writer.WriteMatches(scene.matches, Provenance{"test", {}, "", ""});
-    writer.Commit();
-  }
-  std::unique_ptr<Stage> stage = CreateStage("refine");
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = "refine";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "refine.h5";
-  for (const char* artifact : {"images", "features", "matches", "poses/prior"}) {
-    context.artifacts[artifact] = dir / "inputs.h5";
-  }
-  const nlohmann::json summary = stage->Run(context);
-  *refined = Hdf5Reader(context.output_path).ReadPoseSet("refined");
-  return summary;
-}
-
 // A trust region far below the correction of a 1°-off prior: the solve keeps the orientations
 // (the orientation prior holds this common 1° rotation, a gauge) but moves the centres ~0.16 m.
 const char* kTinyTrustRegion =
     "{preset: plain, num_threads: 1, trust_region: true, trust_region_rotation_deg: 10, "
     "trust_region_translation_m: 0.05}";
-
-const nlohmann::json* FindWarning(const nlohmann::json& summary, const std::string& code) {
-  for (const auto& warning : summary["warnings"]) {
-    if (warning["code"] == code) return &warning;
-  }
-  return nullptr;
-}
 
 // A prior the bootstrap made, or one the prior stage's repair replaced from it, has rotations
 // estimated from the same matches: preset auto finishes without an orientation prior towards them
@@ -303,26 +252,6 @@ double MeanRotationErrorDeg(const PoseSet& estimate, const PoseSet& truth) {
 
 // Runs the export stage on the refine stage's output (its /images when it wrote one): a COLMAP
 // text model in dir/refined/ and dir/refined_transforms.json.
-nlohmann::json RunExport(
-    const TempDir& dir,
-    const std::string& options = "{poses: [refined], formats: [colmap_text, transforms_json]}") {
-  std::unique_ptr<Stage> stage = CreateStage("export");
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = "export";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "export.h5";
-  const bool refined_images = Hdf5Reader(dir / "refine.h5").HasImages();
-  context.artifacts["images"] = refined_images ? dir / "refine.h5" : dir / "inputs.h5";
-  context.artifacts["poses/refined"] = dir / "refine.h5";
-  return stage->Run(context);
-}
-
-nlohmann::json ReadJsonFile(const std::string& path) {
-  std::ifstream in(path);
-  return nlohmann::json::parse(in);
-}
-
 // Per-image cameras used to be refused ("the refiner needs shared intrinsics"); with fixed
 // intrinsics each image is refined with its own camera, and the cameras are left as they are (no
 // /images is written; the export keeps one camera per image).
@@ -381,7 +310,7 @@ TEST(RefineStageTest, SelfCalibratedCamerasAreWrittenAndExportedPerCamera) {
       EXPECT_NEAR(IntrinsicsFromColmap(model.cameras.at(c + 1)).params[kFx],
                   written.cameras[c].params[kFx], 1e-9);
     }
-    const nlohmann::json transforms = ReadJsonFile(dir / "refined_transforms.json");
+    const nlohmann::json transforms = ReadTestJson(dir / "refined_transforms.json");
     EXPECT_FALSE(transforms.contains("fl_x"));
     ASSERT_EQ(transforms["frames"].size(), 6u);
     for (int c = 0; c < 6; ++c) {
@@ -407,25 +336,37 @@ TEST(RefineStageTest, SelfCalibratedCamerasAreWrittenAndExportedPerCamera) {
     EXPECT_EQ(summary["refined_intrinsics"][0]["num_images"], 6);
     RunExport(dir);
     EXPECT_EQ(ReadColmapModelText(dir / "refined").cameras.size(), 1u);
-    const nlohmann::json transforms = ReadJsonFile(dir / "refined_transforms.json");
+    const nlohmann::json transforms = ReadTestJson(dir / "refined_transforms.json");
     EXPECT_NEAR(transforms["fl_x"].get<double>(), written.cameras[0].params[kFx], 1e-9);
   }
 }
 
+// A prior stated good to 1° / 10 cm (prior.sigma_deg, prior.sigma_m): trusted to place scene B,
+// which no pair joins to scene A.
+const nlohmann::json kStatedAccuracy = {{"sigma_deg", 1.0}, {"sigma_m", 0.1}};
+
 TEST(RefineStageTest, PosesAGuardrailReturnedAreLeftOutOfTheRefinedExport) {
   TempDir dir("refine_stage");
   // Scene A's prior is 1° off (its solve leaves the tiny trust region and returns the prior);
-  // scene B's prior is exact (its solve stays inside and is refined).
+  // scene B's prior is exact (its solve stays inside and is refined; the stated prior places it).
   const SceneInputs scene = MakeTwoScenes(false, /*exact_prior_for_b=*/true);
   PoseSet refined;
-  const nlohmann::json summary = RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  const nlohmann::json summary =
+      RunRefine(scene, dir, &refined, kTinyTrustRegion, Provenance{"test", {}, "", ""}, nullptr,
+                kStatedAccuracy);
   const nlohmann::json* returned = FindWarning(summary, "returned_prior");
   ASSERT_NE(returned, nullptr) << summary["warnings"].dump();
   EXPECT_EQ((*returned)["images"].size(), 5u);
+  EXPECT_EQ(summary["frame_verdicts"]["0000.jpg"]["reason"], "returned_prior");
+  EXPECT_EQ(summary["frame_verdicts"]["0005.jpg"]["verdict"], "held_by_prior");
   // Only the returned solve's observations are kept for the export's points.
   const RayTimeObservations rays = Hdf5Reader(dir / "refine.h5").ReadRayTimes("refined");
-  EXPECT_EQ(rays.image_names, (std::vector<std::string>{"0005.jpg", "0006.jpg", "0007.jpg"}));
-  EXPECT_GT(rays.observations.rows(), 0);
+  EXPECT_EQ(rays.image_names.size(), 8u);
+  std::set<std::string> observed;
+  for (Eigen::Index o = 0; o < rays.observations.rows(); ++o) {
+    observed.insert(rays.image_names.at(rays.observations(o, 0)));
+  }
+  EXPECT_EQ(observed, (std::set<std::string>{"0005.jpg", "0006.jpg", "0007.jpg"}));
   EXPECT_GT(rays.matches.rows(), 0);
   const nlohmann::json exported = RunExport(dir);
   const nlohmann::json* left_out = FindWarning(exported, "unrefined_not_exported");
@@ -455,26 +396,50 @@ TEST(RefineStageTest, AnImageMostOfWhosePairsAreUnexplainedIsNamedAndLeftOutOfTh
   EXPECT_NE((*pairs)["message"].get<std::string>().find("0002.jpg"), std::string::npos);
   EXPECT_EQ(summary["guardrails"]["inconsistent_pairs"]["images_mostly_inconsistent"],
             nlohmann::json::array({2}));
+  const nlohmann::json* unexplained = FindWarning(summary, "unexplained_images");
+  ASSERT_NE(unexplained, nullptr) << summary["warnings"].dump();
+  EXPECT_EQ((*unexplained)["images"], nlohmann::json::array({"0002.jpg"}));
+  EXPECT_EQ(summary["frame_verdicts"]["0002.jpg"]["verdict"], "doubted");
+  EXPECT_EQ(summary["frame_verdicts"]["0002.jpg"]["reason"], "unexplained_pairs");
+  EXPECT_EQ(summary["frame_verdicts"]["0001.jpg"]["verdict"], "held");
 
   const nlohmann::json exported = RunExport(dir);
-  const nlohmann::json* left_out = FindWarning(exported, "unexplained_not_exported");
+  const nlohmann::json* left_out = FindWarning(exported, "doubted_not_exported");
   ASSERT_NE(left_out, nullptr) << exported.dump();
   EXPECT_EQ((*left_out)["images"], nlohmann::json::array({"0002.jpg"}));
+  EXPECT_EQ((*left_out)["details"]["reasons"]["0002.jpg"], "unexplained_pairs");
   EXPECT_EQ(FindWarning(exported, "unrefined_not_exported"), nullptr);
   ColmapModel model = ReadColmapModelText(dir / "refined");
   ASSERT_EQ(model.images.size(), 5u);
   for (const auto& [id, image] : model.images) EXPECT_NE(image.name, "0002.jpg");
-  EXPECT_EQ(ReadJsonFile(dir / "refined_transforms.json")["frames"].size(), 5u);
+  const nlohmann::json transforms = ReadTestJson(dir / "refined_transforms.json");
+  ASSERT_EQ(transforms["frames"].size(), 5u);
+  for (const auto& frame : transforms["frames"]) {
+    EXPECT_EQ(frame["raytime_verdict"], "held");
+    EXPECT_FALSE(frame.contains("raytime_verdict_reason"));
+  }
+  // Beside the model, every frame's verdict, the left-out one's with its reason.
+  const nlohmann::json verdicts = ReadTestJson(dir / "refined/frame_verdicts.json");
+  EXPECT_EQ(verdicts["frames"].size(), 6u);
+  EXPECT_EQ(verdicts["frames"]["0002.jpg"]["reason"], "unexplained_pairs");
 
-  const nlohmann::json kept = RunExport(
-      dir, "{poses: [refined], formats: [colmap_text], leave_out_unexplained_images: false}");
-  EXPECT_EQ(FindWarning(kept, "unexplained_not_exported"), nullptr);
+  const nlohmann::json kept =
+      RunExport(dir,
+                "{poses: [refined], formats: [colmap_text, transforms_json], "
+                "leave_out_doubted_images: false}");
+  EXPECT_EQ(FindWarning(kept, "doubted_not_exported"), nullptr);
   EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
+  for (const auto& frame : ReadTestJson(dir / "refined_transforms.json")["frames"]) {
+    if (frame["file_path"].get<std::string>().find("0002.jpg") == std::string::npos) continue;
+    EXPECT_EQ(frame["raytime_verdict"], "doubted");
+    EXPECT_EQ(frame["raytime_verdict_reason"], "unexplained_pairs");
+  }
 }
 
 // Issue 30 item 11: a frame held to the others by one pair is a part the matches do not hold (no
-// second pair checks it, nothing fixes its distance): loose_parts names it, the export leaves it
-// out (loose_not_exported) unless asked to keep it.
+// second pair checks it, nothing fixes its distance): without a trusted prior it is doubted
+// (loose_parts) and the export leaves it out unless asked to keep it; a prior stated accurate
+// enough, that agrees with where the solve put it, keeps it (held_by_prior).
 TEST(RefineStageTest, AFrameHeldByOnePairIsNamedAndLeftOutOfTheExport) {
   TempDir dir("refine_stage");
   std::vector<CameraIntrinsics> cameras;
@@ -488,54 +453,74 @@ TEST(RefineStageTest, AFrameHeldByOnePairIsNamedAndLeftOutOfTheExport) {
   const nlohmann::json* loose = FindWarning(summary, "loose_parts");
   ASSERT_NE(loose, nullptr) << summary["warnings"].dump();
   EXPECT_EQ((*loose)["images"], nlohmann::json::array({"0005.jpg"}));
-  ASSERT_EQ((*loose)["details"]["cuts"].size(), 1u);
-  EXPECT_EQ((*loose)["details"]["cuts"][0]["pairs_across"], 1);
-  EXPECT_EQ((*loose)["details"]["cuts"][0]["images"], nlohmann::json::array({"0005.jpg"}));
+  const std::string detail = (*loose)["details"]["0005.jpg"];
+  EXPECT_NE(detail.find("by 1 pair(s)"), std::string::npos) << detail;
+  EXPECT_NE(detail.find("not trusted"), std::string::npos) << detail;
   EXPECT_EQ(summary["guardrails"]["fired"], nlohmann::json::array({"loose_parts"}));
+  EXPECT_EQ(summary["guardrails"]["loose_parts"]["cuts"][0]["pairs_across"], 1);
+  EXPECT_EQ(summary["frame_verdicts"]["0005.jpg"]["reason"], "loose_part");
 
   const nlohmann::json exported = RunExport(dir);
-  const nlohmann::json* left_out = FindWarning(exported, "loose_not_exported");
+  const nlohmann::json* left_out = FindWarning(exported, "doubted_not_exported");
   ASSERT_NE(left_out, nullptr) << exported.dump();
   EXPECT_EQ((*left_out)["images"], nlohmann::json::array({"0005.jpg"}));
   EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 5u);
-  EXPECT_EQ(ReadJsonFile(dir / "refined_transforms.json")["frames"].size(), 5u);
+  EXPECT_EQ(ReadTestJson(dir / "refined_transforms.json")["frames"].size(), 5u);
   RunExport(dir, "{poses: [refined], formats: [colmap_text], leave_out_doubted_images: false}");
   EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
+
+  // The prior (1° off) stated good to 2°: the frame is where it says, and kept.
+  TempDir stated_dir("refine_stage");
+  const nlohmann::json stated =
+      RunRefine(scene, stated_dir, &refined, "{preset: plain, num_threads: 1, trust_region: false}",
+                Provenance{"test", {}, "", ""}, nullptr, {{"sigma_deg", 2.0}, {"sigma_m", 1.0}});
+  EXPECT_EQ(stated["frame_verdicts"]["0005.jpg"]["verdict"], "held_by_prior")
+      << stated["frame_verdicts"].dump();
+  EXPECT_EQ(FindWarning(stated, "loose_parts"), nullptr);
+  const nlohmann::json* by_prior = FindWarning(stated, "held_by_prior");
+  ASSERT_NE(by_prior, nullptr) << stated["warnings"].dump();
+  EXPECT_EQ((*by_prior)["images"], nlohmann::json::array({"0005.jpg"}));
+  RunExport(stated_dir);
+  EXPECT_EQ(ReadColmapModelText(stated_dir / "refined").images.size(), 6u);
 
   // With two pairs (of ~200 matches each) the frame is held.
   TempDir held_dir("refine_stage");
   const SceneInputs held = MakePerImageScene(&cameras);
   const nlohmann::json held_summary = RunRefine(held, held_dir, &refined);
   EXPECT_EQ(FindWarning(held_summary, "loose_parts"), nullptr) << held_summary["warnings"].dump();
+  EXPECT_EQ(held_summary["frame_verdicts"]["0005.jpg"]["verdict"], "held");
 }
 
-// The smaller components of a match graph in pieces are placed by the prior: by a phone's, they
-// are exported (named in disconnected_graph); by one the prior stage repaired from the matches as
-// coarse (or the bootstrap's), nothing places them and they are left out.
+// The smaller components of a match graph in pieces are placed by the prior alone: by one trusted
+// (here stated accurate), they are exported and named (held_by_prior); by one nothing vouches for,
+// or one the prior stage repaired from the matches as coarse (the bootstrap's), they are doubted
+// and left out.
 TEST(RefineStageTest, ComponentsPlacedByACoarsePriorAreLeftOutOfTheExport) {
   const SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/false);
   const std::vector<std::string> smaller{"0005.jpg", "0006.jpg", "0007.jpg"};
-  for (const bool repaired : {false, true}) {
-    SCOPED_TRACE(repaired ? "repaired prior" : "given prior");
+  for (const std::string prior : {"stated", "given", "repaired"}) {
+    SCOPED_TRACE(prior);
     TempDir dir("refine_stage");
     PoseSet refined;
     const nlohmann::json summary =
-        repaired ? RunRefine(scene, dir, &refined,
-                             "{preset: plain, num_threads: 1, trust_region: false}",
-                             Provenance{"prior", {{"source", "bootstrap"}}, "", ""})
-                 : RunRefine(scene, dir, &refined);
+        RunRefine(scene, dir, &refined, "{preset: plain, num_threads: 1, trust_region: false}",
+                  prior == "repaired" ? Provenance{"prior", {{"source", "bootstrap"}}, "", ""}
+                                      : Provenance{"test", {}, "", ""},
+                  nullptr, prior == "stated" ? kStatedAccuracy : nlohmann::json(nullptr));
     const nlohmann::json* warning = FindWarning(summary, "disconnected_graph");
     ASSERT_NE(warning, nullptr) << summary["warnings"].dump();
     EXPECT_EQ((*warning)["images"], nlohmann::json(smaller));
     const nlohmann::json exported = RunExport(dir);
-    const nlohmann::json* left_out = FindWarning(exported, "loose_not_exported");
-    if (repaired) {
+    const nlohmann::json* left_out = FindWarning(exported, "doubted_not_exported");
+    if (prior == "stated") {
+      EXPECT_EQ(left_out, nullptr) << exported.dump();
+      EXPECT_EQ(summary["frame_verdicts"]["0005.jpg"]["verdict"], "held_by_prior");
+      EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 8u);
+    } else {
       ASSERT_NE(left_out, nullptr) << exported.dump();
       EXPECT_EQ((*left_out)["images"], nlohmann::json(smaller));
+      EXPECT_EQ(summary["frame_verdicts"]["0005.jpg"]["reason"], "disconnected");
       EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 5u);
-    } else {
-      EXPECT_EQ(left_out, nullptr) << exported.dump();
-      EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 8u);
     }
   }
 }
@@ -554,7 +539,8 @@ TEST(RefineStageTest, TrainerExportsShareImagesAcrossPoseSetsAndLeaveOutUnrefine
     ASSERT_TRUE(cv::imwrite(dir / ("images/" + info.name), pixels));
   }
   PoseSet refined;
-  RunRefine(scene, dir, &refined, kTinyTrustRegion);
+  RunRefine(scene, dir, &refined, kTinyTrustRegion, Provenance{"test", {}, "", ""}, nullptr,
+            kStatedAccuracy);
   std::unique_ptr<Stage> stage = CreateStage("export");
   stage->Configure(YAML::Load("{poses: [prior, refined], formats: [3dgs]}"), "test");
   StageContext context;
