@@ -231,9 +231,8 @@ std::string VerdictSection(const RunPage& page) {
     html +=
         fired.empty() ? ", no guardrail fired" : ", guardrails fired: " + HtmlEscape(fired.dump());
     std::map<std::string, int> verdicts;
-    for (const auto& [name, verdict] : JsonObject(s, "frame_verdicts").items()) {
-      ++verdicts[JsonText(verdict, "verdict")];
-    }
+    const json frames = JsonObject(s, "frame_verdicts");
+    for (const auto& [name, verdict] : frames.items()) ++verdicts[JsonText(verdict, "verdict")];
     if (!verdicts.empty()) {
       html += "; frames: " + std::to_string(verdicts["held"]) + " held by their matches, " +
               std::to_string(verdicts["held_by_prior"]) + " placed by the trusted prior, " +

@@ -1,8 +1,8 @@
 #!/usr/bin/python3
 """Runs a pipeline, then opens its run page (WORKDIR/report.html) in headless Chromium, as a person
 would, and checks it (issue 32): every image name of the scene and the verdict are in the page's
-text; a click on a camera in the top view and one in the orbit view each open that camera's panel
-with its image decoded; a drag turns the orbit view; the console has no error or warning and no
+text, every camera row holds its frame verdict (issue 46); a click on a camera in the top view and
+one in the orbit view each open that camera's panel with its image decoded; a drag turns the orbit view; the console has no error or warning and no
 script threw. Drives Debian's chromium over the DevTools protocol on a pipe (--remote-debugging-pipe:
 JSON messages separated by NUL on file descriptors 3 and 4), so it needs nothing beyond the
 standard library. Exit 0: passed; 1: failed; 77: skipped (scene or chromium absent, and
@@ -187,6 +187,19 @@ def check(browser, page, names, screenshot):
     if 'Status: ok' not in text or 'decision' not in text:
         return fail('no verdict ("Status: ok" and the refine decision) on the page')
     print('page text holds the verdict and all %d image names' % len(names))
+    # Every camera's row says its frame verdict (issue 46), and the verdict names the counts.
+    verdicts = browser.evaluate(
+        '(() => { const rows = document.querySelectorAll("#camera-table tr[id^=row-]");'
+        ' return Array.from(rows).map(r => { const v = r.querySelector("span.verdict");'
+        ' return v ? v.textContent : null; }); })()')
+    if not verdicts or len(verdicts) != len(names) or any(
+            v is None or v.split(' ')[0] not in ('held', 'held_by_prior', 'doubted')
+            for v in verdicts):
+        return fail('the camera table does not give every frame a verdict: %s' % verdicts[:5])
+    if 'held by their matches' not in text:
+        return fail('the verdict section does not count the frame verdicts')
+    print('every camera row holds its frame verdict (%d held)' %
+          sum(1 for v in verdicts if v == 'held'))
 
     # A camera in the top view: a real mouse click at its circle. In a dense capture circles
     # overlap: the click opens the one drawn on top there.
