@@ -2,8 +2,8 @@
 """Runs a pipeline, then opens its run page (WORKDIR/report.html) in headless Chromium, as a person
 would, and checks it (issue 32): every image name of the scene and the verdict are in the page's
 text, every camera row holds its frame verdict (issue 46); a click on a camera in the top view and
-one in the orbit view each open that camera's panel with its image decoded; a drag turns the orbit view; the console has no error or warning and no
-script threw. Drives Debian's chromium over the DevTools protocol on a pipe (--remote-debugging-pipe:
+one in the orbit view each open that camera's panel with its image decoded; a drag turns the orbit
+view; the console has no error or warning and no script threw. Drives Debian's chromium over the DevTools protocol on a pipe (--remote-debugging-pipe:
 JSON messages separated by NUL on file descriptors 3 and 4), so it needs nothing beyond the
 standard library. Exit 0: passed; 1: failed; 77: skipped (scene or chromium absent, and
 RAYTIME_REQUIRE_BROWSER unset).
