@@ -182,10 +182,12 @@ RefineSummary SolveComponent(const RefineInput& input, const RefineOptions& opti
 void LogFrameVerdicts(const RefineInput& input, const RefineSummary& summary) {
   const PriorTrust& trust = summary.prior_trust;
   spdlog::info(fmt::format(
-      "refine: prior {} ({}): the {} frames the matches hold agree with it to {:.3g}° / {:.3g} "
-      "(median)",
-      trust.trusted ? "trusted" : "not trusted", trust.source, trust.num_reference_frames,
-      trust.median_rotation_deg, trust.median_centre));
+      "refine: prior {} ({}): {}", trust.trusted ? "trusted" : "not trusted", trust.source,
+      trust.num_reference_frames > 0
+          ? fmt::format("the {} frames the matches hold agree with it to {:.3g}° / {:.3g} "
+                        "(median)",
+                        trust.num_reference_frames, trust.median_rotation_deg, trust.median_centre)
+          : std::string("no frame of the largest component is held by its matches")));
   std::map<std::string, std::vector<std::string>> by_verdict;
   for (size_t i = 0; i < summary.frame_verdicts.size(); ++i) {
     const FrameVerdict& verdict = summary.frame_verdicts[i];
