@@ -306,10 +306,18 @@ void CheckFrames(const RefineInput& input, const RefineInput& active, const Refi
   }
   if (summary->guardrails.returned_prior) return;
   if (options.check_frame_intrinsics) {
+    const auto start = std::chrono::steady_clock::now();
     const std::vector<FrameFinding> named =
         CheckFrameIntrinsics(input, output.world_from_cam, ImageIntrinsics(input, output.cameras),
                              options.Threads(), &summary->frame_intrinsics);
     findings->insert(findings->end(), named.begin(), named.end());
+    const auto fitted = std::count_if(summary->frame_intrinsics.begin(),
+                                      summary->frame_intrinsics.end(),
+                                      [](const FrameIntrinsicsTest& t) { return t.fitted; });
+    spdlog::info(fmt::format(
+        "refine: intrinsics test: {} of {} frames fit worse than the others and were refitted, "
+        "{} explained far better by other intrinsics ({:.2f} s)",
+        fitted, summary->frame_intrinsics.size(), named.size(), SecondsSince(start)));
   }
   const InconsistentPairsVerdict& pairs = summary->guardrails.inconsistent_pairs;
   for (const int image : pairs.images_mostly_inconsistent) {

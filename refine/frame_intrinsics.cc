@@ -198,6 +198,21 @@ void TestFrame(const std::vector<EpipolarSample>& samples, const Rigid3& start,
   test->principal_shift_px = {best[1], best[2]};
 }
 
+// The median |residual| of `samples` at `pose` with the intrinsics as given, no fit.
+double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& pose,
+                     const CameraIntrinsics& given) {
+  const double omega[3] = {0, 0, 0}, no_change[3] = {0, 0, 0};
+  const double centre[3] = {pose.translation.x(), pose.translation.y(), pose.translation.z()};
+  const Eigen::Matrix3d rotation = pose.rotation.toRotationMatrix();
+  std::vector<double> values;
+  for (const EpipolarSample& sample : samples) {
+    double residual = 0.0;
+    EpipolarPlaneCost(sample, rotation, given)(omega, centre, no_change, &residual);
+    values.push_back(std::abs(residual));
+  }
+  return Median(values, 0.0);
+}
+
 }  // namespace
 
 std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
@@ -207,38 +222,49 @@ std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
                                                std::vector<FrameIntrinsicsTest>* tests) {
   const int n = static_cast<int>(world_from_cam.size());
   std::vector<FrameIntrinsicsTest> all(n);
-  std::vector<bool> tested(n, false);
+  std::vector<std::vector<EpipolarSample>> samples(n);
+  std::vector<bool> measured(n, false);
   tbb::task_arena arena(std::max(1, num_threads));
+  // 1. Every frame's fit as it stands (no solve: cheap).
   arena.execute([&] {
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 1), [&](const tbb::blocked_range<int>& range) {
       for (int image = range.begin(); image < range.end(); ++image) {
-        const std::vector<EpipolarSample> samples =
-            SamplesOf(image, input, world_from_cam, intrinsics);
-        if (static_cast<int>(samples.size()) < kMinIntrinsicsMatches) continue;
-        FrameIntrinsicsTest& test = all[image];
-        test.image = image;
-        test.num_matches = static_cast<int>(samples.size());
-        TestFrame(samples, world_from_cam[image], intrinsics[image], &test);
-        tested[image] = true;
+        samples[image] = SamplesOf(image, input, world_from_cam, intrinsics);
+        if (static_cast<int>(samples[image].size()) < kMinIntrinsicsMatches) continue;
+        all[image].image = image;
+        all[image].num_matches = static_cast<int>(samples[image].size());
+        all[image].given_median_px = all[image].free_median_px =
+            CurrentMedian(samples[image], world_from_cam[image], intrinsics[image]);
+        measured[image] = true;
       }
     });
   });
-  std::vector<double> given;
+  std::vector<double> current;
   for (int image = 0; image < n; ++image) {
-    if (tested[image]) given.push_back(all[image].given_median_px);
+    if (measured[image]) current.push_back(all[image].given_median_px);
   }
-  const double typical = Median(given, 0.0);
+  const double gate =
+      std::max(kMinIntrinsicsGivenPx, kMinIntrinsicsGivenMultiple * Median(current, 0.0));
+  // 2. Only the frames that fit worse than the others have anything for other intrinsics to
+  // explain: their pose refitted with the intrinsics as given, then with them free.
+  arena.execute([&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, n, 1), [&](const tbb::blocked_range<int>& range) {
+      for (int image = range.begin(); image < range.end(); ++image) {
+        if (!measured[image] || all[image].given_median_px < gate) continue;
+        TestFrame(samples[image], world_from_cam[image], intrinsics[image], &all[image]);
+        all[image].fitted = true;
+      }
+    });
+  });
   std::vector<FrameFinding> findings;
   for (int image = 0; image < n; ++image) {
-    if (!tested[image]) continue;
+    if (!measured[image]) continue;
     FrameIntrinsicsTest& test = all[image];
     const double width = std::max(1, intrinsics[image].width);
     const bool material = std::abs(test.focal_factor - 1.0) >= kMinFocalChange ||
                           std::hypot(test.principal_shift_px[0], test.principal_shift_px[1]) >=
                               kMinPrincipalPointChange * width;
-    test.named = material &&
-                 test.given_median_px >=
-                     std::max(kMinIntrinsicsGivenPx, kMinIntrinsicsGivenMultiple * typical) &&
+    test.named = test.fitted && material && test.given_median_px >= gate &&
                  test.given_median_px >= kMinIntrinsicsImprovement * test.free_median_px;
     tests->push_back(test);
     if (!test.named) continue;

@@ -259,7 +259,8 @@ sweep:
     EXPECT_EQ(rows_again[r]["errors"], rows[r]["errors"]);
   }
   for (const auto& entry : fs::directory_iterator(fs::path(run_dir) / "runs")) {
-    for (const auto& stage : ReadJson(entry.path() / "summary.json")["stages"]) {
+    const nlohmann::json run = ReadJson(entry.path() / "summary.json");
+    for (const auto& stage : run["stages"]) {
       EXPECT_EQ(stage["status"], "skipped") << entry.path();
     }
   }

@@ -784,6 +784,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "frame_doubts.median_pair_residual_px",
       "frame_doubts.residual_ratio",
       "frame_intrinsics",
+      "frame_intrinsics[].fitted",
       "frame_intrinsics[].focal_factor",
       "frame_intrinsics[].free_median_px",
       "frame_intrinsics[].given_median_px",

@@ -429,7 +429,8 @@ TEST(RefineStageTest, AnImageMostOfWhosePairsAreUnexplainedIsNamedAndLeftOutOfTh
                 "leave_out_doubted_images: false}");
   EXPECT_EQ(FindWarning(kept, "doubted_not_exported"), nullptr);
   EXPECT_EQ(ReadColmapModelText(dir / "refined").images.size(), 6u);
-  for (const auto& frame : ReadTestJson(dir / "refined_transforms.json")["frames"]) {
+  const nlohmann::json kept_transforms = ReadTestJson(dir / "refined_transforms.json");
+  for (const auto& frame : kept_transforms["frames"]) {
     if (frame["file_path"].get<std::string>().find("0002.jpg") == std::string::npos) continue;
     EXPECT_EQ(frame["raytime_verdict"], "doubted");
     EXPECT_EQ(frame["raytime_verdict_reason"], "unexplained_pairs");
