@@ -116,7 +116,11 @@ bool SeedCentresFromMatches(const RefineOptions& options, RefineInput* part) {
   spdlog::info(
       "refine: the prior's centres all coincide (no baseline): a first solve takes the "
       "centres from the matches");
-  SolveConnected(*part, options, &first, &ignored);
+  RefineOptions shape_only = options;  // its frames are judged in the solve that is returned
+  shape_only.check_frame_doubts = false;
+  shape_only.check_frame_intrinsics = false;
+  shape_only.uncertainty_max_cameras = 0;
+  SolveConnected(*part, shape_only, &first, &ignored);
   std::vector<double> ray_times;
   for (Eigen::Index o = 0; o < first.solved_observations.ray_times.size(); ++o) {
     const double t = first.solved_observations.ray_times(o);

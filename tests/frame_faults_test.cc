@@ -98,15 +98,16 @@ TEST(FrameFaultsTest, APartOnAWeakLinkThatTheTrustedPriorContradictsIsDoubted) {
       RunRefine(SceneInputsOf(scene), dir, &refined,
                 "{preset: gnc, num_threads: 2, trust_region: false, orientation_weight: 0}",
                 Provenance{"test", {}, "", ""}, nullptr, {{"sigma_deg", 0.5}, {"sigma_m", 0.1}});
+  RunExport(dir);
+  EXPECT_EQ(ExportedFrames(dir), 7);
   EXPECT_EQ(summary["prior_trust"]["source"], "stated");
+  ASSERT_TRUE(summary["frame_verdicts"].is_object()) << summary["warnings"].dump();
   for (int i = 7; i < 14; ++i) {
     const nlohmann::json& verdict = summary["frame_verdicts"][Name(i)];
     EXPECT_EQ(verdict["verdict"], "doubted") << verdict.dump();
     EXPECT_EQ(verdict["reason"], "loose_part");
     EXPECT_NE(verdict["detail"].get<std::string>().find("disagrees"), std::string::npos);
   }
-  RunExport(dir);
-  EXPECT_EQ(ExportedFrames(dir), 7);
 }
 
 // Issue 46 item 2: one image of eight given a focal length 1.4x its true one is placed where its
@@ -126,6 +127,9 @@ TEST(FrameFaultsTest, AFrameWithAWrongFocalLengthIsNamedAndNotExported) {
   TempDir dir("frame_verdicts");
   PoseSet refined;
   const nlohmann::json summary = RunRefine(SceneInputsOf(scene), dir, &refined, kAuto);
+  RunExport(dir);
+  EXPECT_EQ(ExportedFrames(dir), 7);
+  ASSERT_TRUE(summary["frame_verdicts"].is_object()) << summary["warnings"].dump();
   const nlohmann::json& verdict = summary["frame_verdicts"]["0003.jpg"];
   EXPECT_EQ(verdict["verdict"], "doubted") << summary["warnings"].dump();
   EXPECT_EQ(verdict["reason"], "intrinsics") << verdict.dump();
@@ -137,8 +141,6 @@ TEST(FrameFaultsTest, AFrameWithAWrongFocalLengthIsNamedAndNotExported) {
   const nlohmann::json* named = FindWarning(summary, "wrong_intrinsics");
   ASSERT_NE(named, nullptr) << summary["warnings"].dump();
   EXPECT_EQ((*named)["images"], nlohmann::json::array({"0003.jpg"}));
-  RunExport(dir);
-  EXPECT_EQ(ExportedFrames(dir), 7);
   for (int i = 0; i < 8; ++i) {
     if (i == 3) continue;
     EXPECT_EQ(summary["frame_verdicts"][Name(i)]["verdict"], "held") << Name(i);
