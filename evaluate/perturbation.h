@@ -42,8 +42,9 @@ struct PerturbationOptions {
       "Unit of translation_per_deg: fraction of the camera-to-scene distance, or metres",
       OneOf({"scene_fraction", "metres"}));
     v("scene_distance_m", scene_distance_m,
-      "Median camera-to-scene distance, metres; 0 estimates it from the ground truth",
-      NonNegative());
+      "Median camera-to-scene distance, metres (at most 1000 km); 0 estimates it from the "
+      "ground truth",
+      NonNegative(), AtMost(1e6));
     v("seed", seed, "Seed of the perturbation draws");
   }
   // A perturbation beyond a scene distance per degree moves the cameras out of the scene: no

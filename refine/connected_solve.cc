@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/statistics.h"
 #include "core/timing.h"
 #include "refine/basin_first.h"
 #include "refine/camera_blocks.h"
@@ -305,6 +306,22 @@ void CheckFrames(const RefineInput& input, const RefineInput& active, const Refi
     }
   }
   if (summary->guardrails.returned_prior) return;
+  // A solve that explains its matches nowhere (an arctan scale below the keypoints' noise, a
+  // prior far beyond the basin) is consistent with itself: the inconsistent-pairs threshold rises
+  // with the median pair. Its median pair above the absolute threshold doubts every frame.
+  std::vector<double> pair_medians;
+  for (const PairResidual& pair : output.diagnostics.pairs) pair_medians.push_back(pair.median_px);
+  const double median_pair = Median(pair_medians, 0.0);
+  if (median_pair > options.inconsistent_pair_px) {
+    for (int i = 0; i < n; ++i) {
+      findings->push_back(
+          {i, "unexplained_pairs",
+           fmt::format("the solution explains its matches nowhere: the median pair's median "
+                       "positive-ray epipolar distance is {:.3g} px, above {:.3g} px",
+                       median_pair, options.inconsistent_pair_px)});
+    }
+    return;
+  }
   if (options.check_frame_intrinsics) {
     const auto start = std::chrono::steady_clock::now();
     const std::vector<FrameFinding> named =

@@ -226,12 +226,14 @@ struct RefineOptions {
       "Structure variables: one ray time per observation (the method) or per track (§3.6 "
       "ablation)",
       OneOf({"per_observation", "anchored"}));
-    v("loss_scale_px2", loss_scale_px2, "Arctan loss scale a of the nominal objective, px² (§3.3)",
-      Positive());
+    v("loss_scale_px2", loss_scale_px2,
+      "Arctan loss scale a of the nominal objective, px² (§3.3; between 0.01, below keypoint "
+      "noise, and 1e8)",
+      AtLeast(0.01), AtMost(1e8));
     v("gnc_scales", gnc_scales,
       "GNC schedule of arctan scales solved in order, px² (§3.5); loss_scale_px2 is appended "
       "last; [] = plain solve",
-      Positive());
+      AtLeast(0.01), AtMost(1e8));
     v("position_weight", position_weight,
       "λp, weight of the position prior per squared depth scale of the prior (§3.3; 1/m² at a "
       "1 m deep scene)",
