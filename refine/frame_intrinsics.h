@@ -29,7 +29,7 @@ inline constexpr double kMinIntrinsicsImprovement = 1.5;
 // nothing for other intrinsics to explain) and this many pixels (SIFT locates keypoints to about
 // half a pixel: below, a frame's "worse" fit is noise) ...
 inline constexpr double kMinIntrinsicsGivenPx = 0.25;
-inline constexpr double kMinIntrinsicsGivenMultiple = 2.0;
+inline constexpr double kMinIntrinsicsGivenMultiple = 1.5;
 // ... with the focal length off by this fraction or the principal point by this fraction of the
 // image width (less is within what a solve's noise can trade for pose).
 inline constexpr double kMinFocalChange = 0.03;
