@@ -291,52 +291,49 @@ FrameDoubtVerdict FrameDoubtsOf(const RefineInput& input, const RefineOutput& ou
                           solved.matches, options);
 }
 
-// The frames the returned solve (not a returned prior) leaves in doubt, most decisive first: a
-// non-finite pose, intrinsics other than its own explain its matches far better, most of its pairs
-// unexplained, moved far more than the others while fitting worse. `active` is the input the
-// last passes solved (without the pairs the removal took); the intrinsics test reads every pair
-// of `input`, since a wrong focal length is what made the removal take a frame's pairs.
-void CheckFrames(const RefineInput& input, const RefineInput& active, const RefineOptions& options,
-                 const RefineOutput& output, RefineSummary* summary,
-                 std::vector<FrameFinding>* findings) {
-  const int n = static_cast<int>(output.world_from_cam.size());
-  for (int i = 0; i < n; ++i) {
-    if (!IsFinite(output.world_from_cam[i])) {
-      findings->push_back({i, "non_finite", "the solve returned a non-finite pose"});
-    }
-  }
-  if (summary->guardrails.returned_prior) return;
-  // A solve that explains its matches nowhere (an arctan scale below the keypoints' noise, a
-  // prior far beyond the basin) is consistent with itself: the inconsistent-pairs threshold rises
-  // with the median pair. Its median pair above the absolute threshold doubts every frame.
+// Every frame, when the solve explains its matches nowhere (an arctan scale below the keypoints'
+// noise, a prior far beyond the basin): such a solve is consistent with itself, since the
+// inconsistent-pairs threshold rises with the median pair; its median pair above the absolute
+// threshold says so. True when it does.
+bool DoubtASolveThatExplainsNothing(const RefineOptions& options, const RefineOutput& output,
+                                    std::vector<FrameFinding>* findings) {
   std::vector<double> pair_medians;
   for (const PairResidual& pair : output.diagnostics.pairs) pair_medians.push_back(pair.median_px);
   const double median_pair = Median(pair_medians, 0.0);
-  if (median_pair > options.inconsistent_pair_px) {
-    for (int i = 0; i < n; ++i) {
-      findings->push_back(
-          {i, "unexplained_pairs",
-           fmt::format("the solution explains its matches nowhere: the median pair's median "
-                       "positive-ray epipolar distance is {:.3g} px, above {:.3g} px",
-                       median_pair, options.inconsistent_pair_px)});
-    }
-    return;
+  if (!(median_pair > options.inconsistent_pair_px)) return false;
+  for (int i = 0; i < static_cast<int>(output.world_from_cam.size()); ++i) {
+    findings->push_back(
+        {i, "unexplained_pairs",
+         fmt::format("the solution explains its matches nowhere: the median pair's median "
+                     "positive-ray epipolar distance is {:.3g} px, above {:.3g} px",
+                     median_pair, options.inconsistent_pair_px)});
   }
-  if (options.check_frame_intrinsics) {
-    const auto start = std::chrono::steady_clock::now();
-    const std::vector<FrameFinding> named =
-        CheckFrameIntrinsics(input, output.world_from_cam, ImageIntrinsics(input, output.cameras),
-                             options.Threads(), &summary->frame_intrinsics);
-    findings->insert(findings->end(), named.begin(), named.end());
-    const auto fitted = std::count_if(summary->frame_intrinsics.begin(),
-                                      summary->frame_intrinsics.end(),
-                                      [](const FrameIntrinsicsTest& t) { return t.fitted; });
-    spdlog::info(fmt::format(
-        "refine: intrinsics test: {} of {} frames fit worse than the others and were refitted, "
-        "{} explained far better by other intrinsics ({:.2f} s)",
-        fitted, summary->frame_intrinsics.size(), named.size(), SecondsSince(start)));
-  }
-  const InconsistentPairsVerdict& pairs = summary->guardrails.inconsistent_pairs;
+  return true;
+}
+
+// Frames whose matches other intrinsics explain far better (frame_intrinsics.h), on every pair of
+// `input`: a wrong focal length is what made the wrong-pair removal take a frame's pairs.
+void TestIntrinsics(const RefineInput& input, const RefineOptions& options,
+                    const RefineOutput& output, RefineSummary* summary,
+                    std::vector<FrameFinding>* findings) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::vector<FrameFinding> named =
+      CheckFrameIntrinsics(input, output.world_from_cam, ImageIntrinsics(input, output.cameras),
+                           options.Threads(), &summary->frame_intrinsics);
+  findings->insert(findings->end(), named.begin(), named.end());
+  const auto fitted =
+      std::count_if(summary->frame_intrinsics.begin(), summary->frame_intrinsics.end(),
+                    [](const FrameIntrinsicsTest& t) { return t.fitted; });
+  spdlog::info(fmt::format(
+      "refine: intrinsics test: {} of {} frames fit worse than the others and were refitted, {} "
+      "explained far better by other intrinsics ({:.2f} s)",
+      fitted, summary->frame_intrinsics.size(), named.size(), SecondsSince(start)));
+}
+
+// The frames most of whose pairs the solution leaves unexplained (guardrails.h).
+void NameUnexplainedFrames(const RefineSummary& summary, const RefineOutput& output,
+                           std::vector<FrameFinding>* findings) {
+  const InconsistentPairsVerdict& pairs = summary.guardrails.inconsistent_pairs;
   for (const int image : pairs.images_mostly_inconsistent) {
     int unexplained = 0, total = 0;
     for (const PairResidual& pair : output.diagnostics.pairs) {
@@ -350,30 +347,56 @@ void CheckFrames(const RefineInput& input, const RefineInput& active, const Refi
                      "epipolar distance above {:.3g} px): its pose is likely wrong",
                      unexplained, total, pairs.pair_threshold_px)});
   }
+}
+
+// The frames that moved far more than the others and fit worse, or fit far worse alone
+// (frame_doubt.h).
+void DoubtFramesThatStandOut(const RefineInput& active, const RefineOptions& options,
+                             const RefineOutput& output, RefineSummary* summary,
+                             std::vector<FrameFinding>* findings) {
+  summary->frame_doubts = FrameDoubtsOf(active, output, options.frame_doubt);
+  const FrameDoubtVerdict& doubts = summary->frame_doubts;
+  for (const int image : doubts.images) {
+    if (doubts.centre_change[image] <= doubts.centre_change_threshold) {
+      findings->push_back(
+          {image, "fits_far_worse",
+           fmt::format("its matches fit {:.1f}x worse than the median pair's (doubted above "
+                       "{:g}x alone): a frame its matches do not place (another scene's image, "
+                       "wrong intrinsics)",
+                       doubts.residual_ratio[image], options.frame_doubt.far_residual_ratio)});
+      continue;
+    }
+    findings->push_back(
+        {image, "moved_and_fits_worse",
+         fmt::format("the solve moved it {:.3g} (the median frame {:.3g}, prior length units) and "
+                     "its matches fit {:.2f}x worse than the median pair's: wrong intrinsics, or "
+                     "a frame the solve could not place",
+                     doubts.centre_change[image], doubts.median_centre_change,
+                     doubts.residual_ratio[image])});
+  }
+}
+
+// The frames the returned solve (not a returned prior) leaves in doubt, most decisive first: a
+// non-finite pose; every frame of a solve that explains nothing; frames other intrinsics explain
+// far better, most of whose pairs are unexplained, that stand out. `active` is the input the last
+// passes solved (without the pairs the removal took).
+void CheckFrames(const RefineInput& input, const RefineInput& active, const RefineOptions& options,
+                 const RefineOutput& output, RefineSummary* summary,
+                 std::vector<FrameFinding>* findings) {
+  for (int i = 0; i < static_cast<int>(output.world_from_cam.size()); ++i) {
+    if (!IsFinite(output.world_from_cam[i])) {
+      findings->push_back({i, "non_finite", "the solve returned a non-finite pose"});
+    }
+  }
+  if (summary->guardrails.returned_prior) return;
+  if (DoubtASolveThatExplainsNothing(options, output, findings)) return;
+  if (options.check_frame_intrinsics) TestIntrinsics(input, options, output, summary, findings);
+  NameUnexplainedFrames(*summary, output, findings);
   // A prior made from the match graph (the bootstrap's, or one its repair replaced) is no
   // independent measurement to stand out from: its own errors (a translation-averaging drift
   // at a sequence's ends) doubted correct end frames of entry-P10 at 32°.
   if (options.check_frame_doubts && !active.prior_rotations_from_matches) {
-    summary->frame_doubts = FrameDoubtsOf(active, output, options.frame_doubt);
-    const FrameDoubtVerdict& doubts = summary->frame_doubts;
-    for (const int image : doubts.images) {
-      if (doubts.centre_change[image] <= doubts.centre_change_threshold) {
-        findings->push_back(
-            {image, "fits_far_worse",
-             fmt::format("its matches fit {:.1f}x worse than the median pair's (doubted above "
-                         "{:g}x alone): a frame its matches do not place (another scene's image, "
-                         "wrong intrinsics)",
-                         doubts.residual_ratio[image], options.frame_doubt.far_residual_ratio)});
-        continue;
-      }
-      findings->push_back(
-          {image, "moved_and_fits_worse",
-           fmt::format("the solve moved it {:.3g} (the median frame {:.3g}, prior length units) "
-                       "and its matches fit {:.2f}x worse than the median pair's: wrong "
-                       "intrinsics, or a frame the solve could not place",
-                       doubts.centre_change[image], doubts.median_centre_change,
-                       doubts.residual_ratio[image])});
-    }
+    DoubtFramesThatStandOut(active, options, output, summary, findings);
   }
 }
 
