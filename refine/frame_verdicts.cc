@@ -27,6 +27,13 @@ constexpr double kStatedSigmas = 3.0;
 // the prior's extent (median distance of its centres from their centroid).
 constexpr double kMinRotationToleranceDeg = 0.05;
 constexpr double kMinCentreToleranceFraction = 0.002;
+// A prior the probe did not keep (one frame's glitch can raise the median residual under the
+// orientation prior past its threshold: one of 60 corridor frames rotated 18° did) or did not
+// probe (a preset without it) is still trusted when the frames the matches hold agree with it this
+// closely (median, after the trimmed fit): a phone's tracking, 0.1-0.4° and 0.2-0.7 % of the
+// capture's extent on the shared captures, not a coarse prior of a degree or more.
+constexpr double kMaxMeasuredRotationDeg = 0.5;
+constexpr double kMaxMeasuredCentreFraction = 0.01;
 
 // A similarity mapping the solution's world onto the prior's: x_prior = s R x_solution + t.
 struct SolutionToPrior {
@@ -152,15 +159,19 @@ PriorTrust JudgePrior(const FrameEvidence& evidence, std::vector<int> reference,
         evidence.stated.centre > 0 ? kStatedSigmas * evidence.stated.centre : inf;
     return trust;
   }
+  const bool accurate =
+      *fitted && trust.median_rotation_deg <= kMaxMeasuredRotationDeg &&
+      trust.median_centre <= kMaxMeasuredCentreFraction * PriorExtent(evidence.prior);
   if (evidence.prior_from_matches) {
     trust.source = "prior_from_matches";
-  } else if (!evidence.probe_run) {
-    trust.source = "not_probed";
-  } else if (!evidence.probe_kept) {
-    trust.source = "probe_dropped";
-  } else {
+  } else if (evidence.probe_kept) {
     trust.trusted = true;
     trust.source = "probe";
+  } else if (accurate) {
+    trust.trusted = true;
+    trust.source = "measured";
+  } else {
+    trust.source = evidence.probe_run ? "probe_dropped" : "not_probed";
   }
   if (*fitted) {
     trust.rotation_tolerance_deg = std::max(
@@ -296,12 +307,14 @@ bool PriorAgrees(const std::vector<Disagreement>& part, const PriorTrust& trust)
 std::string WhyNotTrusted(const PriorTrust& trust) {
   if (trust.source == "probe_dropped") {
     return "the prior is not trusted to place it (the orientation probe found the matches "
-           "contradict its rotations)";
+           "contradict its rotations, and the frames they hold disagree with it by more than "
+           "0.5° or 1 % of its extent)";
   }
   if (trust.source == "prior_from_matches") {
     return "the prior cannot place it (its rotations were estimated from these same matches)";
   }
-  return "the prior is not trusted to place it (not probed; state its accuracy with "
+  return "the prior is not trusted to place it (not probed, and the frames the matches hold "
+         "disagree with it by more than 0.5° or 1 % of its extent; state its accuracy with "
          "prior.sigma_deg / prior.sigma_m to let it)";
 }
 

@@ -5,9 +5,9 @@
 // - its own residuals against the solve's: the checks of each solve name frames whose pairs the
 //   solution leaves unexplained, that moved far more than the others and fit worse, whose matches
 //   another focal length or principal point explains far better (refine/frame_intrinsics.h);
-// - the prior, where it is trusted: stated by the user (accuracies per frame), or a capture's
-//   prior whose rotations the orientation probe kept, its accuracy measured on the frames the
-//   matches do hold. A frame the matches do not hold is kept when its placement relative to the
+// - the prior, where it is trusted: stated by the user (accuracies per frame), a capture's prior
+//   whose rotations the orientation probe kept, or one the frames the matches do hold agree with
+//   closely; its accuracy measured on those frames. A frame the matches do not hold is kept when its placement relative to the
 //   rest agrees with a trusted prior within that accuracy; and two frames each placed where the
 //   other's prior is, far from their own, are swapped names.
 // Each frame is `held` (its matches fix it), `held_by_prior` (its matches do not, the trusted prior
@@ -64,7 +64,8 @@ struct StatedPriorAccuracy {
 struct PriorTrust {
   bool trusted = false;
   // "stated" (the user's accuracies), "probe" (the orientation probe kept the prior's rotations),
-  // or why not: "probe_dropped", "prior_from_matches", "not_probed".
+  // "measured" (the frames the matches hold agree with it to 0.5° and 1 % of its extent), or why
+  // not: "probe_dropped", "prior_from_matches", "not_probed".
   std::string source;
   int num_reference_frames = 0;  // held frames of the largest component the fit used
   double median_rotation_deg = std::numeric_limits<double>::quiet_NaN();

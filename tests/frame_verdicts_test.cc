@@ -15,8 +15,9 @@
 namespace raytime {
 namespace {
 
-// Ten frames on a line, the prior 0.2° off each; frames 7-9 a part hanging on one pair.
-FrameEvidence LineEvidence() {
+// Ten frames on a line, the prior `degrees` off each (and 1 cm per 0.2°); frames 7-9 a part
+// hanging on one pair.
+FrameEvidence LineEvidence(double degrees = 0.2) {
   FrameEvidence evidence;
   for (int i = 0; i < 10; ++i) {
     Rigid3 pose;
@@ -25,7 +26,7 @@ FrameEvidence LineEvidence() {
     evidence.solution.push_back(pose);
     evidence.labels.push_back(Name(i));
   }
-  evidence.prior = JitterPoses(evidence.solution, 0.2, 0.01, 4);
+  evidence.prior = JitterPoses(evidence.solution, degrees, 0.05 * degrees, 4);
   evidence.component.assign(10, 0);
   LooseCut cut;
   cut.images = {7, 8, 9};
@@ -48,7 +49,14 @@ TEST(FrameVerdictsTest, APartIsKeptOnlyWhereATrustedPriorAgreesWithIt) {
     EXPECT_EQ(verdicts[i].verdict, i < 7 ? kVerdictHeld : kVerdictHeldByPrior) << i;
   }
   EXPECT_EQ(verdicts[8].reason, "loose_part");
-  // The probe dropped the prior: nothing vouches for the part.
+  // The probe dropped the prior (a glitch elsewhere can make it): the frames the matches hold
+  // still agree with it to 0.2°, and it is trusted as measured.
+  evidence.probe_kept = false;
+  verdicts = JudgeFrames(evidence, &trust);
+  EXPECT_EQ(trust.source, "measured");
+  EXPECT_EQ(verdicts[8].verdict, kVerdictHeldByPrior);
+  // A prior 2° off each frame that the probe dropped: nothing vouches for the part.
+  evidence = LineEvidence(2.0);
   evidence.probe_kept = false;
   verdicts = JudgeFrames(evidence, &trust);
   EXPECT_FALSE(trust.trusted);
@@ -96,7 +104,9 @@ TEST(FrameVerdictsTest, FindingsComeFirstAndAComponentOfItsOwnNeedsATrustedPrior
   EXPECT_EQ(verdicts[8].verdict, kVerdictHeldByPrior);
   EXPECT_EQ(verdicts[8].reason, "disconnected");
   EXPECT_EQ(trust.num_reference_frames, 6);
-  evidence.probe_run = false;
+  // Not probed, the prior 2° off each frame.
+  evidence.prior = LineEvidence(2.0).prior;
+  evidence.probe_run = evidence.probe_kept = false;
   verdicts = JudgeFrames(evidence, &trust);
   EXPECT_EQ(trust.source, "not_probed");
   EXPECT_EQ(verdicts[8].verdict, kVerdictDoubted);

@@ -18,6 +18,7 @@
 #include "formats/colmap_model.h"
 #include "pipelines/stage.h"
 #include "refine_stage_util.h"
+#include "refine_test_util.h"
 #include "temp_dir.h"
 #include "testing/synthetic_scene.h"
 
@@ -493,11 +494,15 @@ TEST(RefineStageTest, AFrameHeldByOnePairIsNamedAndLeftOutOfTheExport) {
 }
 
 // The smaller components of a match graph in pieces are placed by the prior alone: by one trusted
-// (here stated accurate), they are exported and named (held_by_prior); by one nothing vouches for,
-// or one the prior stage repaired from the matches as coarse (the bootstrap's), they are doubted
-// and left out.
+// (here stated accurate), they are exported and named (held_by_prior); by one nothing vouches for
+// (2° off each frame, not probed), or one the prior stage repaired from the matches as coarse (the
+// bootstrap's), they are doubted and left out.
 TEST(RefineStageTest, ComponentsPlacedByACoarsePriorAreLeftOutOfTheExport) {
-  const SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/false);
+  SceneInputs scene = MakeTwoScenes(/*with_lonely_image=*/false);
+  uint64_t seed = 1;
+  for (auto& [name, pose] : scene.prior.world_from_cam) {
+    pose = JitterPoses({scene.ground_truth.world_from_cam.at(name)}, 2.0, 0.1, seed++).front();
+  }
   const std::vector<std::string> smaller{"0005.jpg", "0006.jpg", "0007.jpg"};
   for (const std::string prior : {"stated", "given", "repaired"}) {
     SCOPED_TRACE(prior);
