@@ -560,7 +560,8 @@ PoseSetPoints AddPoints(const SharedExport& shared, const PoseSet& set, const Si
 std::string WritePoseSetFolder(const std::string& root, const std::string& name, const PoseSet& set,
                                const SharedExport& shared,
                                const std::optional<RayTimeSource>& source, const fs::path& images,
-                               Warnings* warnings, TrainerExportSummary* summary) {
+                               const nlohmann::json& frame_fields, Warnings* warnings,
+                               TrainerExportSummary* summary) {
   Sim3 to_set;
   const std::string frame = PointsFrame(name, set, source, shared, warnings, &to_set);
   ColmapModel model = ToColmapModel(shared.pinhole, set);
@@ -581,7 +582,7 @@ std::string WritePoseSetFolder(const std::string& root, const std::string& name,
     MoveFilesInto(sparse / "text", sparse / "0");
     MoveFilesInto(sparse / "binary", sparse / "0");
     WriteTransformsJson((fs::path(tmp) / "transforms.json").string(), shared.pinhole, set,
-                        "images/", extras);
+                        "images/", extras, frame_fields);
     if (frame != "none") {
       WritePointsPly((fs::path(tmp) / "sparse_pc.ply").string(), points.xyz, points.rgb);
     }
@@ -616,7 +617,8 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
                                        const std::map<std::string, PoseSet>& poses,
                                        const std::optional<RayTimeSource>& source,
                                        const TrainerExportOptions& options, const std::string& root,
-                                       Warnings* warnings) {
+                                       Warnings* warnings,
+                                       const std::map<std::string, nlohmann::json>& frame_fields) {
   const auto start = std::chrono::steady_clock::now();
   ValidateOptions(options, "export (3dgs)");
   if (images.images.empty()) throw InputError("export (3dgs): no image to export");
@@ -646,8 +648,10 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
     for (const ImageInfo* info : shared.ordered) {
       set.world_from_cam[info->name] = all_poses.world_from_cam.at(info->name);
     }
-    summary.directories.push_back(
-        WritePoseSetFolder(root, name, set, shared, source, image_folder.path, warnings, &summary));
+    summary.directories.push_back(WritePoseSetFolder(
+        root, name, set, shared, source, image_folder.path,
+        frame_fields.count(name) ? frame_fields.at(name) : nlohmann::json::object(), warnings,
+        &summary));
     summary.pose_sets.push_back(name);
   }
   if (!source) {

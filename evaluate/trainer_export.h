@@ -159,12 +159,13 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrainerExportSummary, pose_sets, directories,
 // supplies the points: in the source's own pose set as solved, in any other through the Sim(3)
 // that maps the source's camera centres onto that set's (Umeyama, over the exported images);
 // without a source, or where no such Sim(3) exists (fewer than three centres, collinear), the
-// points3D are empty and a warning says so (`no_initial_points`). Throws InputError on an
-// unreadable image or an image whose size is not its camera's.
-TrainerExportSummary ExportForTrainers(const ImageSet& images,
-                                       const std::map<std::string, PoseSet>& poses,
-                                       const std::optional<RayTimeSource>& source,
-                                       const TrainerExportOptions& options, const std::string& root,
-                                       Warnings* warnings);
+// points3D are empty and a warning says so (`no_initial_points`). `frame_fields`, per pose set,
+// per image name: fields added to its transforms.json frame (raytime's verdict and σ). Throws
+// InputError on an unreadable image or an image whose size is not its camera's.
+TrainerExportSummary ExportForTrainers(
+    const ImageSet& images, const std::map<std::string, PoseSet>& poses,
+    const std::optional<RayTimeSource>& source, const TrainerExportOptions& options,
+    const std::string& root, Warnings* warnings,
+    const std::map<std::string, nlohmann::json>& frame_fields = {});
 
 }  // namespace raytime

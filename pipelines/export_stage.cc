@@ -302,7 +302,12 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     }
     nlohmann::json result = {{"written", written}};
     if (options_.Has3dgs()) {
-      const TrainerExportSummary summary = Export3dgs(context, images, exportable, &warnings);
+      std::map<std::string, nlohmann::json> frame_fields;
+      for (const auto& [name, poses] : exportable) {
+        frame_fields[name] = RaytimeFrameFields(uncertainty_of.at(name), verdicts_of.at(name));
+      }
+      const TrainerExportSummary summary =
+          Export3dgs(context, images, exportable, frame_fields, &warnings);
       for (size_t k = 0; k < summary.directories.size(); ++k) {
         const std::string& name = summary.pose_sets[k];
         WriteUncertaintyInto(summary.directories[k], uncertainty_of.at(name));
@@ -326,6 +331,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
   // warning), one split, one set of tracks.
   TrainerExportSummary Export3dgs(const StageContext& context, const ImageSet& images,
                                   const std::map<std::string, PoseSet>& poses,
+                                  const std::map<std::string, nlohmann::json>& frame_fields,
                                   Warnings* warnings) const {
     ImageSet common = images;
     common.images.clear();
@@ -389,9 +395,9 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     }
     // ExportForTrainers warns when it has no source; a stated reason above says it once.
     Warnings export_warnings;
-    const TrainerExportSummary summary =
-        ExportForTrainers(common, poses, source, options_.trainer,
-                          (fs::path(context.workdir) / "3dgs").string(), &export_warnings);
+    const TrainerExportSummary summary = ExportForTrainers(
+        common, poses, source, options_.trainer, (fs::path(context.workdir) / "3dgs").string(),
+        &export_warnings, frame_fields);
     for (const Warning& warning : export_warnings) {
       const bool said = warning.code == "no_initial_points" && !source &&
                         std::any_of(warnings->begin(), warnings->end(),

@@ -575,6 +575,16 @@ TEST(RefineStageTest, TrainerExportsShareImagesAcrossPoseSetsAndLeaveOutUnrefine
     ASSERT_EQ(model.images.size(), 3u) << set;
     for (const auto& [id, image] : model.images) EXPECT_GE(image.name, "0005.jpg") << set;
     EXPECT_EQ(ReadTextFile(dir / ("3dgs/" + set + "/test.txt")), "0005.jpg\n");
+    // The refined set's frames carry their verdicts (scene B: placed by the stated prior).
+    const nlohmann::json transforms = ReadTestJson(dir / ("3dgs/" + set + "/transforms.json"));
+    for (const auto& frame : transforms["frames"]) {
+      if (set == "prior") {
+        EXPECT_FALSE(frame.contains("raytime_verdict")) << frame.dump();
+      } else {
+        EXPECT_EQ(frame["raytime_verdict"], "held_by_prior") << frame.dump();
+        EXPECT_EQ(frame["raytime_verdict_reason"], "disconnected") << frame.dump();
+      }
+    }
   }
 }
 
