@@ -52,6 +52,28 @@ SyntheticScene WeakLinkScene() {
 
 const char* kAuto = "{preset: auto, num_threads: 2}";
 
+// Eight cameras on the arc, each matched with the next three, keypoints 0.5 px noisy.
+SyntheticSceneOptions EightCameras() {
+  SyntheticSceneOptions options;
+  options.num_cameras = 8;
+  options.num_points = 300;
+  options.max_pair_gap = 3;
+  options.pixel_noise = 0.5;
+  return options;
+}
+
+// Preset auto's recipe for RefinePoses (configs/presets/refine/auto.yaml).
+RefineOptions AutoOptions() {
+  RefineOptions refine;
+  refine.basin_first = true;
+  refine.trust_region = false;
+  refine.max_pair_removal_rounds = 3;
+  refine.finish_noise_multiple = 2;
+  refine.finish_anneal_hold_ratio = 0.01;
+  refine.num_threads = 2;
+  return refine;
+}
+
 int ExportedFrames(const TempDir& dir) {
   return static_cast<int>(ReadColmapModelText(dir / "refined").images.size());
 }
@@ -151,19 +173,9 @@ TEST(FrameFaultsTest, AFrameWithAWrongFocalLengthIsNamedAndNotExported) {
 // centimetres, millimetres and kilometres gives the same poses up to scale (before, centimetres
 // made it worse than the prior itself).
 TEST(FrameFaultsTest, ThePriorsUnitDoesNotChangeTheSolve) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 300;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
-  SyntheticScene scene = MakeSyntheticScene(options);
+  SyntheticScene scene = MakeSyntheticScene(EightCameras());
   const std::vector<Rigid3> prior = PerturbedPrior(scene, 4.0, 2);
-  RefineOptions refine;
-  refine.basin_first = true;
-  refine.trust_region = false;
-  refine.max_pair_removal_rounds = 3;
-  refine.finish_noise_multiple = 2;
-  refine.num_threads = 2;
+  const RefineOptions refine = AutoOptions();
   std::vector<Rigid3> metres;
   for (const double unit : {1.0, 100.0, 1000.0, 0.001}) {
     SCOPED_TRACE(unit);
@@ -192,20 +204,10 @@ TEST(FrameFaultsTest, ThePriorsUnitDoesNotChangeTheSolve) {
 // refined into cameras 1e-7 apart and accepted. The centres now come from the matches: spread
 // out, the shape right, and the run says so.
 TEST(FrameFaultsTest, APriorWithoutBaselineGetsItsCentresFromTheMatches) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 300;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
-  SyntheticScene scene = MakeSyntheticScene(options);
+  SyntheticScene scene = MakeSyntheticScene(EightCameras());
   scene.input.prior_world_from_cam = scene.ground_truth;
   for (Rigid3& pose : scene.input.prior_world_from_cam) pose.translation.setZero();
-  RefineOptions refine;
-  refine.basin_first = true;
-  refine.trust_region = false;
-  refine.max_pair_removal_rounds = 3;
-  refine.finish_noise_multiple = 2;
-  refine.num_threads = 2;
+  const RefineOptions refine = AutoOptions();
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, refine, &output);
   Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
@@ -246,19 +248,9 @@ TEST(FrameFaultsTest, OptionValuesThatMakeNonsenseAreRefused) {
 // A solve started from centres kilometres off (a prior 250 scene distances off per frame) is not
 // exported as refined unless its frames are right.
 TEST(FrameFaultsTest, AFrameHeldIsRightOrDoubtedFromAnAbsurdPrior) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 300;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
-  SyntheticScene scene = MakeSyntheticScene(options);
+  SyntheticScene scene = MakeSyntheticScene(EightCameras());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 4.0, 4000.0, 9);
-  RefineOptions refine;
-  refine.basin_first = true;
-  refine.trust_region = false;
-  refine.max_pair_removal_rounds = 3;
-  refine.finish_noise_multiple = 2;
-  refine.num_threads = 2;
+  const RefineOptions refine = AutoOptions();
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, refine, &output);
   const nlohmann::json verdicts = summary.ToJson()["frame_verdicts"];

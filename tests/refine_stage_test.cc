@@ -86,33 +86,13 @@ SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
   options.max_pair_gap = 3;
   options.focal_drift = 0.03;
   options.principal_point_drift_px = 8.0;
-  const SyntheticScene scene = MakeSyntheticScene(options);
+  SyntheticScene scene = MakeSyntheticScene(options);
   *cameras = scene.input.cameras;
-  SceneInputs out;
-  out.images.cameras = scene.input.cameras;
-  for (int k = 0; k < options.num_cameras; ++k) {
-    const CameraIntrinsics& camera = scene.input.cameras[k];
-    out.images.images.push_back({Name(k), camera.width, camera.height, k});
-    ImageFeatures features;
-    features.keypoints.resize(scene.input.keypoints[k].rows(), 4);
-    features.keypoints.setZero();
-    features.keypoints.leftCols<2>() = scene.input.keypoints[k].cast<float>();
-    out.features.push_back(features);
-    out.ground_truth.world_from_cam[Name(k)] = scene.ground_truth[k];
-    Rigid3 prior = scene.ground_truth[k];
+  for (Rigid3& prior : scene.input.prior_world_from_cam) {
     prior.rotation =
         (Eigen::AngleAxisd(M_PI / 180.0, Eigen::Vector3d::UnitY()) * prior.rotation).normalized();
-    out.prior.world_from_cam[Name(k)] = prior;
   }
-  for (const PairMatchIndices& p : scene.input.pairs) {
-    PairMatches pair;
-    pair.image1 = p.image1;
-    pair.image2 = p.image2;
-    pair.matches = p.matches;
-    pair.geometry.inlier_matches = p.matches;
-    out.matches.push_back(pair);
-  }
-  return out;
+  return SceneInputsOf(scene);
 }
 
 // A trust region far below the correction of a 1°-off prior: the solve keeps the orientations
