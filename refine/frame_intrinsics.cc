@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 #include "core/statistics.h"
 
@@ -32,7 +33,22 @@ struct EpipolarSample {
   Eigen::Vector2d observed;
   Eigen::Vector3d other_ray;  // unit, world
   Eigen::Vector3d other_centre;
+  int other = 0;  // the other frame (the pair)
 };
+
+// The frame's fit: the median over its pairs of each pair's median |residual|. Per pair first, so
+// that a wrong pair (repeated structure matched to the wrong copy, castle-P19's walls) counts as
+// one pair, not as its many matches.
+double MedianOverPairs(const std::vector<EpipolarSample>& samples,
+                       const std::vector<double>& residuals) {
+  std::map<int, std::vector<double>> by_pair;
+  for (size_t k = 0; k < samples.size(); ++k) {
+    by_pair[samples[k].other].push_back(std::abs(residuals[k]));
+  }
+  std::vector<double> medians;
+  for (auto& [other, values] : by_pair) medians.push_back(Median(std::move(values), 0.0));
+  return Median(medians, 0.0);
+}
 
 // Distance, in the tested frame's pixels (its focal length times the sine), of its keypoint's ray
 // from the epipolar plane spanned by the other frame's ray and the two centres. Parameters: the
@@ -107,6 +123,7 @@ std::vector<EpipolarSample> SamplesOf(int image, const RefineInput& input,
       ObservedPixelToUnitRay(intrinsics[other].params.data(), other_pixel.data(), ray.data());
       sample.other_ray = other_rotation * ray;
       sample.other_centre = world_from_cam[other].translation;
+      sample.other = other;
       samples.push_back(sample);
     }
   }
@@ -116,7 +133,7 @@ std::vector<EpipolarSample> SamplesOf(int image, const RefineInput& input,
 // What a fit may move besides the pose.
 enum class FreeIntrinsics { kNone, kFocal, kPrincipalPoint, kBoth };
 
-// The median |residual| after fitting the frame's pose (and the intrinsics `free` names) to
+// The fit (MedianOverPairs) after fitting the frame's pose (and the intrinsics `free` names) to
 // `samples` from `start`; `intrinsics` receives (log focal factor, Δcx, Δcy). False when a free
 // intrinsic ended at its bound: within a factor kMaxFocalFactor of the given focal length and half
 // the image of its principal point, since beyond, a frame's rays collapse onto a line or spread
@@ -165,9 +182,9 @@ bool FitMedian(const std::vector<EpipolarSample>& samples, const Rigid3& start,
   for (ceres::CostFunction* cost : costs) {
     double residual = 0.0;
     cost->Evaluate(parameters, &residual, nullptr);
-    values.push_back(std::abs(residual));
+    values.push_back(residual);
   }
-  *median = Median(values, 0.0);
+  *median = MedianOverPairs(samples, values);
   for (int p = 0; p < 3; ++p) {
     if (std::abs(intrinsics[p]) >= 0.95 * bound[p]) return false;
   }
@@ -198,7 +215,7 @@ void TestFrame(const std::vector<EpipolarSample>& samples, const Rigid3& start,
   test->principal_shift_px = {best[1], best[2]};
 }
 
-// The median |residual| of `samples` at `pose` with the intrinsics as given, no fit.
+// The fit (MedianOverPairs) of `samples` at `pose` with the intrinsics as given, no fit.
 double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& pose,
                      const CameraIntrinsics& given) {
   const double omega[3] = {0, 0, 0}, no_change[3] = {0, 0, 0};
@@ -208,9 +225,9 @@ double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& p
   for (const EpipolarSample& sample : samples) {
     double residual = 0.0;
     EpipolarPlaneCost(sample, rotation, given)(omega, centre, no_change, &residual);
-    values.push_back(std::abs(residual));
+    values.push_back(residual);
   }
-  return Median(values, 0.0);
+  return MedianOverPairs(samples, values);
 }
 
 }  // namespace

@@ -7,9 +7,9 @@
 //   another focal length or principal point explains far better (refine/frame_intrinsics.h);
 // - the prior, where it is trusted: stated by the user (accuracies per frame), a capture's prior
 //   whose rotations the orientation probe kept, or one the frames the matches do hold agree with
-//   closely; its accuracy measured on those frames. A frame the matches do not hold is kept when its placement relative to the
-//   rest agrees with a trusted prior within that accuracy; and two frames each placed where the
-//   other's prior is, far from their own, are swapped names.
+//   closely; its accuracy measured on those frames. A frame the matches do not hold is kept when
+//   its placement relative to the rest agrees with a trusted prior within that accuracy; and two
+//   frames each placed where the other's prior is, far from their own, are swapped names.
 // Each frame is `held` (its matches fix it), `held_by_prior` (its matches do not, the trusted prior
 // places it, and they agree) or `doubted` (with the reason). A loose part hanging on two pairs is
 // as often right as wrong; what the checks built on the graph alone could not tell apart, the
@@ -100,9 +100,10 @@ struct FrameEvidence {
 struct FrameIntrinsicsTest {
   int image = 0;
   int num_matches = 0;  // sampled matches to frames with a pose
-  // Median epipolar distance with its intrinsics as given: at the solve; for a frame that fits
-  // worse than the others (`fitted`), after refitting its pose; and, fitted, the best with the
-  // focal length, the principal point or both free (else the same as given).
+  // Median over its pairs of each pair's median epipolar distance with its intrinsics as given:
+  // at the solve; for a frame that fits worse than the others (`fitted`), after refitting its
+  // pose; and, fitted, the best with the focal length, the principal point or both free (else the
+  // same as given).
   double given_median_px = 0.0;
   double free_median_px = 0.0;
   bool fitted = false;
