@@ -317,9 +317,9 @@ void TestIntrinsics(const RefineInput& input, const RefineOptions& options,
                     const RefineOutput& output, RefineSummary* summary,
                     std::vector<FrameFinding>* findings) {
   const auto start = std::chrono::steady_clock::now();
-  const std::vector<FrameFinding> named =
-      CheckFrameIntrinsics(input, output.world_from_cam, ImageIntrinsics(input, output.cameras),
-                           options.Threads(), &summary->frame_intrinsics);
+  const std::vector<FrameFinding> named = CheckFrameIntrinsics(
+      input, output.world_from_cam, ImageIntrinsics(input, output.cameras),
+      options.inconsistent_pair_px, options.Threads(), &summary->frame_intrinsics);
   findings->insert(findings->end(), named.begin(), named.end());
   const auto fitted =
       std::count_if(summary->frame_intrinsics.begin(), summary->frame_intrinsics.end(),

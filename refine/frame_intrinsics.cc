@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 
 #include "core/statistics.h"
 
@@ -36,18 +37,36 @@ struct EpipolarSample {
   int other = 0;  // the other frame (the pair)
 };
 
-// The frame's fit: the median over its pairs of each pair's median |residual|. Per pair first, so
-// that a wrong pair (repeated structure matched to the wrong copy, castle-P19's walls) counts as
-// one pair, not as its many matches.
-double MedianOverPairs(const std::vector<EpipolarSample>& samples,
-                       const std::vector<double>& residuals) {
+// Each pair's fit: the median |residual| of its sampled matches, by the other frame. Judged per
+// pair, so that a wrong pair (repeated structure matched to the wrong copy, castle-P19's walls)
+// counts as one pair, not as its many matches.
+using PairFits = std::map<int, double>;
+
+PairFits FitsOfPairs(const std::vector<EpipolarSample>& samples,
+                     const std::vector<double>& residuals) {
   std::map<int, std::vector<double>> by_pair;
   for (size_t k = 0; k < samples.size(); ++k) {
     by_pair[samples[k].other].push_back(std::abs(residuals[k]));
   }
+  PairFits fits;
+  for (auto& [other, values] : by_pair) fits[other] = Median(std::move(values), 0.0);
+  return fits;
+}
+
+// The median over the pairs `judged` (all when empty) of their fits.
+double MedianOf(const PairFits& fits, const std::set<int>& judged = {}) {
   std::vector<double> medians;
-  for (auto& [other, values] : by_pair) medians.push_back(Median(std::move(values), 0.0));
+  for (const auto& [other, fit] : fits) {
+    if (judged.empty() || judged.count(other)) medians.push_back(fit);
+  }
   return Median(medians, 0.0);
+}
+
+// Adds the pairs that `fits` explains (within `explained_px`) to `judged`.
+void AddExplained(const PairFits& fits, double explained_px, std::set<int>* judged) {
+  for (const auto& [other, fit] : fits) {
+    if (fit <= explained_px) judged->insert(other);
+  }
 }
 
 // Distance, in the tested frame's pixels (its focal length times the sine), of its keypoint's ray
@@ -133,14 +152,14 @@ std::vector<EpipolarSample> SamplesOf(int image, const RefineInput& input,
 // What a fit may move besides the pose.
 enum class FreeIntrinsics { kNone, kFocal, kPrincipalPoint, kBoth };
 
-// The fit (MedianOverPairs) after fitting the frame's pose (and the intrinsics `free` names) to
-// `samples` from `start`; `intrinsics` receives (log focal factor, Δcx, Δcy). False when a free
+// The pairs' fits after fitting the frame's pose (and the intrinsics `free` names) to `samples`
+// from `start`; `intrinsics` receives (log focal factor, Δcx, Δcy). False when a free
 // intrinsic ended at its bound: within a factor kMaxFocalFactor of the given focal length and half
 // the image of its principal point, since beyond, a frame's rays collapse onto a line or spread
 // over a hemisphere and what they "explain" is degenerate geometry, not a lens.
-bool FitMedian(const std::vector<EpipolarSample>& samples, const Rigid3& start,
-               const CameraIntrinsics& given, FreeIntrinsics free, double intrinsics[3],
-               double* median) {
+bool FitPairs(const std::vector<EpipolarSample>& samples, const Rigid3& start,
+              const CameraIntrinsics& given, FreeIntrinsics free, double intrinsics[3],
+              PairFits* fits) {
   double omega[3] = {0, 0, 0};
   double centre[3] = {start.translation.x(), start.translation.y(), start.translation.z()};
   intrinsics[0] = intrinsics[1] = intrinsics[2] = 0.0;
@@ -184,7 +203,7 @@ bool FitMedian(const std::vector<EpipolarSample>& samples, const Rigid3& start,
     cost->Evaluate(parameters, &residual, nullptr);
     values.push_back(residual);
   }
-  *median = MedianOverPairs(samples, values);
+  *fits = FitsOfPairs(samples, values);
   for (int p = 0; p < 3; ++p) {
     if (std::abs(intrinsics[p]) >= 0.95 * bound[p]) return false;
   }
@@ -194,28 +213,49 @@ bool FitMedian(const std::vector<EpipolarSample>& samples, const Rigid3& start,
 // The frame's test: its fit with the intrinsics as given, and the best of the fits that free the
 // focal length, the principal point or both (a fit ending at a bound counts as none; both only
 // when it beats the better single one by kBothMargin, since two groups trade against each other).
+// All are judged on the same pairs: those explained (within `explained_px`) with the intrinsics as
+// given or by one of the fits. A wrong pair neither explains stays out, else with half a frame's
+// pairs wrong the median pair is the worst right one, and a fit that trades the others for it
+// "explains" a correct frame (castle-P19's 0015, its principal point "off" 12 %); a frame whose
+// wrong focal length made the pair removal take its pairs has them back in, explained by the fit.
 constexpr double kBothMargin = 1.25;
 
 void TestFrame(const std::vector<EpipolarSample>& samples, const Rigid3& start,
-               const CameraIntrinsics& given, FrameIntrinsicsTest* test) {
+               const CameraIntrinsics& given, double explained_px, FrameIntrinsicsTest* test) {
   double held[3];
-  FitMedian(samples, start, given, FreeIntrinsics::kNone, held, &test->given_median_px);
-  test->free_median_px = test->given_median_px;
-  double best[3] = {0, 0, 0};
+  PairFits given_fits;
+  FitPairs(samples, start, given, FreeIntrinsics::kNone, held, &given_fits);
+  struct Candidate {
+    FreeIntrinsics free;
+    double intrinsics[3];
+    PairFits fits;
+  };
+  std::vector<Candidate> candidates;
+  std::set<int> judged;
+  AddExplained(given_fits, explained_px, &judged);
   for (const FreeIntrinsics free :
        {FreeIntrinsics::kFocal, FreeIntrinsics::kPrincipalPoint, FreeIntrinsics::kBoth}) {
-    double fitted[3], median = 0.0;
-    if (!FitMedian(samples, start, given, free, fitted, &median)) continue;
-    const double needed = free == FreeIntrinsics::kBoth ? kBothMargin : 1.0;
+    Candidate candidate{free, {0, 0, 0}, {}};
+    if (!FitPairs(samples, start, given, free, candidate.intrinsics, &candidate.fits)) continue;
+    AddExplained(candidate.fits, explained_px, &judged);
+    candidates.push_back(std::move(candidate));
+  }
+  test->pairs_judged = static_cast<int>(judged.size());
+  if (judged.empty()) return;  // nothing explained either way: nothing to compare
+  test->given_median_px = test->free_median_px = MedianOf(given_fits, judged);
+  double best[3] = {0, 0, 0};
+  for (const Candidate& candidate : candidates) {
+    const double median = MedianOf(candidate.fits, judged);
+    const double needed = candidate.free == FreeIntrinsics::kBoth ? kBothMargin : 1.0;
     if (median * needed >= test->free_median_px) continue;
     test->free_median_px = median;
-    std::copy(fitted, fitted + 3, best);
+    std::copy(candidate.intrinsics, candidate.intrinsics + 3, best);
   }
   test->focal_factor = std::exp(best[0]);
   test->principal_shift_px = {best[1], best[2]};
 }
 
-// The fit (MedianOverPairs) of `samples` at `pose` with the intrinsics as given, no fit.
+// The median over its pairs of their fits at `pose` with the intrinsics as given, no fit.
 double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& pose,
                      const CameraIntrinsics& given) {
   const double omega[3] = {0, 0, 0}, no_change[3] = {0, 0, 0};
@@ -227,7 +267,7 @@ double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& p
     EpipolarPlaneCost(sample, rotation, given)(omega, centre, no_change, &residual);
     values.push_back(residual);
   }
-  return MedianOverPairs(samples, values);
+  return MedianOf(FitsOfPairs(samples, values));
 }
 
 }  // namespace
@@ -235,7 +275,7 @@ double CurrentMedian(const std::vector<EpipolarSample>& samples, const Rigid3& p
 std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
                                                const std::vector<Rigid3>& world_from_cam,
                                                const std::vector<CameraIntrinsics>& intrinsics,
-                                               int num_threads,
+                                               double explained_pair_px, int num_threads,
                                                std::vector<FrameIntrinsicsTest>* tests) {
   const int n = static_cast<int>(world_from_cam.size());
   std::vector<FrameIntrinsicsTest> all(n);
@@ -268,7 +308,8 @@ std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
     tbb::parallel_for(tbb::blocked_range<int>(0, n, 1), [&](const tbb::blocked_range<int>& range) {
       for (int image = range.begin(); image < range.end(); ++image) {
         if (!measured[image] || all[image].given_median_px < gate) continue;
-        TestFrame(samples[image], world_from_cam[image], intrinsics[image], &all[image]);
+        TestFrame(samples[image], world_from_cam[image], intrinsics[image], explained_pair_px,
+                  &all[image]);
         all[image].fitted = true;
       }
     });
@@ -281,7 +322,7 @@ std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
     const bool material = std::abs(test.focal_factor - 1.0) >= kMinFocalChange ||
                           std::hypot(test.principal_shift_px[0], test.principal_shift_px[1]) >=
                               kMinPrincipalPointChange * width;
-    test.named = test.fitted && material && test.given_median_px >= gate &&
+    test.named = test.fitted && material && test.given_median_px >= kMinIntrinsicsGivenPx &&
                  test.given_median_px >= kMinIntrinsicsImprovement * test.free_median_px;
     tests->push_back(test);
     if (!test.named) continue;

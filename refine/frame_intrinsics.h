@@ -23,13 +23,14 @@
 
 namespace raytime {
 
-// The free fit must cut the frame's median epipolar distance by this factor ...
-inline constexpr double kMinIntrinsicsImprovement = 1.5;
-// ... from at least this multiple of the median frame's (a frame that fits like the others has
-// nothing for other intrinsics to explain) and this many pixels (SIFT locates keypoints to about
-// half a pixel: below, a frame's "worse" fit is noise) ...
-inline constexpr double kMinIntrinsicsGivenPx = 0.25;
+// Frames whose median over their pairs fits at least this multiple of the median frame's are
+// fitted (a frame that fits like the others has nothing for other intrinsics to explain) ...
 inline constexpr double kMinIntrinsicsGivenMultiple = 1.5;
+// ... and the free fit must cut the median over the pairs explained (by either) by this factor ...
+inline constexpr double kMinIntrinsicsImprovement = 1.5;
+// ... from at least this many pixels (SIFT locates keypoints to about half a pixel: below, a
+// frame's "worse" fit is noise) ...
+inline constexpr double kMinIntrinsicsGivenPx = 0.25;
 // ... with the focal length off by this fraction or the principal point by this fraction of the
 // image width (less is within what a solve's noise can trade for pose).
 inline constexpr double kMinFocalChange = 0.03;
@@ -38,11 +39,12 @@ inline constexpr double kMinPrincipalPointChange = 0.01;
 inline constexpr int kMinIntrinsicsMatches = 30;
 
 // Every image with enough matches, tested at `world_from_cam` with its intrinsics
-// `intrinsics[image]`; the named ones as findings (reason "intrinsics").
+// `intrinsics[image]`, a pair explained when its median is within `explained_pair_px`; the named
+// ones as findings (reason "intrinsics").
 std::vector<FrameFinding> CheckFrameIntrinsics(const RefineInput& input,
                                                const std::vector<Rigid3>& world_from_cam,
                                                const std::vector<CameraIntrinsics>& intrinsics,
-                                               int num_threads,
+                                               double explained_pair_px, int num_threads,
                                                std::vector<FrameIntrinsicsTest>* tests);
 
 }  // namespace raytime

@@ -102,17 +102,19 @@ struct FrameIntrinsicsTest {
   int num_matches = 0;  // sampled matches to frames with a pose
   // Median over its pairs of each pair's median epipolar distance with its intrinsics as given:
   // at the solve; for a frame that fits worse than the others (`fitted`), after refitting its
-  // pose; and, fitted, the best with the focal length, the principal point or both free (else the
-  // same as given).
+  // pose, over the `pairs_judged` that fit or a free fit explains; and, fitted, the best with the
+  // focal length, the principal point or both free (else the same as given).
   double given_median_px = 0.0;
   double free_median_px = 0.0;
   bool fitted = false;
+  int pairs_judged = 0;
   double focal_factor = 1.0;                              // fitted focal / given
   std::array<double, 2> principal_shift_px = {0.0, 0.0};  // fitted - given, pixels
   bool named = false;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FrameIntrinsicsTest, image, num_matches, given_median_px,
-                                   free_median_px, fitted, focal_factor, principal_shift_px, named)
+                                   free_median_px, fitted, pairs_judged, focal_factor,
+                                   principal_shift_px, named)
 
 // The verdicts, per image; *trust says how the prior was judged.
 std::vector<FrameVerdict> JudgeFrames(const FrameEvidence& evidence, PriorTrust* trust);

@@ -797,6 +797,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "frame_intrinsics[].image",
       "frame_intrinsics[].named",
       "frame_intrinsics[].num_matches",
+      "frame_intrinsics[].pairs_judged",
       "frame_intrinsics[].principal_shift_px",
       "frame_verdicts",
       "frame_verdicts[].detail",
