@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "core/written_files.h"
 
 namespace fs = std::filesystem;
 
@@ -127,22 +128,74 @@ void WriteAtomically(const std::string& path,
   }
 }
 
+namespace {
+
+// Replaces folder `path` by the complete `tmp`, carrying `theirs` (FilesNotWritten(path)) over.
+// Under the temporaries' lock, so that an interruption's clean-up, which removes this process's
+// temporaries, never runs while the user's files are in one. A carry that fails midway keeps the
+// earlier folder, with what it still holds of theirs, under a name no clean-up removes.
+void ReplaceFolder(const fs::path& path, const fs::path& tmp,
+                   const std::vector<std::string>& theirs) {
+  std::lock_guard<std::mutex> lock(PendingMutex());
+  std::error_code ignored;
+  if (!fs::exists(fs::symlink_status(path, ignored))) {
+    fs::rename(tmp, path);
+    return;
+  }
+  const fs::path old = tmp.string() + ".old";
+  fs::remove_all(old, ignored);
+  fs::rename(path, old);
+  try {
+    fs::rename(tmp, path);
+  } catch (...) {
+    fs::rename(old, path, ignored);
+    throw;
+  }
+  try {
+    CarryEntriesOver(theirs, old.string(), path.string());
+  } catch (const std::exception& e) {
+    const fs::path kept = path.string() + ".kept." + std::to_string(getpid());
+    fs::rename(old, kept, ignored);
+    throw std::runtime_error(std::string(e.what()) + "; the earlier " + path.string() +
+                             ", with the files raytime did not write, is kept as " + kept.string());
+  }
+  fs::remove_all(old, ignored);
+}
+
+}  // namespace
+
 void WriteDirectoryAtomically(const std::string& path,
                               const std::function<void(const std::string&)>& write) {
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty()) fs::create_directories(parent);
+  std::error_code ignored;
+  if (fs::exists(fs::symlink_status(path, ignored)) && !fs::is_directory(path, ignored)) {
+    throw InputError(path +
+                     " is a file, and raytime writes a folder there: move it away and run "
+                     "again (it was not replaced)");
+  }
   const std::string tmp = TemporarySibling(path);
   const PendingTemporary pending(tmp);
-  std::error_code ignored;
   fs::remove_all(tmp, ignored);
   try {
     fs::create_directories(tmp);
     write(tmp);
-    const std::string old = tmp + ".old";
-    fs::remove_all(old, ignored);
-    if (fs::exists(path)) fs::rename(path, old);
-    fs::rename(tmp, path);
-    fs::remove_all(old, ignored);
+    const std::vector<std::string> theirs = FilesNotWritten(path);
+    const std::vector<std::string> colliding = CollidingEntries(theirs, path, tmp);
+    if (!colliding.empty()) {
+      const fs::path record = fs::path(path) / kWrittenFilesRecord;
+      const std::string why =
+          fs::exists(record, ignored)
+              ? "or has changed since it was: " + record.string() + " lists what it wrote"
+              : "the folder has no " + std::string(kWrittenFilesRecord) +
+                    " record: someone else's, or an earlier raytime's, which kept none";
+      throw InputError((fs::path(path) / colliding.front()).string() +
+                       " was not written by raytime (" + why + "), and raytime writes " +
+                       colliding.front() + " there: move it out of " + path +
+                       " and run again (nothing in " + path + " was replaced)");
+    }
+    RecordWrittenFiles(tmp);
+    ReplaceFolder(path, tmp, theirs);
   } catch (...) {
     fs::remove_all(tmp, ignored);
     throw;

@@ -14,6 +14,9 @@ void WriteAtomically(const std::string& path, const std::function<void(const std
 
 // Same for a whole directory (e.g. a COLMAP model): `write` fills a temporary sibling directory,
 // which then replaces `path` (an existing directory at `path` is removed only after success).
+// Only what raytime wrote is replaced (core/written_files.h): the other files of an existing
+// `path` are carried into the new one, and one under a name `write` wrote throws InputError naming
+// it, `path` untouched.
 void WriteDirectoryAtomically(const std::string& path,
                               const std::function<void(const std::string&)>& write);
 

@@ -20,6 +20,7 @@
 #include "core/graph.h"
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "core/written_files.h"
 #include "formats/colmap_model.h"
 #include "formats/nerfstudio.h"
 
@@ -106,6 +107,11 @@ void CreateHardLinkOrCopy(const fs::path& from, const fs::path& to) {
 void MoveFilesInto(const fs::path& from, const fs::path& to) {
   fs::create_directories(to);
   for (const auto& entry : fs::directory_iterator(from)) {
+    // The model writer's record of its folder: the export's own covers the whole.
+    if (entry.path().filename() == kWrittenFilesRecord) {
+      fs::remove(entry.path());
+      continue;
+    }
     fs::rename(entry.path(), to / entry.path().filename());
   }
   fs::remove(from);
@@ -669,6 +675,13 @@ TrainerExportSummary ExportForTrainers(const ImageSet& images,
   summary.num_test = static_cast<int>(shared.split.test.size());
   summary.seconds = SecondsSince(start);
   return summary;
+}
+
+bool TrainerDerivedPath(const std::string& relative) {
+  const fs::path path(relative);
+  if (path.empty()) return false;
+  return path == fs::path("sparse/0/points3D.ply") ||
+         path.begin()->string().rfind("images_", 0) == 0;
 }
 
 }  // namespace raytime

@@ -168,4 +168,9 @@ TrainerExportSummary ExportForTrainers(
     const std::string& root, Warnings* warnings,
     const std::map<std::string, nlohmann::json>& frame_fields = {});
 
+// Whether `relative`, a path in a trainer-ready folder, is one trainers derive from the export on
+// first use: Inria converts points3D.bin to sparse/0/points3D.ply; gsplat and nerfstudio write
+// downscaled copies to images_<N>*/. Stale once the export is written again.
+bool TrainerDerivedPath(const std::string& relative);
+
 }  // namespace raytime

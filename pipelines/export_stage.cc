@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <ctime>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -13,6 +14,7 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
+#include "core/written_files.h"
 #include "evaluate/trainer_export.h"
 #include "formats/colmap_model.h"
 #include "formats/nerfstudio.h"
@@ -215,6 +217,7 @@ void WriteVerdictsInto(const std::string& folder, const nlohmann::json& verdicts
       {"frames", verdicts}};
   WriteTextFileAtomically((fs::path(folder) / "frame_verdicts.json").string(),
                           document.dump(2) + "\n");
+  RecordWrittenFile(folder, "frame_verdicts.json");
 }
 
 // pose_uncertainty.json inside an exported folder, when the pose set has it.
@@ -222,6 +225,30 @@ void WriteUncertaintyInto(const std::string& folder, const nlohmann::json& uncer
   if (uncertainty.is_null()) return;
   WriteTextFileAtomically((fs::path(folder) / "pose_uncertainty.json").string(),
                           uncertainty.dump(2) + "\n");
+  RecordWrittenFile(folder, "pose_uncertainty.json");
+}
+
+// What a trainer derived from an earlier export of WORKDIR/3dgs/`set` (TrainerDerivedPath): moved
+// to WORKDIR/stale/3dgs/`set`/ before the folder is written again, since a trainer finding it would
+// use it instead of the new export's (Inria's points3D.ply, downscaled images); raytime did not
+// write it, so it is moved, not deleted (an earlier move's kept under a dated name).
+void MoveTrainerDerivedAside(const std::string& workdir, const std::string& set) {
+  const fs::path folder = fs::path(workdir) / "3dgs" / set;
+  std::error_code error;
+  if (!fs::is_directory(folder, error)) return;
+  for (const std::string& entry : FilesNotWritten(folder.string())) {
+    if (!TrainerDerivedPath(entry)) continue;
+    const fs::path to = fs::path(workdir) / "stale" / "3dgs" / set / entry;
+    if (fs::exists(fs::symlink_status(to, error))) {
+      fs::rename(to, to.string() + "." + std::to_string(std::time(nullptr)));
+    }
+    fs::create_directories(to.parent_path());
+    fs::rename(folder / entry, to);
+    spdlog::warn(
+        fmt::format("export (3dgs): moved {} to {}: a trainer derived it from the earlier "
+                    "export, and would use it instead of the new one",
+                    (folder / entry).string(), to.string()));
+  }
 }
 
 class ExportStage : public StageWithOptions<ExportStageOptions> {
@@ -333,6 +360,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
                                   const std::map<std::string, PoseSet>& poses,
                                   const std::map<std::string, nlohmann::json>& frame_fields,
                                   Warnings* warnings) const {
+    for (const auto& [name, set] : poses) MoveTrainerDerivedAside(context.workdir, name);
     ImageSet common = images;
     common.images.clear();
     Warning left_out{

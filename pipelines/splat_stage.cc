@@ -18,7 +18,9 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
+#include "core/written_files.h"
 #include "evaluate/splat_trainer.h"
+#include "evaluate/trainer_export.h"
 #include "pipelines/content_hash.h"
 #include "pipelines/stages.h"
 
@@ -56,12 +58,10 @@ struct SplatStageOptions {
   }
 };
 
-// Files trainers add to the folder they train on: Inria converts points3D.bin to
-// sparse/0/points3D.ply on first use; gsplat and nerfstudio write downscaled copies to
-// images_<N>*/.
+// Files trainers add to the folder they train on (TrainerDerivedPath) and the record of what
+// raytime wrote there, whose times change with every export of the same content.
 bool WrittenByTrainers(const fs::path& relative) {
-  const std::string first = relative.begin()->string();
-  return relative == fs::path("sparse/0/points3D.ply") || first.rfind("images_", 0) == 0;
+  return TrainerDerivedPath(relative.generic_string()) || relative == kWrittenFilesRecord;
 }
 
 // Everything a trainer's result depends on besides the trainer installation: the command as run,

@@ -19,6 +19,7 @@
 #include "core/timing.h"
 #include "core/version.h"
 #include "core/warnings.h"
+#include "core/written_files.h"
 #include "pipelines/content_hash.h"
 #include "pipelines/run_report.h"
 #include "pipelines/stage.h"
@@ -152,15 +153,31 @@ bool Completed(const json& entry) {
   return status == "ran" || status == "skipped" || status == "cached";
 }
 
-// Moves WORKDIR/`output` (a file or folder an earlier run wrote) to WORKDIR/stale/`output`,
-// replacing what an earlier move left there; false when there is nothing to move or it cannot be
-// moved (said in the log).
+// Clears WORKDIR/stale/`output` for a new move: removed when raytime wrote all of it, else (files
+// of the user's in it, or an earlier raytime's folder without a record) kept under a dated name.
+void ClearStaleSlot(const fs::path& to) {
+  std::error_code error;
+  if (!fs::exists(fs::symlink_status(to, error))) return;
+  if (fs::is_directory(to, error) && !FilesNotWritten(to.string()).empty()) {
+    const fs::path kept = to.string() + "." + std::to_string(std::time(nullptr));
+    fs::rename(to, kept, error);
+    if (!error) return;
+  }
+  fs::remove_all(to, error);
+}
+
+// Moves WORKDIR/`output` (a file or folder an earlier run wrote) to WORKDIR/stale/`output`; false
+// when there is nothing to move or it cannot be moved (said in the log). Of a folder raytime
+// recorded writing, only its files move: the user's stay where they are (core/written_files.h).
 bool MoveAside(const std::string& workdir, const std::string& output, const std::string& why) {
   const fs::path from = fs::path(workdir) / output;
   std::error_code error;
   if (!fs::exists(fs::symlink_status(from, error))) return false;
+  const bool recorded = fs::exists(from / kWrittenFilesRecord, error);
+  const std::vector<std::string> theirs =
+      recorded ? FilesNotWritten(from.string()) : std::vector<std::string>();
   const fs::path to = fs::path(workdir) / "stale" / output;
-  fs::remove_all(to, error);
+  ClearStaleSlot(to);
   fs::create_directories(to.parent_path(), error);
   fs::rename(from, to, error);
   if (error) {
@@ -172,6 +189,12 @@ bool MoveAside(const std::string& workdir, const std::string& output, const std:
   }
   spdlog::warn(fmt::format("moved {} to {}: an earlier run wrote it, and {}", from.string(),
                            to.string(), why));
+  if (!theirs.empty()) {
+    fs::create_directories(from, error);
+    CarryEntriesOver(theirs, to.string(), from.string());
+    spdlog::warn(fmt::format("kept {} file(s) raytime did not write in {} (first: {})",
+                             theirs.size(), from.string(), theirs.front()));
+  }
   return true;
 }
 

@@ -23,6 +23,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/geometry.h"
+#include "core/written_files.h"
 #include "formats/strecha.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"
@@ -744,7 +745,10 @@ TEST(Video, FramesAreSampledByStrideOrCount) {
   ASSERT_EQ(images.images.size(), 2u);
   EXPECT_EQ(images.images[0].name, "frame_000000.jpg");
   EXPECT_EQ(images.images[1].name, "frame_000009.jpg");
-  EXPECT_EQ(std::distance(fs::directory_iterator(dir / "frames"), fs::directory_iterator()), 2);
+  // The two frames and the record of what raytime wrote there (core/written_files.h).
+  EXPECT_EQ(
+      std::distance(fs::directory_iterator(fs::path(dir / "frames")), fs::directory_iterator()), 3);
+  EXPECT_TRUE(fs::exists(fs::path(dir / "frames") / kWrittenFilesRecord));
 
   options.video = dir / "missing.mp4";
   try {

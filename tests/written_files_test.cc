@@ -1,0 +1,123 @@
+// What raytime wrote in a folder (core/written_files.h, issue 47): its record, what is the user's,
+// collisions and the carry into a replacement, and WriteDirectoryAtomically keeping the rest.
+#include "core/written_files.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "core/atomic_file.h"
+#include "core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace raytime {
+namespace {
+
+void Write(const fs::path& path, const std::string& text) {
+  fs::create_directories(path.parent_path());
+  std::ofstream(path) << text;
+}
+
+class WrittenFilesTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("raytime_written_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // A folder as an export writes it: two files and one in a subfolder.
+  fs::path Export() {
+    const fs::path folder = dir_ / "refined";
+    WriteDirectoryAtomically(folder.string(), [](const std::string& tmp) {
+      Write(fs::path(tmp) / "images.txt", "raytime's images");
+      Write(fs::path(tmp) / "cameras.txt", "raytime's cameras");
+      Write(fs::path(tmp) / "sparse" / "0" / "points3D.txt", "raytime's points");
+    });
+    return folder;
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(WrittenFilesTest, TheUsersEntriesAreThoseNotRecordedOrChanged) {
+  const fs::path folder = Export();
+  EXPECT_TRUE(fs::exists(folder / kWrittenFilesRecord));
+  EXPECT_TRUE(FilesNotWritten(folder.string()).empty());
+  Write(folder / "notes.txt", "mine");
+  Write(folder / "state" / "a" / "step.ckpt", "mine");
+  Write(folder / "sparse" / "0" / "extra.txt", "mine");
+  fs::create_directories(folder / "empty");
+  // A file raytime wrote and someone changed since is theirs now.
+  Write(folder / "cameras.txt", "my cameras, longer than raytime's");
+  EXPECT_EQ(FilesNotWritten(folder.string()),
+            (std::vector<std::string>{"cameras.txt", "empty", "notes.txt", "sparse/0/extra.txt",
+                                      "state"}));
+  // Without a record nothing is raytime's.
+  fs::remove(folder / kWrittenFilesRecord);
+  EXPECT_EQ(FilesNotWritten(folder.string()).size(), 6u);
+}
+
+TEST_F(WrittenFilesTest, AReplacementKeepsTheUsersFilesAndRefusesOneUnderItsNames) {
+  const fs::path folder = Export();
+  Write(folder / "notes.txt", "mine");
+  Write(folder / "sparse" / "mine" / "model.txt", "mine");
+  const fs::path again = Export();
+  EXPECT_EQ(ReadTextFile((again / "notes.txt").string()), "mine");
+  EXPECT_EQ(ReadTextFile((again / "sparse" / "mine" / "model.txt").string()), "mine");
+  EXPECT_EQ(ReadTextFile((again / "images.txt").string()), "raytime's images");
+  // Still the user's after the replacement (the record lists raytime's files only).
+  EXPECT_EQ(FilesNotWritten(again.string()),
+            (std::vector<std::string>{"notes.txt", "sparse/mine"}));
+
+  Write(folder / "images.txt", "my images, not raytime's");
+  try {
+    Export();
+    FAIL() << "a file of the user's under a name raytime writes was replaced";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find((folder / "images.txt").string() +
+                                         " was not written by raytime"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(ReadTextFile((folder / "images.txt").string()), "my images, not raytime's");
+  EXPECT_EQ(ReadTextFile((folder / "notes.txt").string()), "mine");
+  // No temporary left beside it.
+  for (const auto& entry : fs::directory_iterator(dir_)) {
+    EXPECT_EQ(entry.path().filename(), "refined");
+  }
+}
+
+TEST_F(WrittenFilesTest, CollisionsAreSamePathsOrPathsThroughAFileAndFoldersMerge) {
+  Write(dir_ / "from" / "a.txt", "x");
+  Write(dir_ / "from" / "d" / "inner.txt", "x");
+  Write(dir_ / "from" / "f" / "g.txt", "x");
+  Write(dir_ / "from" / "m" / "own.txt", "x");
+  Write(dir_ / "to" / "a.txt", "y");
+  Write(dir_ / "to" / "d" / "inner.txt", "y");
+  Write(dir_ / "to" / "f", "a file where theirs is a folder");
+  Write(dir_ / "to" / "m" / "raytime.txt", "y");
+  const std::vector<std::string> entries = {"a.txt", "d", "f/g.txt", "m"};
+  EXPECT_EQ(CollidingEntries(entries, (dir_ / "from").string(), (dir_ / "to").string()),
+            (std::vector<std::string>{"a.txt", "d/inner.txt", "f/g.txt"}));
+  CarryEntriesOver({"m"}, (dir_ / "from").string(), (dir_ / "to").string());
+  EXPECT_TRUE(fs::exists(dir_ / "to" / "m" / "own.txt"));
+  EXPECT_TRUE(fs::exists(dir_ / "to" / "m" / "raytime.txt"));
+}
+
+TEST_F(WrittenFilesTest, AFileWhereRaytimeWritesAFolderIsNotReplaced) {
+  Write(dir_ / "refined", "a file of the user's");
+  EXPECT_THROW(Export(), InputError);
+  EXPECT_EQ(ReadTextFile((dir_ / "refined").string()), "a file of the user's");
+}
+
+}  // namespace
+}  // namespace raytime
