@@ -135,7 +135,7 @@ namespace {
 // temporaries, never runs while the user's files are in one. A carry that fails midway keeps the
 // earlier folder, with what it still holds of theirs, under a name no clean-up removes.
 void ReplaceFolder(const fs::path& path, const fs::path& tmp,
-                   const std::vector<std::string>& theirs) {
+                   const std::vector<std::string>& theirs, const std::string& keep_old_as) {
   std::lock_guard<std::mutex> lock(PendingMutex());
   std::error_code ignored;
   if (!fs::exists(fs::symlink_status(path, ignored))) {
@@ -159,7 +159,15 @@ void ReplaceFolder(const fs::path& path, const fs::path& tmp,
     throw std::runtime_error(std::string(e.what()) + "; the earlier " + path.string() +
                              ", with the files raytime did not write, is kept as " + kept.string());
   }
-  fs::remove_all(old, ignored);
+  if (keep_old_as.empty()) {
+    fs::remove_all(old, ignored);
+    return;
+  }
+  fs::path kept = keep_old_as;
+  for (int k = 1; fs::exists(fs::symlink_status(kept, ignored)); ++k) {
+    kept = keep_old_as + "." + std::to_string(k);
+  }
+  fs::rename(old, kept);
 }
 
 }  // namespace
@@ -182,20 +190,27 @@ void WriteDirectoryAtomically(const std::string& path,
     write(tmp);
     const std::vector<std::string> theirs = FilesNotWritten(path);
     const std::vector<std::string> colliding = CollidingEntries(theirs, path, tmp);
-    if (!colliding.empty()) {
-      const fs::path record = fs::path(path) / kWrittenFilesRecord;
-      const std::string why =
-          fs::exists(record, ignored)
-              ? "or has changed since it was: " + record.string() + " lists what it wrote"
-              : "the folder has no " + std::string(kWrittenFilesRecord) +
-                    " record: someone else's, or an earlier raytime's, which kept none";
+    const fs::path record = fs::path(path) / kWrittenFilesRecord;
+    const bool recorded = fs::exists(record, ignored);
+    if (!colliding.empty() && recorded) {
       throw InputError((fs::path(path) / colliding.front()).string() +
-                       " was not written by raytime (" + why + "), and raytime writes " +
+                       " was not written by raytime (or has changed since it was: " +
+                       record.string() + " lists what it wrote), and raytime writes " +
                        colliding.front() + " there: move it out of " + path +
                        " and run again (nothing in " + path + " was replaced)");
     }
+    // A folder without a record was written by an earlier raytime, which kept none (or by
+    // someone else): what collides stays in it, kept whole as PATH.before-record; the rest is
+    // carried over.
+    std::vector<std::string> carried;
+    for (const std::string& entry : theirs) {
+      const bool collides = std::any_of(colliding.begin(), colliding.end(), [&](const auto& c) {
+        return c == entry || c.rfind(entry + "/", 0) == 0;
+      });
+      if (!collides) carried.push_back(entry);
+    }
     RecordWrittenFiles(tmp);
-    ReplaceFolder(path, tmp, theirs);
+    ReplaceFolder(path, tmp, carried, colliding.empty() ? "" : path + ".before-record");
   } catch (...) {
     fs::remove_all(tmp, ignored);
     throw;

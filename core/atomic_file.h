@@ -16,7 +16,8 @@ void WriteAtomically(const std::string& path, const std::function<void(const std
 // which then replaces `path` (an existing directory at `path` is removed only after success).
 // Only what raytime wrote is replaced (core/written_files.h): the other files of an existing
 // `path` are carried into the new one, and one under a name `write` wrote throws InputError naming
-// it, `path` untouched.
+// it, `path` untouched. A `path` without a record (an earlier raytime's, which kept none) is kept
+// whole as `path`.before-record when something in it collides.
 void WriteDirectoryAtomically(const std::string& path,
                               const std::function<void(const std::string&)>& write);
 

@@ -113,6 +113,19 @@ TEST_F(WrittenFilesTest, CollisionsAreSamePathsOrPathsThroughAFileAndFoldersMerg
   EXPECT_TRUE(fs::exists(dir_ / "to" / "m" / "raytime.txt"));
 }
 
+// A folder an earlier raytime wrote, which kept no record: kept whole beside the new one, whose
+// names it shares; what it holds under other names is carried into the new one.
+TEST_F(WrittenFilesTest, AFolderWithoutARecordIsKeptBesideTheNewOne) {
+  Write(dir_ / "refined" / "cameras.txt", "an earlier raytime's cameras");
+  Write(dir_ / "refined" / "notes.txt", "mine");
+  const fs::path folder = Export();
+  EXPECT_EQ(ReadTextFile((folder / "cameras.txt").string()), "raytime's cameras");
+  EXPECT_EQ(ReadTextFile((folder / "notes.txt").string()), "mine");
+  EXPECT_EQ(ReadTextFile((dir_ / "refined.before-record" / "cameras.txt").string()),
+            "an earlier raytime's cameras");
+  EXPECT_EQ(FilesNotWritten(folder.string()), std::vector<std::string>{"notes.txt"});
+}
+
 TEST_F(WrittenFilesTest, AFileWhereRaytimeWritesAFolderIsNotReplaced) {
   Write(dir_ / "refined", "a file of the user's");
   EXPECT_THROW(Export(), InputError);
