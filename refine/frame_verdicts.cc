@@ -213,9 +213,10 @@ std::vector<FrameFinding> FindSwappedNames(const FrameEvidence& evidence,
     const Disagreement d = DisagreementOf(fit, evidence.prior[prior], evidence.solution[frame]);
     return std::max(d.rotation_deg / unit_rotation, d.centre / unit_centre);
   };
+  // Frames a check already doubted count too (their findings stand; a swap only adds to them).
   std::vector<int> off;
-  for (size_t i = 0; i < verdicts.size(); ++i) {
-    if (verdicts[i].verdict != kVerdictHeld || evidence.component[i] < 0) continue;
+  for (size_t i = 0; i < evidence.solution.size(); ++i) {
+    if (evidence.component[i] < 0) continue;
     if (units(static_cast<int>(i), static_cast<int>(i)) > kSwapNormal) {
       off.push_back(static_cast<int>(i));
     }
@@ -250,6 +251,35 @@ std::vector<FrameFinding> FindSwappedNames(const FrameEvidence& evidence,
                          Degrees(unit_rotation), unit_centre)});
       }
     }
+  }
+  // One half of a swap whose other half a check doubted: that frame's placement is no evidence
+  // (a part the pair removal cut loose, placed anywhere), so this frame, held where the doubted
+  // one's prior is and far from its own, is the half that shows it.
+  for (const int i : off) {
+    if (taken.count(i) || verdicts[i].verdict != kVerdictHeld) continue;
+    int partner = -1;
+    double nearest = kSwapNormal;
+    for (const int j : off) {
+      if (j == i || verdicts[j].verdict == kVerdictHeld) continue;
+      const double swapped = units(i, j);
+      if (swapped <= nearest && units(i, i) >= kSwapRatio * swapped) {
+        partner = j;
+        nearest = swapped;
+      }
+    }
+    if (partner < 0) continue;
+    taken.insert(i);
+    const Disagreement own = DisagreementOf(fit, evidence.prior[i], evidence.solution[i]);
+    const Disagreement there = DisagreementOf(fit, evidence.prior[partner], evidence.solution[i]);
+    findings.push_back(
+        {i, "names_swapped",
+         fmt::format("its matches place it where the prior has {} ({} / {:.3g} from it), far from "
+                     "its own prior ({} / {:.3g}; the frames the matches hold are within {} / "
+                     "{:.3g}), and {} is doubted ({}): the two frames' images or names are likely "
+                     "swapped",
+                     evidence.labels[partner], Degrees(there.rotation_deg), there.centre,
+                     Degrees(own.rotation_deg), own.centre, Degrees(unit_rotation), unit_centre,
+                     evidence.labels[partner], verdicts[partner].reason)});
   }
   return findings;
 }

@@ -93,6 +93,29 @@ TEST(FrameVerdictsTest, SwappedFramesAreNamedAndAGlitchTheSolveFixedIsNot) {
   EXPECT_NE(verdicts[2].detail.find("0005.jpg"), std::string::npos) << verdicts[2].detail;
 }
 
+// fountain-P11 with 0000 and 0006 swapped: the pair removal cut 0006 loose and a check doubted it
+// where it happened to land, far from 0000's prior; 0000, held where 0006's prior is, was exported
+// 57° off.
+TEST(FrameVerdictsTest, TheHeldHalfOfASwapWhoseOtherHalfWasDoubtedIsNamed) {
+  PriorTrust trust;
+  FrameEvidence evidence = LineEvidence();
+  evidence.loose_cuts.clear();
+  // Frame 2 carries frame 5's image: placed where 5's prior is. Frame 5 landed elsewhere.
+  evidence.solution[2] = evidence.prior[5];
+  evidence.solution[5].translation += Eigen::Vector3d(0, 3, 0);
+  evidence.findings = {{5, "moved_and_fits_worse", "moved"}};
+  const std::vector<FrameVerdict> verdicts = JudgeFrames(evidence, &trust);
+  EXPECT_EQ(verdicts[2].reason, "names_swapped");
+  EXPECT_NE(verdicts[2].detail.find("0005.jpg is doubted"), std::string::npos)
+      << verdicts[2].detail;
+  EXPECT_EQ(verdicts[5].reason, "moved_and_fits_worse");
+  for (const int i : {0, 1, 3, 4, 6, 7, 8, 9}) EXPECT_EQ(verdicts[i].verdict, kVerdictHeld) << i;
+  // Without the other half doubted, one frame off its prior is not named a swap.
+  evidence.findings.clear();
+  evidence.solution[5] = evidence.prior[5];
+  EXPECT_NE(JudgeFrames(evidence, &trust)[2].reason, "names_swapped");
+}
+
 TEST(FrameVerdictsTest, FindingsComeFirstAndAComponentOfItsOwnNeedsATrustedPrior) {
   PriorTrust trust;
   FrameEvidence evidence = LineEvidence();
