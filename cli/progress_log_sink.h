@@ -1,6 +1,6 @@
 // The CLI's log sink (issue 32): log lines on stderr as before, with the progress bar
 // (core/progress.h) erased before each and drawn again after, so a bar and a log line never share
-// a terminal line.
+// a terminal line; control characters in messages are escaped (issue 47).
 #pragma once
 
 #include <spdlog/sinks/sink.h>
@@ -9,6 +9,7 @@
 #include <string>
 #include <utility>
 
+#include "core/terminal_text.h"
 #include "core/progress.h"
 
 namespace raytime {
@@ -17,9 +18,14 @@ class ProgressLogSink : public spdlog::sinks::sink {
  public:
   explicit ProgressLogSink(std::shared_ptr<spdlog::sinks::sink> inner) : inner_(std::move(inner)) {}
 
+  // Control characters in a message (a file name's escape sequences) are shown, not obeyed.
   void log(const spdlog::details::log_msg& message) override {
+    const std::string escaped =
+        EscapeControlCharacters(std::string(message.payload.data(), message.payload.size()));
+    spdlog::details::log_msg shown = message;
+    shown.payload = escaped;
     ClearProgressLine();
-    inner_->log(message);
+    inner_->log(shown);
     inner_->flush();
     RedrawProgressLine();
   }

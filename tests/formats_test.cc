@@ -15,6 +15,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "core/terminal_text.h"
 #include "core/geometry.h"
 #include "core/warnings.h"
 #include "formats/colmap_model.h"
@@ -307,6 +308,20 @@ TEST(Formats, ImageNamesThatAreNotUtf8AreRefusedWithAPrintableMessage) {
 
   EXPECT_EQ(EscapeInvalidUtf8("d\xe9mo \xc3\xa9 \xe2\x82"), "d\\xE9mo \xc3\xa9 \\xE2\\x82");
   EXPECT_EQ(std::string(InputError("x\xff").what()), "x\\xFF");
+}
+
+// Issue 47: an image named "\e]0;owned\a\e[31mred.jpg" retitled the terminal and recoloured the
+// log through the features log line.
+TEST(Formats, ControlCharactersAreShownNotObeyed) {
+  EXPECT_EQ(EscapeControlCharacters("\x1b]0;owned\x07\x1b[31mred.jpg"),
+            "\\x1B]0;owned\\x07\\x1B[31mred.jpg");
+  EXPECT_EQ(EscapeControlCharacters("a\rb\x7f"), "a\\x0Db\\x7F");
+  // C1 (U+009B is a one-character CSI for some terminals); newlines, tabs and text stay.
+  EXPECT_EQ(EscapeControlCharacters("x\xc2\x9b"
+                                    "2J \xc3\xa9\tline\n"),
+            "x\\u009B2J \xc3\xa9\tline\n");
+  // Bytes that are not UTF-8 are escaped first, so none is taken for the start of a C1 pair.
+  EXPECT_EQ(EscapeControlCharacters("\x9b"), "\\x9B");
 }
 
 TEST(Formats, WarningsQuotingBytesThatAreNotUtf8StillSerialize) {

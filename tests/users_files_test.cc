@@ -1,7 +1,7 @@
 // Issue 47 "Nothing of the user's is lost", end to end through the binary on the sample scene: a
 // file raytime did not write in a folder it writes whole (a user's notes, a trainer's state kept
 // beside the export, the user's own cameras.txt) survives a rerun and a failed run, or the run
-// refuses, naming it.
+// refuses, naming it; a file name's escape sequences reach the terminal shown, not obeyed.
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -115,6 +115,23 @@ TEST_F(UsersFilesTest, AFailedRunMovesOnlyRaytimesFilesAside) {
   ASSERT_EQ(good.exit_code, 0) << good.output;
   ExpectUsersFilesKept();
   EXPECT_TRUE(fs::exists(workdir_ / "refined" / "images.txt"));
+}
+
+// An image named with escape sequences retitled the terminal and recoloured the log.
+TEST_F(UsersFilesTest, AnImageNamesEscapeSequencesAreShownNotObeyed) {
+  const fs::path scene = dir_ / "scene";
+  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data" / "sample" / "fountain-P11", scene,
+           fs::copy_options::recursive);
+  const std::string name = "\x1b]0;owned\x07\x1b[31m0003.jpg";
+  fs::rename(scene / "images" / "0003.jpg", scene / "images" / name);
+  fs::rename(scene / "gt_dense_cameras" / "0003.jpg.camera",
+             scene / "gt_dense_cameras" / (name + ".camera"));
+  const CommandResult run = RunRaytime("run configs/demo.yaml --workdir " + workdir_.string() +
+                                       " --set dataset.root=" + scene.string());
+  EXPECT_EQ(run.output.find('\x1b'), std::string::npos) << run.output;
+  EXPECT_EQ(run.output.find('\x07'), std::string::npos) << run.output;
+  EXPECT_NE(run.output.find("\\x1B]0;owned\\x07\\x1B[31m0003.jpg"), std::string::npos)
+      << run.output;
 }
 
 }  // namespace
