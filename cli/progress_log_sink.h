@@ -9,8 +9,8 @@
 #include <string>
 #include <utility>
 
-#include "core/terminal_text.h"
 #include "core/progress.h"
+#include "core/terminal_text.h"
 
 namespace raytime {
 

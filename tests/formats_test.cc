@@ -15,8 +15,8 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/terminal_text.h"
 #include "core/geometry.h"
+#include "core/terminal_text.h"
 #include "core/warnings.h"
 #include "formats/colmap_model.h"
 #include "formats/dataset.h"
