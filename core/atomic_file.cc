@@ -154,7 +154,7 @@ void ReplaceFolder(const fs::path& path, const fs::path& tmp,
   try {
     CarryEntriesOver(theirs, old.string(), path.string());
   } catch (const std::exception& e) {
-    const fs::path kept = path.string() + ".kept." + std::to_string(getpid());
+    const fs::path kept = UnusedPath(path.string() + ".kept." + std::to_string(getpid()));
     fs::rename(old, kept, ignored);
     throw std::runtime_error(std::string(e.what()) + "; the earlier " + path.string() +
                              ", with the files raytime did not write, is kept as " + kept.string());
@@ -163,11 +163,7 @@ void ReplaceFolder(const fs::path& path, const fs::path& tmp,
     fs::remove_all(old, ignored);
     return;
   }
-  fs::path kept = keep_old_as;
-  for (int k = 1; fs::exists(fs::symlink_status(kept, ignored)); ++k) {
-    kept = keep_old_as + "." + std::to_string(k);
-  }
-  fs::rename(old, kept);
+  fs::rename(old, UnusedPath(keep_old_as));
 }
 
 }  // namespace

@@ -77,6 +77,15 @@ void CollectNotWritten(const fs::path& folder, const fs::path& relative, const j
   }
 }
 
+// The entries of the folder `entry` of `from`, as paths relative to `from`.
+std::vector<std::string> ChildEntries(const std::string& from, const std::string& entry) {
+  std::vector<std::string> children;
+  for (const auto& child : fs::directory_iterator(fs::path(from) / entry)) {
+    children.push_back((fs::path(entry) / child.path().filename()).generic_string());
+  }
+  return children;
+}
+
 void WriteRecord(const fs::path& folder, const json& files) {
   WriteTextFileAtomically(
       (folder / kWrittenFilesRecord).string(),
@@ -128,11 +137,9 @@ std::vector<std::string> CollidingEntries(const std::vector<std::string>& entrie
       colliding.push_back(entry);
     } else if (Exists(target)) {
       // Two folders: their contents must not collide either.
-      std::vector<std::string> inner;
-      for (const auto& child : fs::directory_iterator(source)) {
-        inner.push_back((fs::path(entry) / child.path().filename()).generic_string());
+      for (const std::string& c : CollidingEntries(ChildEntries(from, entry), from, to)) {
+        colliding.push_back(c);
       }
-      for (const std::string& c : CollidingEntries(inner, from, to)) colliding.push_back(c);
     }
   }
   return colliding;
@@ -143,11 +150,7 @@ void CarryEntriesOver(const std::vector<std::string>& entries, const std::string
   for (const std::string& entry : entries) {
     const fs::path source = fs::path(from) / entry, target = fs::path(to) / entry;
     if (IsFolder(source) && IsFolder(target)) {
-      std::vector<std::string> inner;
-      for (const auto& child : fs::directory_iterator(source)) {
-        inner.push_back((fs::path(entry) / child.path().filename()).generic_string());
-      }
-      CarryEntriesOver(inner, from, to);
+      CarryEntriesOver(ChildEntries(from, entry), from, to);
       continue;
     }
     std::error_code error;
@@ -158,6 +161,12 @@ void CarryEntriesOver(const std::vector<std::string>& entries, const std::string
                                error.message());
     }
   }
+}
+
+std::string UnusedPath(const std::string& wanted) {
+  std::string path = wanted;
+  for (int k = 1; Exists(path); ++k) path = wanted + "." + std::to_string(k);
+  return path;
 }
 
 }  // namespace raytime

@@ -38,4 +38,8 @@ std::vector<std::string> CollidingEntries(const std::vector<std::string>& entrie
 void CarryEntriesOver(const std::vector<std::string>& entries, const std::string& from,
                       const std::string& to);
 
+// `wanted` when nothing is there, else the first of `wanted`.1, `wanted`.2, ... that is free: where
+// something raytime keeps (an earlier folder, a stale copy) goes without replacing what is there.
+std::string UnusedPath(const std::string& wanted);
+
 }  // namespace raytime

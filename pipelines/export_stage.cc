@@ -240,7 +240,7 @@ void MoveTrainerDerivedAside(const std::string& workdir, const std::string& set)
     if (!TrainerDerivedPath(entry)) continue;
     const fs::path to = fs::path(workdir) / "stale" / "3dgs" / set / entry;
     if (fs::exists(fs::symlink_status(to, error))) {
-      fs::rename(to, to.string() + "." + std::to_string(std::time(nullptr)));
+      fs::rename(to, UnusedPath(to.string() + "." + std::to_string(std::time(nullptr))));
     }
     fs::create_directories(to.parent_path());
     fs::rename(folder / entry, to);

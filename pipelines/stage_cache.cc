@@ -159,8 +159,7 @@ void ClearStaleSlot(const fs::path& to) {
   std::error_code error;
   if (!fs::exists(fs::symlink_status(to, error))) return;
   if (fs::is_directory(to, error) && !FilesNotWritten(to.string()).empty()) {
-    const fs::path kept = to.string() + "." + std::to_string(std::time(nullptr));
-    fs::rename(to, kept, error);
+    fs::rename(to, UnusedPath(to.string() + "." + std::to_string(std::time(nullptr))), error);
     if (!error) return;
   }
   fs::remove_all(to, error);

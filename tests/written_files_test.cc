@@ -126,6 +126,15 @@ TEST_F(WrittenFilesTest, AFolderWithoutARecordIsKeptBesideTheNewOne) {
   EXPECT_EQ(FilesNotWritten(folder.string()), std::vector<std::string>{"notes.txt"});
 }
 
+// Where something is kept aside, what an earlier keep left there is not replaced.
+TEST_F(WrittenFilesTest, AnUnusedPathNeverNamesWhatIsThere) {
+  const std::string wanted = (dir_ / "kept").string();
+  EXPECT_EQ(UnusedPath(wanted), wanted);
+  Write(wanted, "first");
+  Write(wanted + ".1", "second");
+  EXPECT_EQ(UnusedPath(wanted), wanted + ".2");
+}
+
 TEST_F(WrittenFilesTest, AFileWhereRaytimeWritesAFolderIsNotReplaced) {
   Write(dir_ / "refined", "a file of the user's");
   EXPECT_THROW(Export(), InputError);
