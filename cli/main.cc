@@ -5,17 +5,22 @@
 #include <spdlog/spdlog.h>
 
 #include <malloc.h>
+#include <signal.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 
 #include "cli/progress_log_sink.h"
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
+#include "core/resource_failure.h"
+#include "core/supervise.h"
+#include "core/user_paths.h"
 #include "core/version.h"
 #include "pipelines/commands.h"
 #include "pipelines/pipeline.h"
@@ -29,6 +34,18 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
+// A path option: its value's leading tilde expanded as a shell would (a quoted '~/wk' reaches us
+// unexpanded; core/user_paths.h).
+CLI::Option* PathOption(CLI::Option* option) {
+  return option->transform([](std::string path) {
+    try {
+      return ExpandUser(path);
+    } catch (const InputError& e) {
+      throw CLI::ValidationError(e.what());
+    }
+  });
+}
+
 // `raytime <stage> --in A.h5 --in B.h5 --out OUT.h5 [--option value ...]`.
 CLI::App* AddStageCommand(CLI::App& app, const std::string& type, std::vector<std::string>* inputs,
                           std::string* output, std::unique_ptr<Stage>* holder) {
@@ -37,10 +54,10 @@ CLI::App* AddStageCommand(CLI::App& app, const std::string& type, std::vector<st
       type, (*holder)->description() +
                 " (one stage alone: reads --in HDF5 files, writes --out, prints its summary JSON "
                 "on stdout; logs go to stderr)");
-  command->add_option("--in", *inputs,
-                      "HDF5 files from earlier stages (artifacts are looked up "
-                      "in them, later files win)");
-  command->add_option("--out", *output, "HDF5 file to write (default: ./<stage>.h5)");
+  PathOption(command->add_option("--in", *inputs,
+                                 "HDF5 files from earlier stages (artifacts are looked up "
+                                 "in them, later files win)"));
+  PathOption(command->add_option("--out", *output, "HDF5 file to write (default: ./<stage>.h5)"));
   (*holder)->BindCli(command->add_option_group("options", "The stage's options"));
   return command;
 }
@@ -66,6 +83,15 @@ int RunStageAlone(Stage& stage, const std::vector<std::string>& inputs, std::str
   return 0;
 }
 
+// The last non-empty line of `text`.
+std::string LastLine(const std::string& text) {
+  const size_t end = text.find_last_not_of('\n');
+  if (end == std::string::npos) return "";
+  const size_t newline = text.rfind('\n', end);
+  const size_t start = newline == std::string::npos ? 0 : newline + 1;
+  return text.substr(start, end - start + 1);
+}
+
 // `raytime run PIPELINE.yaml`.
 struct RunCommand {
   std::string pipeline_path, workdir;
@@ -79,16 +105,17 @@ struct RunCommand {
   void Add(CLI::App& app) {
     command =
         app.add_subcommand("run", "Run a YAML pipeline (resumes: unchanged stages are skipped)");
-    command->add_option("pipeline", pipeline_path, "Pipeline YAML file")->required();
-    workdir_option = command->add_option("--workdir", workdir,
-                                         "Work directory (overrides the pipeline's 'workdir')");
+    PathOption(command->add_option("pipeline", pipeline_path, "Pipeline YAML file"))->required();
+    workdir_option = PathOption(command->add_option(
+        "--workdir", workdir, "Work directory (overrides the pipeline's 'workdir')"));
     command->add_option("--set", overrides, "Override an option: STAGE.KEY=VALUE (repeatable)");
     command->add_flag("--force", force, "Rerun every stage even when unchanged");
     command->add_option("--jobs", run_options.jobs,
                         "Concurrent sweep runs (default: number of cores)");
-    command->add_option("--cache_dir,--cache-dir", run_options.cache_dir,
-                        "Stage outputs shared between runs, by content key (sweeps default to "
-                        "WORKDIR/cache)");
+    PathOption(
+        command->add_option("--cache_dir,--cache-dir", run_options.cache_dir,
+                            "Stage outputs shared between runs, by content key (sweeps default to "
+                            "WORKDIR/cache)"));
     command
         ->add_option("--backend", run_options.backend,
                      "Where a sweep's runs execute: processes on this machine, or job arrays on a "
@@ -101,6 +128,42 @@ struct RunCommand {
                       "Slurm backend: wait until every run has ended and the tables are collected");
     command->add_flag("--no_report,--no-report", no_report,
                       "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
+  }
+
+  // The parent's part once the run's process has ended (core/supervise.h): a process killed by
+  // a signal, or one that ended leaving its record at "running", crashed; its record is finished
+  // here. Returns the exit status.
+  int Ended(const SupervisedEnd& end, std::filesystem::file_time_type run_start) const {
+    const bool killed = end.status.signal != 0;
+    std::string message =
+        killed
+            ? "raytime crashed: killed by " + DescribeSignal(end.status.signal) +
+                  (end.status.signal == SIGKILL ? " (the system's out-of-memory killer, or kill -9)"
+                                                : "")
+            : "raytime ended (exit status " + std::to_string(end.status.exit_code) +
+                  ") without recording how";
+    std::string cause = ResourceNamedIn(end.stderr_tail);
+    const std::string last = LastLine(end.stderr_tail);
+    if (!last.empty()) message += "; its last output line: \"" + last + "\"";
+    if (!cause.empty()) message += ": " + ResourceAdvice(cause);
+    if (cause.empty()) cause = "crash";
+    if (command->parsed()) {
+      try {
+        PipelineSpec spec = LoadPipeline(pipeline_path);
+        for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
+        const std::string effective = workdir.empty() ? spec.workdir : workdir;
+        if (spec.sweep.empty() && RecordCrashedRun(spec, effective, end.child, run_start, message,
+                                                   cause, end.status.signal)) {
+          spdlog::error(message + " (recorded in " + effective + "/summary.json)");
+          return kExitCrashed;
+        }
+      } catch (const std::exception& e) {
+        if (killed) message += " (its record could not be finished: " + std::string(e.what()) + ")";
+      }
+    }
+    if (!killed) return end.status.exit_code;
+    spdlog::error(message);
+    return kExitCrashed;
   }
 
   int Execute() {
@@ -150,13 +213,13 @@ struct EvaluateFilesCommand {
         "any two pose files joined by image name (--est/--gt)");
     CLI::Option_group* files = evaluate->add_option_group(
         "pose files", "Score two pose files instead of running the stage (needs --est and --gt)");
-    est_option = files->add_option("--est", est, "Estimated poses (file or folder)");
+    est_option = PathOption(files->add_option("--est", est, "Estimated poses (file or folder)"));
     files
         ->add_option("--est_format,--est-format", est_format,
                      "A pose file format (prior.format) or hdf5")
         ->capture_default_str();
     files->add_option("--est_set,--est-set", est_set, "Pose set name in an HDF5 file");
-    gt_option = files->add_option("--gt", gt, "Ground-truth poses (file or folder)");
+    gt_option = PathOption(files->add_option("--gt", gt, "Ground-truth poses (file or folder)"));
     files
         ->add_option("--gt_format,--gt-format", gt_format,
                      "A pose file format (prior.format) or hdf5")
@@ -195,12 +258,13 @@ struct ReportCommand {
         "report",
         "Campaign report of a finished sweep: Markdown tables shaped like the paper's "
         "Tables 5, 6 and 8 (and 4 when it trained 3DGS), CSVs of cells, plots");
-    CLI::Option* sweep =
-        command->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)");
-    CLI::Option* run = command->add_option(
-        "--run", run_dir, "A run's work directory: rebuild its page WORKDIR/report.html");
+    CLI::Option* sweep = PathOption(
+        command->add_option("--sweep", sweep_dir, "Sweep work directory (reads DIR/sweep.json)"));
+    CLI::Option* run = PathOption(command->add_option(
+        "--run", run_dir, "A run's work directory: rebuild its page WORKDIR/report.html"));
     sweep->excludes(run);
-    command->add_option("--out", report_dir, "Output directory (default: the sweep directory)");
+    PathOption(command->add_option("--out", report_dir,
+                                   "Output directory (default: the sweep directory)"));
     command->add_flag("--collect", collect,
                       "First rebuild DIR/sweep.csv, sweep.json and summary.json from the runs' "
                       "summaries (what the Slurm backend's last job does)");
@@ -244,8 +308,8 @@ struct ResizeSceneCommand {
     command = app.add_subcommand("resize-scene",
                                  "Write a downsampled copy of a dataset in the Strecha layout");
     command->add_option("--format", input.format, "Input dataset format")->capture_default_str();
-    command->add_option("--root", input.root, "Input dataset root")->required();
-    command->add_option("--out", output, "Output scene folder")->required();
+    PathOption(command->add_option("--root", input.root, "Input dataset root"))->required();
+    PathOption(command->add_option("--out", output, "Output scene folder"))->required();
     command->add_option("--width", options.width, "Output width, pixels")->capture_default_str();
     command
         ->add_option("--jpeg_quality,--jpeg-quality", options.jpeg_quality,
@@ -271,10 +335,12 @@ struct ScoreSplatCommand {
         "score-splat",
         "Render a trained 3DGS .ply at a 3dgs export's held-out cameras and score them (PSNR, "
         "SSIM)");
-    command->add_option("--ply", ply, "The trainer's .ply (standard 3DGS fields)")->required();
-    command->add_option("--data", data_dir, "The 3dgs export (WORKDIR/3dgs/<pose set>)")
+    PathOption(command->add_option("--ply", ply, "The trainer's .ply (standard 3DGS fields)"))
         ->required();
-    command->add_option("--out", out_dir, "Where renders/ and gt/ are written")->required();
+    PathOption(command->add_option("--data", data_dir, "The 3dgs export (WORKDIR/3dgs/<pose set>)"))
+        ->required();
+    PathOption(command->add_option("--out", out_dir, "Where renders/ and gt/ are written"))
+        ->required();
     command
         ->add_option("--trainer", trainer,
                      "Rasterize as this trainer does (gsplat, inria, nerfstudio, opensplat)")
@@ -312,41 +378,64 @@ struct StageCommands {
   }
 };
 
-int Main(int argc, char** argv) {
-  CLI::App app{"raytime: triangulation-free bundle adjustment from coarse pose priors"};
-  app.set_version_flag("--version", std::string(Version()));
-  app.require_subcommand(1);
-  bool quiet = false;
-  app.add_flag("-q,--quiet", quiet, "Only print warnings and errors");
-  RunCommand run;
-  run.Add(app);
-  StageCommands stages;
-  stages.Add(app);
-  EvaluateFilesCommand evaluate_files;
-  evaluate_files.Add(stages.commands.at("evaluate"));
-  ReportCommand report;
-  report.Add(app);
-  ResizeSceneCommand resize;
-  resize.Add(app);
-  ScoreSplatCommand score_splat;
-  score_splat.Add(app);
+// Every command, parsed once; executed in the supervised child (core/supervise.h).
+class Commands {
+ public:
+  Commands() {
+    app_.set_version_flag("--version", std::string(Version()));
+    app_.require_subcommand(1);
+    app_.add_flag("-q,--quiet", quiet_, "Only print warnings and errors");
+    run_.Add(app_);
+    stages_.Add(app_);
+    evaluate_files_.Add(stages_.commands.at("evaluate"));
+    report_.Add(app_);
+    resize_.Add(app_);
+    score_splat_.Add(app_);
+  }
 
-  CLI11_PARSE(app, argc, argv);
-  // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
-  // Through ProgressLogSink: a progress bar on a terminal is erased and redrawn around each line.
-  spdlog::set_default_logger(std::make_shared<spdlog::logger>(
-      "raytime",
-      std::make_shared<ProgressLogSink>(std::make_shared<spdlog::sinks::stderr_color_sink_mt>())));
-  spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
-  if (quiet) spdlog::set_level(spdlog::level::warn);
+  // Parses the command line and sets up the log; an exit status when it ends here (--help,
+  // --version: 0; a command-line error: 2, said on stderr).
+  std::optional<int> Parse(int argc, char** argv) {
+    try {
+      app_.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+      return app_.exit(e) == 0 ? kExitOk : kExitInput;
+    }
+    // Logs on stderr: stdout carries only results (a stage's summary JSON, `evaluate --json`).
+    // Through ProgressLogSink: a progress bar on a terminal is erased and redrawn around each
+    // line.
+    spdlog::set_default_logger(std::make_shared<spdlog::logger>(
+        "raytime", std::make_shared<ProgressLogSink>(
+                       std::make_shared<spdlog::sinks::stderr_color_sink_mt>())));
+    spdlog::set_pattern("%H:%M:%S %^%l%$ %v");
+    if (quiet_) spdlog::set_level(spdlog::level::warn);
+    return std::nullopt;
+  }
 
-  if (run.command->parsed()) return run.Execute();
-  if (evaluate_files.Parsed()) return evaluate_files.Execute();
-  if (report.command->parsed()) return report.Execute();
-  if (resize.command->parsed()) return resize.Execute();
-  if (score_splat.command->parsed()) return score_splat.Execute();
-  return stages.Execute(app);
-}
+  int Execute() {
+    if (run_.command->parsed()) return run_.Execute();
+    if (evaluate_files_.Parsed()) return evaluate_files_.Execute();
+    if (report_.command->parsed()) return report_.Execute();
+    if (resize_.command->parsed()) return resize_.Execute();
+    if (score_splat_.command->parsed()) return score_splat_.Execute();
+    return stages_.Execute(app_);
+  }
+
+  // In the supervising parent, once the child that executed the command has ended.
+  int Ended(const SupervisedEnd& end, std::filesystem::file_time_type run_start) const {
+    return run_.Ended(end, run_start);
+  }
+
+ private:
+  CLI::App app_{"raytime: triangulation-free bundle adjustment from coarse pose priors"};
+  bool quiet_ = false;
+  RunCommand run_;
+  StageCommands stages_;
+  EvaluateFilesCommand evaluate_files_;
+  ReportCommand report_;
+  ResizeSceneCommand resize_;
+  ScoreSplatCommand score_splat_;
+};
 
 }  // namespace
 }  // namespace raytime
@@ -363,18 +452,22 @@ int main(int argc, char** argv) {
   // kept; peak memory +0-2 % (desk 1.43 GB both).
   mallopt(M_MMAP_MAX, 0);
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
+  raytime::Commands commands;
+  if (const std::optional<int> status = commands.Parse(argc, argv)) return *status;
+  raytime::RaiseOpenFileLimit();
+  const auto run_start = std::filesystem::file_time_type::clock::now();
+  if (const std::optional<raytime::SupervisedEnd> end = raytime::ForkSupervised()) {
+    return commands.Ended(*end, run_start);
+  }
   raytime::InstallInterruptHandler();
   try {
-    const int status = raytime::Main(argc, argv);
+    const int status = commands.Execute();
     if (raytime::Interrupting()) raytime::AwaitInterruptExit();
     return status;
-  } catch (const raytime::InputError& e) {
-    if (raytime::Interrupting()) raytime::AwaitInterruptExit();
-    spdlog::error(fmt::format("{}", e.what()));
-    return 2;
   } catch (const std::exception& e) {
     if (raytime::Interrupting()) raytime::AwaitInterruptExit();
-    spdlog::error(fmt::format("{}", e.what()));
-    return 1;
+    const raytime::FailureDescription failure = raytime::DescribeFailure(e);
+    spdlog::error(fmt::format("{}", failure.message));
+    return failure.exit_code;
   }
 }

@@ -116,6 +116,14 @@ void WriteAtomically(const std::string& path,
                      const std::function<void(const std::string&)>& write) {
   const fs::path parent = fs::path(path).parent_path();
   if (!parent.empty()) fs::create_directories(parent);
+  // A rename cannot put a file over a folder; said before anything is written, not as "Is a
+  // directory" about a temporary name. The folder is not raytime's: it writes a file here.
+  std::error_code error;
+  if (fs::is_directory(fs::symlink_status(path, error))) {
+    throw InputError(path +
+                     ": a folder is where raytime writes this file (raytime did not make it); "
+                     "move it away, or give another work directory");
+  }
   const std::string tmp = TemporarySibling(path);
   const PendingTemporary pending(tmp);
   try {
@@ -240,6 +248,7 @@ std::string WriteFailureReason(const std::string& path, int error) {
     return ": no space left on device (" + std::to_string(free_bytes) + " bytes free in " +
            dir.string() + "); free some space and run again";
   }
+  if (error == EMFILE || error == ENFILE) return std::string(": ") + std::strerror(error);
   // Only the errors of a write itself: errno may be left over from an unrelated call.
   if (error == EFBIG || error == EIO || error == EROFS)
     return std::string(": ") + std::strerror(error);
@@ -253,7 +262,8 @@ bool PathExists(const std::string& path) {
 
 std::string ReadTextFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) ThrowInput(path, 0, "cannot open file for reading");
+  if (!in)
+    ThrowInput(path, 0, std::string("cannot open file for reading (") + std::strerror(errno) + ")");
   std::ostringstream ss;
   ss << in.rdbuf();
   return ss.str();

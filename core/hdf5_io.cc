@@ -94,8 +94,9 @@ void Context::Fail(const std::string& message) const {
 Id OpenFile(const Context& c) {
   SilenceErrors();
   std::error_code error;
-  if (!fs::is_regular_file(c.path, error) || !std::ifstream(c.path, std::ios::binary)) {
-    c.Fail("cannot open (no such file, or not readable)");
+  if (!fs::is_regular_file(c.path, error)) c.Fail("cannot open (no such file)");
+  if (!std::ifstream(c.path, std::ios::binary)) {
+    c.Fail(std::string("cannot open (") + std::strerror(errno) + ")");
   }
   const std::string unreadable = "is not a readable HDF5 file (truncated or corrupt?)";
   if (H5Fis_hdf5(c.path.c_str()) <= 0) c.Fail(unreadable);

@@ -74,6 +74,7 @@ void InstallInterruptHandler() {
   action.sa_flags = SA_RESTART;
   ::sigaction(SIGINT, &action, nullptr);
   ::sigaction(SIGTERM, &action, nullptr);
+  ::sigaction(SIGHUP, &action, nullptr);
   std::thread(Watch).detach();
 }
 

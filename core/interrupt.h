@@ -1,8 +1,8 @@
-// Clean ends on SIGINT and SIGTERM. A signal handler only writes the signal number into a pipe;
-// a watcher thread reads it, runs the registered actions (newest first: e.g. stop child
-// processes, write summary.json with status "interrupted", remove this process's temporary
-// files) and exits with 128 + the signal (130 for Ctrl-C, 143 for kill). Nothing runs inside the
-// handler itself, so the actions may allocate, lock and write files.
+// Clean ends on SIGINT, SIGTERM and SIGHUP (the terminal closed). A signal handler only writes
+// the signal number into a pipe; a watcher thread reads it, runs the registered actions (newest
+// first: e.g. stop child processes, write summary.json with status "interrupted", remove this
+// process's temporary files) and exits with 128 + the signal (130 for Ctrl-C, 143 for kill).
+// Nothing runs inside the handler itself, so the actions may allocate, lock and write files.
 #pragma once
 
 #include <functional>

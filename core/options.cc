@@ -1,7 +1,10 @@
 #include "core/options.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <map>
 #include <numeric>
 #include <sstream>
@@ -77,11 +80,15 @@ void CheckNoRepeatedKeys(const YAML::Node& node, const std::string& path) {
 }  // namespace
 
 YAML::Node LoadYamlFile(const std::string& path) {
+  std::error_code error;
+  if (std::filesystem::is_directory(path, error)) {
+    ThrowInput(path, 0, "is a folder, not a YAML file");
+  }
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
   } catch (const YAML::BadFile&) {
-    ThrowInput(path, 0, "cannot read the file");
+    ThrowInput(path, 0, std::string("cannot read the file (") + std::strerror(errno) + ")");
   } catch (const YAML::ParserException& e) {
     ThrowInput(path, e.mark.line + 1, "YAML syntax error: " + e.msg);
   }
@@ -99,6 +106,10 @@ void RequireUtf8(const std::string& text, const std::string& path, int line,
 namespace {
 
 std::string NumberText(double value) {
+  // Whole bounds in full ("at most 1000000", not "1e+06").
+  if (value == std::floor(value) && std::abs(value) < 1e15) {
+    return std::to_string(static_cast<long long>(value));
+  }
   std::ostringstream out;
   out << value;
   return out.str();

@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/user_paths.h"
 
 namespace raytime {
 
@@ -159,6 +160,9 @@ void ReadYamlField(const YAML::Node& node, T& field, const std::string& path,
   }
   if constexpr (std::is_same_v<T, std::string>) {
     RequireUtf8(field, path, YamlLine(node), "option '" + key + "'");
+    // The text options that may start with a tilde are paths and commands: expanded as a shell
+    // expands a word's leading tilde (a YAML file or a --set is no shell).
+    field = ExpandUser(field);
   } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
     for (const std::string& element : field) {
       RequireUtf8(element, path, YamlLine(node), "option '" + key + "'");

@@ -33,7 +33,7 @@ struct TimestampJoinOptions {
       "Timestamp join (stray, arkitscenes, lamar): largest time from a frame to each of the two "
       "poses it is interpolated between (SLERP + linear), seconds; frames further from the "
       "trajectory are reported and left out",
-      Positive());
+      Positive(), AtMost(86400));
   }
 };
 

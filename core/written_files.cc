@@ -1,11 +1,18 @@
 #include "core/written_files.h"
 
+#include <xxhash.h>
+
 #include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 #include "core/atomic_file.h"
 
@@ -15,13 +22,48 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-// What identifies a file raytime wrote: its size and modification time (nanoseconds), which a
-// user's edit or replacement changes; the contents are not hashed, since a 3dgs folder's images
-// are gigabytes.
-json Stamp(const fs::path& file) {
+// Files up to this size are also identified by their contents (a 3dgs folder's images, hundreds
+// of megabytes in all, are each below it; a longer file is identified by size and time alone).
+constexpr std::uintmax_t kHashedFileBytes = 64ull << 20;
+
+// XXH3-64 of a file's contents, as hex.
+std::string ContentHash(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(),
+                                                                 &XXH3_freeState);
+  XXH3_64bits_reset(state.get());
+  std::vector<char> buffer(1 << 20);
+  while (in.read(buffer.data(), buffer.size()) || in.gcount() > 0) {
+    XXH3_64bits_update(state.get(), buffer.data(), static_cast<size_t>(in.gcount()));
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof(hex), "%016llx",
+                static_cast<unsigned long long>(XXH3_64bits_digest(state.get())));
+  return hex;
+}
+
+int64_t ModificationNs(const fs::path& file) {
   const auto time = fs::last_write_time(file).time_since_epoch();
-  return {{"size", fs::file_size(file)},
-          {"mtime_ns", std::chrono::duration_cast<std::chrono::nanoseconds>(time).count()}};
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(time).count();
+}
+
+// What identifies a file raytime wrote: its size and modification time (nanoseconds), which a
+// user's edit or replacement changes, and for files up to kHashedFileBytes its contents, so that
+// a copy of the folder (cp -r, which sets new times) is still raytime's.
+json Stamp(const fs::path& file) {
+  const std::uintmax_t size = fs::file_size(file);
+  json stamp = {{"size", size}, {"mtime_ns", ModificationNs(file)}};
+  if (size <= kHashedFileBytes) stamp["xxh3"] = ContentHash(file);
+  return stamp;
+}
+
+// Whether `file` is the one `stamp` records: same size, and the same time or the same contents.
+bool Matches(const fs::path& file, const json& stamp) {
+  if (!stamp.is_object() || stamp.value("size", std::uintmax_t(0)) != fs::file_size(file)) {
+    return false;
+  }
+  if (stamp.value("mtime_ns", int64_t(0)) == ModificationNs(file)) return true;
+  return stamp.contains("xxh3") && stamp["xxh3"] == ContentHash(file);
 }
 
 // The record of `folder`: relative path -> stamp; empty when it has none or it does not parse
@@ -73,7 +115,7 @@ void CollectNotWritten(const fs::path& folder, const fs::path& relative, const j
     const auto it = files.find(key);
     std::error_code error;
     const bool regular = fs::is_regular_file(fs::symlink_status(entry.path(), error));
-    if (it == files.end() || !regular || Stamp(entry.path()) != *it) out->push_back(key);
+    if (it == files.end() || !regular || !Matches(entry.path(), *it)) out->push_back(key);
   }
 }
 

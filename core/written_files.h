@@ -1,10 +1,10 @@
 // What raytime wrote into a folder (issue 47: nothing of the user's is lost). A folder raytime
 // writes whole (an export's refined/, a 3dgs/<pose set>/ folder, a video's frames) holds a record,
-// FOLDER/.raytime_written, of every file it wrote there: its path in the folder, size and
-// modification time. Replacing or moving the folder touches those files only; anything else in it
-// (a user's notes, a trainer's state kept beside the export, a file raytime wrote and someone has
-// since changed) stays where it is, and a file of the user's under a name raytime is about to
-// write stops the write, naming it, before anything is replaced.
+// FOLDER/.raytime_written, of every file it wrote there: its path in the folder, size,
+// modification time and (up to 64 MB) content checksum. Replacing or moving the folder touches
+// those files only; anything else in it (a user's notes, a trainer's state kept beside the export,
+// a file raytime wrote and someone has since changed) stays where it is, and a file of the user's
+// under a name raytime is about to write stops the write, naming it, before anything is replaced.
 #pragma once
 
 #include <string>
@@ -23,7 +23,7 @@ void RecordWrittenFiles(const std::string& folder);
 void RecordWrittenFile(const std::string& folder, const std::string& relative);
 
 // The entries below `folder` that raytime did not write there, as paths relative to it: files and
-// links the record does not list or whose size or modification time changed since it did, and
+// links the record does not list or whose size, or time and contents, changed since it did, and
 // folders holding no file it wrote (one entry each, not their contents). A folder without a
 // record (an earlier raytime's, or one a user made) is all theirs. Sorted.
 std::vector<std::string> FilesNotWritten(const std::string& folder);
