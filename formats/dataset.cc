@@ -2,7 +2,9 @@
 #include "core/atomic_file.h"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 
 #include "core/error.h"
 #include "core/intrinsics.h"
@@ -97,6 +99,60 @@ void RequireUtf8Names(const Dataset& dataset, const std::string& source) {
   if (dataset.ground_truth) RequireUtf8Names(Names(*dataset.ground_truth), source);
 }
 
+// The Strecha, COLMAP and nerfstudio files state each image's size with its intrinsics; the file
+// itself may be another size of the same view (a full-resolution photo among downsampled
+// siblings). As the capture readers do (DatasetFromRecording): the same aspect ratio rescales
+// that image's camera, with a warning `intrinsics_rescaled`; another aspect ratio is an error
+// naming the file. Files whose header ReadImageSize does not read (BMP, TIFF, WEBP) are left to
+// the features stage, which compares the decoded size.
+void FitCamerasToImageFiles(ImageSet* images, Warnings* warnings) {
+  Warning rescaled{"intrinsics_rescaled", "", {}, {}, nlohmann::json::object()};
+  for (ImageInfo& image : images->images) {
+    const std::string path = (fs::path(images->image_root) / image.name).string();
+    ImageSize size;
+    try {
+      size = ReadImageSize(path);
+    } catch (const InputError&) {
+      continue;
+    }
+    if (image.width <= 0 || image.height <= 0 ||
+        (size.width == image.width && size.height == image.height)) {
+      continue;
+    }
+    const double sx = double(size.width) / image.width, sy = double(size.height) / image.height;
+    const std::string stated = std::to_string(image.width) + "x" + std::to_string(image.height);
+    const std::string actual = std::to_string(size.width) + "x" + std::to_string(size.height);
+    if (std::abs(sx / sy - 1.0) > 0.01) {
+      ThrowInput(path, 0,
+                 "image is " + actual + " but its intrinsics are for " + stated +
+                     " pixels: another aspect ratio (rotated or cropped), not a rescaled image" +
+                     ExifOrientationNote(size));
+    }
+    CameraIntrinsics camera = images->cameras[image.camera_index];
+    camera.params[kFx] *= sx;
+    camera.params[kFy] *= sy;
+    camera.params[kCx] = (camera.params[kCx] + 0.5) * sx - 0.5;
+    camera.params[kCy] = (camera.params[kCy] + 0.5) * sy - 0.5;
+    camera.width = size.width;
+    camera.height = size.height;
+    const auto same = std::find(images->cameras.begin(), images->cameras.end(), camera);
+    image.camera_index = static_cast<int>(same - images->cameras.begin());
+    if (same == images->cameras.end()) images->cameras.push_back(camera);
+    image.width = size.width;
+    image.height = size.height;
+    rescaled.images.push_back(image.name);
+    rescaled.details["from"] = stated;
+    rescaled.details["to"] = actual;
+  }
+  if (rescaled.images.empty()) return;
+  rescaled.message = std::to_string(rescaled.images.size()) +
+                     " image(s) are another size than their intrinsics state (e.g. " +
+                     rescaled.details["to"].get<std::string>() + " for " +
+                     rescaled.details["from"].get<std::string>() +
+                     "): focal lengths and principal points were rescaled to the images";
+  warnings->push_back(rescaled);
+}
+
 }  // namespace
 
 Dataset LoadDataset(const DatasetOptions& options) {
@@ -143,11 +199,14 @@ Dataset LoadDataset(const DatasetOptions& options) {
     throw InputError(
         UnknownKeyMessage("dataset.format", options.format, kDatasetFormats, "format"));
   }
+  CheckImagesExist(dataset.images, options.root);
+  if (options.format == "strecha" || options.format == "colmap" || options.format == "nerfstudio") {
+    FitCamerasToImageFiles(&dataset.images, &dataset.warnings);
+  }
   // Per-view cameras that differ only by numerical noise (DTU's K) are one camera, for every
   // format alike.
   MergeNearlyEqualCameras(&dataset.images, &dataset.warnings);
   SortImagesByName(&dataset.images);
-  CheckImagesExist(dataset.images, options.root);
   for (const auto& image : dataset.images.images) {
     dataset.files.push_back((fs::path(dataset.images.image_root) / image.name).string());
   }

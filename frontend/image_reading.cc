@@ -1,5 +1,6 @@
 #include "frontend/image_reading.h"
 
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
@@ -143,7 +144,11 @@ void CheckImageStructure(const std::string& path, const std::vector<uint8_t>& by
 
 cv::Mat ReadImage(const std::string& path, int flags) {
   std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) ThrowInput(path, 0, "cannot read the image (missing or unreadable)");
+  if (!in) {
+    ThrowInput(
+        path, 0,
+        std::string("cannot read the image (missing or unreadable: ") + std::strerror(errno) + ")");
+  }
   const std::streamoff size = in.tellg();
   if (size < 0) ThrowInput(path, 0, "cannot read the image (not a regular file)");
   if (size == 0) ThrowInput(path, 0, "the image file is empty");

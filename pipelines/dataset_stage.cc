@@ -33,6 +33,16 @@ class DatasetStage : public StageWithOptions<DatasetOptions> {
     return {};
   }
   std::vector<std::string> ExternalFiles() const override { return LoadDataset(options_).files; }
+  // A dataset that does not load lists none: the stage's run says what is wrong with it.
+  std::vector<std::string> InputFolders() const override {
+    try {
+      const Dataset dataset = LoadDataset(options_);
+      if (dataset.video || dataset.images.image_root.empty()) return {};
+      return {dataset.images.image_root};
+    } catch (const std::exception&) {
+      return {};
+    }
+  }
 
   nlohmann::json Run(const StageContext& context) override {
     Dataset dataset = LoadDataset(options_);

@@ -57,7 +57,7 @@ struct ExportStageOptions {
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
       "images, PINHOLE model, points, split)",
-      OneOf(kExportFormats));
+      NonEmpty(), OneOf(kExportFormats));
     v("points_from", points_from,
       "3dgs: pose set whose refine ray times give the initial points3D; auto = the first listed "
       "pose set that has them, none = no points",
@@ -81,11 +81,12 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
 
 // The file_path prefix of a transforms.json written to `path`: trainers resolve file_path from the
 // file's own folder, so the dataset's image folder is given relative to it (absolute when the two
-// share no root). Paths relative to the working directory are made absolute first, as every
-// stage reads them.
+// share no root). Both are resolved as the operating system resolves them (symbolic links
+// followed): a work directory reached through a link at another depth would otherwise get ".."
+// steps that climb from the link's folder, not from where the file lies.
 std::string ImagePrefixFor(const std::string& path, const std::string& image_root) {
-  const fs::path root = fs::absolute(image_root).lexically_normal();
-  const fs::path folder = fs::absolute(path).parent_path().lexically_normal();
+  const fs::path root = fs::weakly_canonical(fs::absolute(image_root));
+  const fs::path folder = fs::weakly_canonical(fs::absolute(path).parent_path());
   fs::path relative = root.lexically_relative(folder);
   if (relative.empty()) relative = root;
   std::string prefix = relative.generic_string();
@@ -269,6 +270,28 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
       inputs.push_back(PoseArtifact(source));
     }
     return inputs;
+  }
+  // COLMAP's text model (colmap_text, and the 3dgs folders' sparse/0) splits its lines on
+  // whitespace: a name with a space would be written and then misread by every trainer.
+  void CheckImageNames(const std::vector<std::string>& names) const override {
+    std::vector<std::string> text_formats;
+    for (const std::string& format : options_.formats) {
+      if (format == "colmap_text" || format == "3dgs") text_formats.push_back(format);
+    }
+    if (text_formats.empty()) return;
+    std::vector<std::string> spaced;
+    for (const std::string& name : names) {
+      if (name.find_first_of(" \t\n\r\v\f") != std::string::npos) spaced.push_back(name);
+    }
+    if (spaced.empty()) return;
+    std::string formats;
+    for (const std::string& format : text_formats)
+      formats += (formats.empty() ? "" : ", ") + format;
+    throw InputError("export: " + std::to_string(spaced.size()) +
+                     " image name(s) have whitespace ('" + spaced.front() + "'" +
+                     (spaced.size() > 1 ? ", ..." : "") +
+                     "), which COLMAP's text model cannot hold (export formats " + formats +
+                     "); rename the images, or export colmap_binary and transforms_json instead");
   }
   std::vector<std::string> ExtraOutputs() const override {
     std::vector<std::string> outputs;

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "pipelines/stage.h"
 #include "pipelines/sweep.h"
 
 namespace fs = std::filesystem;
@@ -29,7 +30,14 @@ class WorkdirLock {
     std::error_code error;
     fs::create_directories(dir, error);
     if (error) {
-      throw InputError(workdir + ": cannot create the work directory (" + error.message() + ")");
+      // Name the part of the path in the way (a file where a folder goes), not only the whole.
+      fs::path blocking = dir;
+      std::error_code ignored;
+      while (!blocking.empty() && !fs::exists(blocking, ignored)) blocking = blocking.parent_path();
+      const bool file_in_way = !blocking.empty() && !fs::is_directory(blocking, ignored);
+      throw InputError(workdir + ": cannot create the work directory (" + error.message() +
+                       (file_in_way ? ": " + blocking.string() + " is a file, not a folder" : "") +
+                       ")");
     }
     const std::string path = (dir / "run.lock").string();
     fd_ = ::open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644);
@@ -66,6 +74,36 @@ class WorkdirLock {
   int fd_ = -1;
 };
 
+// The work directory is refused where it is, or lies inside, a folder a stage reads whole (the
+// dataset's image folder): raytime would write summary.json among the images and read it back as
+// one. Resolved as the operating system resolves paths (links followed).
+void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& workdir) {
+  std::error_code error;
+  const fs::path work = fs::weakly_canonical(fs::absolute(workdir), error);
+  if (error) return;
+  for (const PipelineStageSpec& stage_spec : spec.stages) {
+    std::vector<std::string> folders;
+    try {
+      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
+      stage->Configure(stage_spec.options, spec.path);
+      folders = stage->InputFolders();
+    } catch (const std::exception&) {
+      continue;  // said by the stage when it runs
+    }
+    for (const std::string& folder : folders) {
+      const fs::path input = fs::weakly_canonical(fs::absolute(folder), error);
+      if (error) continue;
+      const fs::path inside = work.lexically_relative(input);
+      if (inside.empty() || *inside.begin() == "..") continue;
+      throw InputError(workdir + ": the work directory is " +
+                       (inside == "." ? std::string("") : "inside ") + "the folder " +
+                       input.string() + " that stage " + stage_spec.id +
+                       " reads whole (the dataset's images): raytime would write its files among "
+                       "them and read them back as images; give a --workdir outside it");
+    }
+  }
+}
+
 }  // namespace
 
 nlohmann::json RunPipeline(const PipelineSpec& spec, const RunOptions& options) {
@@ -73,11 +111,17 @@ nlohmann::json RunPipeline(const PipelineSpec& spec, const RunOptions& options) 
   if (workdir.empty()) {
     throw InputError(spec.path + ": no work directory (set 'workdir' or pass --workdir)");
   }
+  std::error_code error;
+  if (!options.cache_dir.empty() && fs::exists(options.cache_dir, error) &&
+      !fs::is_directory(options.cache_dir, error)) {
+    throw InputError(options.cache_dir + ": the cache folder (--cache_dir) is a file");
+  }
   if (!spec.sweep.empty()) {
     const WorkdirLock lock(workdir);
     return RunSweep(spec, workdir, options);
   }
   ValidatePipeline(spec);
+  RefuseWorkdirInInputFolder(spec, workdir);
   const WorkdirLock lock(workdir);
   return RunStages(spec, workdir, options);
 }

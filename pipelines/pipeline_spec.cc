@@ -5,6 +5,7 @@
 
 #include "core/error.h"
 #include "core/options.h"
+#include "core/user_paths.h"
 #include "pipelines/stage.h"
 
 namespace fs = std::filesystem;
@@ -143,7 +144,7 @@ PipelineSpec LoadPipeline(const std::string& path) {
   spec.path = path;
   spec.name =
       root["name"] ? ScalarText(root["name"], path, "'name'") : fs::path(path).stem().string();
-  spec.workdir = root["workdir"] ? ScalarText(root["workdir"], path, "'workdir'") : "";
+  spec.workdir = root["workdir"] ? ExpandUser(ScalarText(root["workdir"], path, "'workdir'")) : "";
   if (!root["dataset"]) ThrowInput(path, 0, "the pipeline has no 'dataset' section");
   spec.stages.push_back({"dataset", "dataset", root["dataset"], YamlLine(root["dataset"])});
 

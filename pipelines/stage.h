@@ -119,6 +119,14 @@ class Stage {
   virtual std::vector<std::string> ExtraOutputs() const { return {}; }
   // Files outside the work directory whose contents the result depends on (content-hashed).
   virtual std::vector<std::string> ExternalFiles() const { return {}; }
+  // Folders outside the work directory this stage reads whole (the dataset's image folder): the
+  // work directory may be none of them nor lie inside one, or raytime would read back its own
+  // files as the user's (RunPipeline refuses it before writing anything).
+  virtual std::vector<std::string> InputFolders() const { return {}; }
+  // Refuses (InputError naming the image and what to do) image names this stage could not write
+  // with its options: called before any work, once the dataset stage has listed the images, so
+  // that a name an export cannot hold is not found after the whole solve.
+  virtual void CheckImageNames(const std::vector<std::string>& names) const {}
   // Whether the result an earlier run left in `context.workdir` is complete. A stage that returns
   // partial failures as warnings (a trainer that failed for one pose set) says false so that a
   // rerun with unchanged inputs retries them instead of skipping the stage.

@@ -16,6 +16,7 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
+#include "core/resource_failure.h"
 #include "core/timing.h"
 #include "core/version.h"
 #include "core/warnings.h"
@@ -111,6 +112,11 @@ class RunSummary {
  public:
   RunSummary(const std::string& path, json summary) : path_(path), summary_(std::move(summary)) {}
 
+  // When the run started, on the file system's clock, less the lag of the coarse clock file
+  // times are taken from: what changed since was written by this run.
+  const fs::file_time_type started =
+      fs::file_time_type::clock::now() - std::chrono::milliseconds(20);
+
   template <typename Change>
   void Update(Change&& change) {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -165,29 +171,44 @@ void ClearStaleSlot(const fs::path& to) {
   fs::remove_all(to, error);
 }
 
-// Moves WORKDIR/`output` (a file or folder an earlier run wrote) to WORKDIR/stale/`output`; false
-// when there is nothing to move or it cannot be moved (said in the log). Of a folder raytime
-// recorded writing, only its files move: the user's stay where they are (core/written_files.h).
-bool MoveAside(const std::string& workdir, const std::string& output, const std::string& why) {
+// Whether `path` (a file, or a folder's newest entry) changed at or after `since`.
+bool ChangedSince(const fs::path& path, fs::file_time_type since) {
+  std::error_code error;
+  if (fs::last_write_time(path, error) >= since && !error) return true;
+  if (!fs::is_directory(path, error)) return false;
+  for (fs::recursive_directory_iterator it(path, error), end; !error && it != end;
+       it.increment(error)) {
+    std::error_code entry_error;
+    if (fs::last_write_time(it->path(), entry_error) >= since && !entry_error) return true;
+  }
+  return false;
+}
+
+// Moves WORKDIR/`output` (a file or folder a run wrote: an earlier one, or this one's stage
+// before it failed) to WORKDIR/stale/`output`; false when there is nothing to move or it cannot
+// be moved (said in the log). Of a folder raytime recorded writing, only its files move: the
+// user's stay where they are (core/written_files.h). `run_start`: when this run started, for the
+// log's word on whose output it was.
+bool MoveAside(const std::string& workdir, const std::string& output, const std::string& why,
+               fs::file_time_type run_start) {
   const fs::path from = fs::path(workdir) / output;
   std::error_code error;
   if (!fs::exists(fs::symlink_status(from, error))) return false;
   const bool recorded = fs::exists(from / kWrittenFilesRecord, error);
   const std::vector<std::string> theirs =
       recorded ? FilesNotWritten(from.string()) : std::vector<std::string>();
+  const std::string whose = ChangedSince(from, run_start) ? "this run wrote it before it stopped"
+                                                          : "it is from before this run";
   const fs::path to = fs::path(workdir) / "stale" / output;
   ClearStaleSlot(to);
   fs::create_directories(to.parent_path(), error);
   fs::rename(from, to, error);
   if (error) {
-    spdlog::error(
-        fmt::format("cannot move the earlier run's {} aside ({}): it is not this run's "
-                    "result",
-                    from.string(), error.message()));
+    spdlog::error(fmt::format("cannot move {} aside ({}): it is not this run's result",
+                              from.string(), error.message()));
     return false;
   }
-  spdlog::warn(fmt::format("moved {} to {}: an earlier run wrote it, and {}", from.string(),
-                           to.string(), why));
+  spdlog::warn(fmt::format("moved {} to {}: {}, and {}", from.string(), to.string(), whose, why));
   if (!theirs.empty()) {
     fs::create_directories(from, error);
     CarryEntriesOver(theirs, to.string(), from.string());
@@ -202,7 +223,7 @@ bool MoveAside(const std::string& workdir, const std::string& output, const std:
 // or is interrupted, so that a failed run never leaves poses of other inputs or options under the
 // names users train from. Returns the paths moved, relative to the work directory.
 std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::string& workdir,
-                                          const json& stages) {
+                                          const json& stages, fs::file_time_type run_start) {
   std::vector<std::string> moved;
   for (const PipelineStageSpec& stage_spec : spec.stages) {
     const bool done = std::any_of(stages.begin(), stages.end(), [&](const json& entry) {
@@ -218,7 +239,8 @@ std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::s
       continue;  // a stage that does not configure wrote nothing under this configuration
     }
     for (const std::string& output : outputs) {
-      if (MoveAside(workdir, output, "this run did not reach its stage " + stage_spec.id)) {
+      if (MoveAside(workdir, output, "this run did not complete its stage " + stage_spec.id,
+                    run_start)) {
         moved.push_back(output);
       }
     }
@@ -232,14 +254,15 @@ std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::s
 std::vector<std::string> MoveOutputsNoLongerWritten(const std::string& workdir,
                                                     const std::string& stage_id,
                                                     const json& previous_record,
-                                                    const std::vector<std::string>& outputs) {
+                                                    const std::vector<std::string>& outputs,
+                                                    fs::file_time_type run_start) {
   std::vector<std::string> moved;
   if (!previous_record.is_object() || !previous_record.contains("extra_outputs")) return moved;
   for (const json& previous : previous_record["extra_outputs"]) {
     if (!previous.is_string()) continue;
     const std::string output = previous.get<std::string>();
     if (std::find(outputs.begin(), outputs.end(), output) != outputs.end()) continue;
-    if (MoveAside(workdir, output, "stage " + stage_id + " no longer writes it")) {
+    if (MoveAside(workdir, output, "stage " + stage_id + " no longer writes it", run_start)) {
       moved.push_back(output);
     }
   }
@@ -324,9 +347,10 @@ std::string VerifiedPreviousOutput(const StageContext& context, const json& prev
   return context.output_path;
 }
 
-// 2. The record of a result another run left in the shared cache; null when there is none or it is
-// damaged (no record or checksum, or the content differs).
-json CachedRecord(const fs::path& cached, const std::string& tag) {
+// 2. The record of a result another run left in the shared cache under `key`; null when there is
+// none, it is damaged (no record or checksum, or the content differs) or it is another key's (an
+// entry moved or copied under a folder name it was not computed for).
+json CachedRecord(const fs::path& cached, const std::string& key, const std::string& tag) {
   if (!fs::exists(cached / "record.json")) return json();
   const json record = json::parse(ReadTextFile((cached / "record.json").string()), nullptr, false);
   if (record.is_discarded() || !record.contains("output_hash") ||
@@ -336,6 +360,13 @@ json CachedRecord(const fs::path& cached, const std::string& tag) {
         fmt::format("{}: the cached result in {} is damaged (no record or checksum, or the content "
                     "differs), computing it again",
                     tag, cached.string()));
+    return json();
+  }
+  if (record.value("key", "") != key) {
+    spdlog::warn(fmt::format(
+        "{}: the cached result in {} was computed for another key ({}): moved or copied there, "
+        "not this stage's; computing it again",
+        tag, cached.string(), record.value("key", "none")));
     return json();
   }
   return record;
@@ -381,7 +412,7 @@ json RunStageNow(Stage& stage, const PipelineStageSpec& stage_spec, const StageC
                        {"output_hash", HashFileContents(context.output_path)},
                        {"extra_outputs", stage.ExtraOutputs()}};
   const std::vector<std::string> moved = MoveOutputsNoLongerWritten(
-      context.workdir, stage_spec.id, previous_record, stage.ExtraOutputs());
+      context.workdir, stage_spec.id, previous_record, stage.ExtraOutputs(), run->started);
   if (!moved.empty()) run->Update([&](json& summary) { AppendStaleOutputs(moved, &summary); });
   (*entry)["status"] = "ran";
   (*entry)["seconds"] = seconds;
@@ -431,7 +462,8 @@ void StepStage(const PipelineSpec& spec, size_t index, const std::string& workdi
     std::unique_ptr<CacheLock> lock;
     const fs::path cached = fs::path(options.cache_dir) / key;
     if (cacheable) lock = std::make_unique<CacheLock>(options.cache_dir, key);
-    const json cached_record = cacheable && !options.force ? CachedRecord(cached, tag) : json();
+    const json cached_record =
+        cacheable && !options.force ? CachedRecord(cached, key, tag) : json();
     if (!cached_record.is_null()) {
       spdlog::info(fmt::format("{}: computed by another run, taken from the cache", tag));
       record = cached_record;
@@ -466,6 +498,18 @@ void StepStage(const PipelineSpec& spec, size_t index, const std::string& workdi
     CollectStage(stage_spec.id, entry["summary"], &summary);
     summary["stages"].push_back(entry);
   });
+}
+
+// Once the images are known, the stages after `first` refuse names they could not write, before
+// any of them works (Stage::CheckImageNames).
+void CheckImageNamesAhead(const PipelineSpec& spec, size_t first, const std::string& images_file) {
+  std::vector<std::string> names;
+  for (const ImageInfo& image : Hdf5Reader(images_file).ReadImages().images) {
+    names.push_back(image.name);
+  }
+  for (size_t j = first; j < spec.stages.size(); ++j) {
+    ConfiguredStage(spec, spec.stages[j])->CheckImageNames(names);
+  }
 }
 
 // WORKDIR/report.html (run_report.h); a page that cannot be written is said in the log, never
@@ -509,7 +553,7 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   };
   const InterruptAction on_interrupt([&](int signal) {
     run.Update([&](json& summary) {
-      AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"]), &summary);
+      AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"], run.started), &summary);
       finish(summary, "interrupted");
       summary["signal"] = signal;
       summary["error"] =
@@ -523,15 +567,23 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
 
   std::map<std::string, ArtifactSource> artifacts;
   try {
+    bool names_checked = false;
     for (size_t i = 0; i < spec.stages.size(); ++i) {
       StepStage(spec, i, workdir, options, &run, &artifacts);
+      if (!names_checked && artifacts.count(kArtifactImages) > 0) {
+        names_checked = true;
+        CheckImageNamesAhead(spec, i + 1, artifacts.at(kArtifactImages).file);
+      }
     }
   } catch (const std::exception& e) {
+    const FailureDescription failure = DescribeFailure(e);
     try {
       run.Update([&](json& summary) {
-        AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"]), &summary);
+        AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"], run.started),
+                           &summary);
         finish(summary, "failed");
-        summary["error"] = e.what();
+        summary["error"] = failure.message;
+        summary["cause"] = failure.cause;
       });
     } catch (const std::exception& summary_error) {
       // A full disk fails this write too: the stage's error is the one to report.
@@ -553,6 +605,32 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   }
   spdlog::info(fmt::format("summary: {}", (fs::path(workdir) / "summary.json").string()));
   return summary;
+}
+
+bool RecordCrashedRun(const PipelineSpec& spec, const std::string& workdir, int pid,
+                      fs::file_time_type run_start, const std::string& error,
+                      const std::string& cause, int signal) {
+  const std::string path = (fs::path(workdir) / "summary.json").string();
+  std::error_code exists_error;
+  if (!fs::exists(path, exists_error)) return false;
+  const json previous = json::parse(ReadTextFile(path), nullptr, false);
+  if (previous.is_discarded() || previous.value("pid", 0) != pid ||
+      previous.value("status", "") != "running") {
+    return false;
+  }
+  RunSummary run(path, previous);
+  run.Update([&](json& summary) {
+    // What the stages it did not complete had written, in this run or an earlier one: aside, as
+    // a failure moves it.
+    AppendStaleOutputs(MoveStaleOutputs(spec, workdir, summary["stages"], run_start), &summary);
+    summary["status"] = "crashed";
+    summary["finished_utc"] = UtcNow();
+    summary["error"] = error;
+    summary["cause"] = cause;
+    if (signal != 0) summary["signal"] = signal;
+  });
+  WriteReportPage(workdir);
+  return true;
 }
 
 }  // namespace raytime
