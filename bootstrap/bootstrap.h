@@ -58,12 +58,12 @@ struct BootstrapOptions {
       OneOf({"lud", "look_at"}));
     v("direction_gate_deg", direction_gate_deg,
       "Pairs above this rotation-averaging residual give no direction, degrees (§4.8: 5°)",
-      Positive());
+      Positive(), AtMost(180));
     v("filter_pairs", filter_pairs,
       "Solve the final poses on the pairs the wrong-pair detector keeps");
     v("fragility_threshold_deg", fragility_threshold_deg,
       "Fragile above this mean pairwise rotation-averaging residual, degrees (§4.8: ~10°)",
-      Positive());
+      Positive(), AtMost(180));
     v("focal_search", focal_search, "Unknown intrinsics: search a shared focal per camera (§4.8)");
     relative_pose.VisitFields(v);
     rotation_averaging.VisitFields(v);

@@ -24,15 +24,16 @@ struct FocalSearchOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("focal_min_ratio", focal_min_ratio,
-      "Focal search: smallest candidate, multiple of max(width, height)", Positive());
+      "Focal search: smallest candidate, multiple of max(width, height)", Positive(), AtMost(1000));
     v("focal_max_ratio", focal_max_ratio,
-      "Focal search: largest candidate, multiple of max(width, height)", Positive());
+      "Focal search: largest candidate, multiple of max(width, height)", Positive(), AtMost(1000));
     v("focal_candidates", focal_candidates, "Focal search: log-spaced coarse candidates",
-      AtLeast(2));
+      AtLeast(2), AtMost(1e4));
     v("focal_refinements", focal_refinements,
-      "Focal search: candidates between the best coarse one's neighbours", NonNegative());
+      "Focal search: candidates between the best coarse one's neighbours", NonNegative(),
+      AtMost(1e4));
     v("focal_pairs", focal_pairs, "Focal search: pairs with the most correspondences scored",
-      Positive());
+      Positive(), AtMost(1e5));
   }
   void CheckRelations(const Requirement& require) const {
     require(focal_max_ratio > focal_min_ratio, "focal_max_ratio must be above focal_min_ratio");

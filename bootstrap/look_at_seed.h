@@ -21,10 +21,11 @@ struct LookAtSeedOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("look_at_distance", look_at_distance,
-      "Look-at seed: distance of every camera from the look-at point, scene units", Positive());
+      "Look-at seed: distance of every camera from the look-at point, scene units", Positive(),
+      AtMost(1e9));
     v("look_at_min_spread", look_at_min_spread,
       "Look-at seed: smallest RMS centre spread, fraction of look_at_distance (else a ring)",
-      Positive());
+      Positive(), AtMost(1000));
   }
 };
 

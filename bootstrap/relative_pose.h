@@ -35,19 +35,21 @@ struct RelativePoseOptions {
     v("algorithm", algorithm, "Five-point minimal solver inside RANSAC (OpenGV)",
       OneOf({"stewenius", "nister"}));
     v("max_error_px", max_error_px, "Five-point RANSAC inlier threshold, pixels at the focal",
-      Positive());
-    v("max_iterations", max_iterations, "Five-point RANSAC iterations at most", Positive());
+      Positive(), AtMost(1000));
+    v("max_iterations", max_iterations, "Five-point RANSAC iterations at most", Positive(),
+      AtMost(1e7));
     v("confidence", confidence, "Five-point RANSAC success probability for the adaptive stop",
       Positive(), Below(1));
     v("min_inliers", min_inliers,
-      "Pairs with fewer five-point inliers are unusable (8 = OpenGV's sample)", AtLeast(8));
+      "Pairs with fewer five-point inliers are unusable (8 = OpenGV's sample)", AtLeast(8),
+      AtMost(1e6));
     v("pure_rotation_ratio", pure_rotation_ratio,
       "Near-pure rotation when a rotation-only model explains this share of the essential "
       "inliers",
-      Positive());
+      Positive(), AtMost(1));
     v("min_parallax_deg", min_parallax_deg,
       "Near-pure rotation below this median parallax of the essential inliers, degrees",
-      NonNegative());
+      NonNegative(), AtMost(180));
   }
 };
 

@@ -33,13 +33,13 @@ struct RotationAveragingOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("l1_iterations", l1_iterations, "Rotation averaging: L1 linearizations (Chatterjee-Govindu)",
-      NonNegative());
+      NonNegative(), AtMost(1e4));
     v("irls_iterations", irls_iterations, "Rotation averaging: Geman-McClure IRLS iterations",
-      NonNegative());
+      NonNegative(), AtMost(1e4));
     v("robust_scale_deg", robust_scale_deg, "Rotation averaging: Geman-McClure scale σ, degrees",
-      Positive());
+      Positive(), AtMost(180));
     v("rotation_tolerance_deg", rotation_tolerance_deg,
-      "Rotation averaging: stop below this largest update, degrees", Positive());
+      "Rotation averaging: stop below this largest update, degrees", Positive(), AtMost(180));
   }
 };
 

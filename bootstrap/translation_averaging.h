@@ -30,13 +30,14 @@ struct TranslationAveragingOptions {
 
   template <class Visitor>
   void VisitFields(Visitor&& v) {
-    v("lud_iterations", lud_iterations, "LUD translation averaging: reweighting rounds",
-      Positive());
+    v("lud_iterations", lud_iterations, "LUD translation averaging: reweighting rounds", Positive(),
+      AtMost(1e4));
     v("lud_delta", lud_delta, "LUD: weight floor, solution units (edges have length >= 1)",
-      Positive());
-    v("lud_tolerance", lud_tolerance, "LUD: stop when no centre moves more than this", Positive());
+      Positive(), AtMost(1e6));
+    v("lud_tolerance", lud_tolerance, "LUD: stop when no centre moves more than this", Positive(),
+      AtMost(1e6));
     v("lud_newton_iterations", lud_newton_iterations,
-      "LUD: semi-smooth Newton iterations per round", Positive());
+      "LUD: semi-smooth Newton iterations per round", Positive(), AtMost(1e4));
   }
 };
 

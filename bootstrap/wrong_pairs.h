@@ -34,13 +34,14 @@ struct WrongPairOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("wrong_rotation_deg", wrong_rotation_deg,
-      "Wrong pair above this rotation-averaging residual, degrees (§4.8: 5°)", Positive());
+      "Wrong pair above this rotation-averaging residual, degrees (§4.8: 5°)", Positive(),
+      AtMost(180));
     v("wrong_direction_deg", wrong_direction_deg,
-      "Wrong pair above this translation-direction residual, degrees", Positive());
+      "Wrong pair above this translation-direction residual, degrees", Positive(), AtMost(180));
     v("cycle_tolerance_deg", cycle_tolerance_deg,
-      "Triplet cycle consistency tolerance, degrees (reported evidence)", Positive());
+      "Triplet cycle consistency tolerance, degrees (reported evidence)", Positive(), AtMost(180));
     v("wrong_pair_rounds", wrong_pair_rounds, "Rounds of solve-on-kept-pairs / re-score-all-pairs",
-      Positive());
+      Positive(), AtMost(1000));
   }
 };
 

@@ -50,15 +50,18 @@ struct ClassicalControlOptions {
       "COLMAP point_triangulator + bundle_adjuster from the prior (§4.1), or the prior-free "
       "mapper (§4.8)",
       OneOf({"triangulate", "mapper"}));
-    v("rounds", rounds, "Triangulate-adjust alternations (§4.1: 2; tuned control: 8)", Positive());
+    v("rounds", rounds, "Triangulate-adjust alternations (§4.1: 2; tuned control: 8)", Positive(),
+      AtMost(100));
     v("refine_intrinsics", refine_intrinsics,
       "Refine focal, principal point and distortion (OPENCV model, room protocol §4.3)");
     v("max_angle_error_deg", max_angle_error_deg,
-      "COLMAP triangulation angle-error gates, degrees (tuned control: 8)", Positive());
+      "COLMAP triangulation angle-error gates, degrees (tuned control: 8)", Positive(),
+      AtMost(180));
     v("max_reproj_error_px", max_reproj_error_px,
-      "COLMAP merge/complete/filter reprojection gates, pixels (tuned control: 16)", Positive());
+      "COLMAP merge/complete/filter reprojection gates, pixels (tuned control: 16)", Positive(),
+      AtMost(1e4));
     v("min_tri_angle_deg", min_tri_angle_deg, "COLMAP minimum triangulation angle, degrees",
-      NonNegative());
+      NonNegative(), AtMost(90));
     v("colmap", colmap, "The COLMAP 3.8 executable", NonEmpty());
   }
 };

@@ -25,7 +25,7 @@ struct PoseErrorOptions {
       "Alignment before scoring: Sim(3) on centres (standard), SE(3), or none (prior's frame)",
       OneOf({"sim3", "se3", "none"}));
     v("success_rotation_deg", success_rotation_deg,
-      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive());
+      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive(), AtMost(180));
   }
 };
 

@@ -67,19 +67,20 @@ struct SplatTrainerOptions {
     v("working_dir", working_dir,
       "Directory the command runs in, e.g. the trainer's checkout (empty: raytime's)");
     v("timeout_s", timeout_s, "Stop a trainer after this many seconds, a failure (0: no limit)",
-      NonNegative());
-    v("steps", steps, "Training steps, the command's {steps} (opensplat: -n)", Positive());
+      NonNegative(), AtMost(1e7));
+    v("steps", steps, "Training steps, the command's {steps} (opensplat: -n)", Positive(),
+      AtMost(1e8));
     v("downscale", downscale,
       "Image downscale factor, the command's {downscale} (opensplat: -d); held-out views are "
       "rendered at the photos' size over it",
-      AtLeast(1.0));
+      AtLeast(1.0), AtMost(1000));
     v("seed", seed,
       "The command's {seed}; also shuffles the train-only view's image order (0: as exported)",
       NonNegative());
     v("random_init_points", random_init_points,
       "Initial points of the train-only view: 0 the export's, N random ones in a ball around the "
       "training cameras (the paper's random initialization)",
-      NonNegative());
+      NonNegative(), AtMost(1e8));
     v("binary", binary,
       "The trainer's executable in the default command, {binary} (empty: 'opensplat' on PATH)");
   }

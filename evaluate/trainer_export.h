@@ -106,11 +106,11 @@ struct TrainerExportOptions {
     undistortion.VisitFields(v);
     v("test_every", test_every,
       "3dgs: every N-th image by name is held out for testing (gsplat, Inria: 8; paper §4.5)",
-      AtLeast(2));
+      AtLeast(2), AtMost(1e6));
     v("max_track_error_px", max_track_error_px,
       "3dgs: drop a track whose merged point reprojects farther than this from one of its "
       "observations, pixels",
-      Positive());
+      Positive(), AtMost(1e6));
     v("jpeg_quality", jpeg_quality, "3dgs: JPEG quality of undistorted images (colmap: 100)",
       AtLeast(1), AtMost(100));
   }

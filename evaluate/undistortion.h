@@ -40,10 +40,10 @@ struct UndistortionOptions {
       NonNegative(), AtMost(1.0));
     v("undistort_min_scale", min_scale,
       "3dgs: smallest change of the undistorted image's size, factor (colmap --min_scale)",
-      Positive());
+      Positive(), AtMost(1));
     v("undistort_max_scale", max_scale,
       "3dgs: largest change of the undistorted image's size, factor (colmap --max_scale)",
-      Positive());
+      Positive(), AtMost(100));
     v("centre_principal_point", centre_principal_point,
       "3dgs: crop each image symmetrically so its principal point is the image centre (trainers "
       "that ignore cx, cy: Inria, OpenSplat on CPU)");

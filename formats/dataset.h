@@ -48,13 +48,15 @@ struct DatasetOptions {
     v("images", images, "colmap: image folder relative to root");
     v("model", model, "colmap: model folder relative to root; \"\" tries sparse/0, sparse, root");
     v("transforms", transforms, "nerfstudio, nerfcapture: transforms file relative to root");
-    v("stride", stride, "stray: keep every stride-th video frame (frame 0 first)", Positive());
+    v("stride", stride, "stray: keep every stride-th video frame (frame 0 first)", Positive(),
+      AtMost(1e6));
     v("num_frames", num_frames,
-      "stray: video frames spread evenly over the video; overrides stride when > 0", NonNegative());
+      "stray: video frames spread evenly over the video; overrides stride when > 0", NonNegative(),
+      AtMost(1e6));
     v("capture_width", capture_width,
       "stray: width in pixels of the frames camera_matrix.csv describes; 0 = the decoded "
       "video's, or estimated from the principal point when it is far from their centre",
-      NonNegative());
+      NonNegative(), AtMost(1e5));
     timestamps.VisitFields(v);  // flat key: dataset.max_time_gap_s
   }
 };

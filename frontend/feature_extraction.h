@@ -52,17 +52,17 @@ struct FeatureExtractionOptions {
   void VisitFields(Visitor&& v) {
     v("max_features", max_features,
       "Keypoints per image at most: whole DoG levels from the coarsest, the last by response",
-      Positive());
+      Positive(), AtMost(1e6));
     v("first_octave", first_octave,
       "Scale-space start: -1 doubles the image (COLMAP's default), 0 native, k > 0 at 2^-k",
-      AtLeast(-1));
+      AtLeast(-1), AtMost(8));
     v("upsample_max_size", upsample_max_size,
       "first_octave -1 doubles only images whose longer side is at most this (px); 0 = always",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("contrast_threshold", contrast_threshold,
-      "OpenCV SIFT contrastThreshold (0.02 ~ COLMAP's peak_threshold)", Positive());
-    v("edge_threshold", edge_threshold, "Lowe's edge threshold r on principal curvatures",
-      Above(1));
+      "OpenCV SIFT contrastThreshold (0.02 ~ COLMAP's peak_threshold)", Positive(), AtMost(1));
+    v("edge_threshold", edge_threshold, "Lowe's edge threshold r on principal curvatures", Above(1),
+      AtMost(1000));
     v("root_sift", root_sift, "RootSIFT descriptors (COLMAP's default normalization)");
   }
 };

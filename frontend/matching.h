@@ -72,13 +72,14 @@ struct MatchingOptions {
       "Pairs to match: every pair, name-order neighbours (video), or chosen from the prior's "
       "poses (the prior stage must come first)",
       OneOf({"exhaustive", "sequential", "prior"}));
-    v("window", window, "Sequential: neighbours matched after each image", Positive());
+    v("window", window, "Sequential: neighbours matched after each image", Positive(), AtMost(1e6));
     v("loop_stride", loop_stride,
-      "Sequential: keyframe stride of loop-closure candidates; 0 disables", NonNegative());
+      "Sequential: keyframe stride of loop-closure candidates; 0 disables", NonNegative(),
+      AtMost(1e6));
     v("max_ratio", max_ratio, "Lowe's ratio test on descriptor distances (COLMAP: 0.8)", Positive(),
       AtMost(1));
     v("max_distance", max_distance, "Largest descriptor distance of a match (unit descriptors)",
-      Positive());
+      Positive(), AtMost(2));
     v("mutual_check", mutual_check, "Keep only mutual nearest neighbours (COLMAP's cross_check)");
     v("kernel", kernel, "Descriptor product kernel (auto: VNNI, else AVX2, else portable)",
       OneOf({"auto", "vnni", "avx2", "gemm"}));
@@ -88,14 +89,16 @@ struct MatchingOptions {
     v("estimator", estimator, "Robust estimator (OpenCV MAGSAC++ or RANSAC)",
       OneOf({"magsac", "ransac"}));
     v("ransac_error_px", ransac_error_px, "Robust estimator threshold, pixels (Sampson distance)",
-      Positive());
+      Positive(), AtMost(1000));
     v("max_error_px", max_error_px,
-      "Inlier threshold and guided-matching band, pixels (COLMAP's max_error)", Positive());
+      "Inlier threshold and guided-matching band, pixels (COLMAP's max_error)", Positive(),
+      AtMost(1000));
     v("confidence", confidence, "RANSAC stopping confidence (COLMAP: 0.999)", Positive(), Below(1));
     v("max_iterations", max_iterations, "RANSAC iteration cap (COLMAP's max_num_trials)",
-      Positive());
+      Positive(), AtMost(1e7));
     v("min_num_inliers", min_num_inliers,
-      "Pairs with fewer verified inliers are dropped (COLMAP: 15; estimators need 8)", AtLeast(8));
+      "Pairs with fewer verified inliers are dropped (COLMAP: 15; estimators need 8)", AtLeast(8),
+      AtMost(1e6));
     v("guided_matching", guided_matching,
       "Second matching pass within max_error_px of the epipolar lines, then verified again");
   }

@@ -27,11 +27,12 @@ struct VideoFramesOptions {
   template <class Visitor>
   void VisitFields(Visitor&& v) {
     v("video", video, "Video file to sample frames from; \"\" = the dataset's images");
-    v("stride", stride, "Keep every stride-th frame (frame 0 first)", Positive());
+    v("stride", stride, "Keep every stride-th frame (frame 0 first)", Positive(), AtMost(1e6));
     v("num_frames", num_frames, "Frames spread evenly over the video; overrides stride when > 0",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("focal_px", focal_px,
-      "Video focal length, pixels (principal point at the centre); 0 = unknown", NonNegative());
+      "Video focal length, pixels (principal point at the centre); 0 = unknown", NonNegative(),
+      AtMost(1e7));
     v("jpeg_quality", jpeg_quality, "JPEG quality of the written frames", AtLeast(1), AtMost(100));
   }
 };

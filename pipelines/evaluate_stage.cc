@@ -26,7 +26,7 @@ struct EvaluateStageOptions {
       "Alignments: Sim(3) on centres (standard), SE(3), none (the prior's frame, §4.9)",
       OneOf({"sim3", "se3", "none"}));
     v("success_rotation_deg", success_rotation_deg,
-      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive());
+      "Success: mean rotation error below this, degrees (§4.8: 1°)", Positive(), AtMost(180));
     v("reference", reference,
       "Pose set scored against: ground_truth, or another estimate (e.g. classical@mapper) to "
       "measure agreement on a capture without ground truth",

@@ -79,10 +79,10 @@ struct PriorPairOptions {
   void VisitFields(Visitor&& v) {
     v("prior_neighbors", prior_neighbors,
       "pairs: prior: partners per image, the best by view overlap under the prior (SPEC §5)",
-      Positive());
+      Positive(), AtMost(1e5));
     v("prior_window", prior_window,
       "pairs: prior: also pair each image with the next N in natural name order (video); 0 = none",
-      NonNegative());
+      NonNegative(), AtMost(1e5));
     v("prior_max_angle_deg", prior_max_angle_deg,
       "pairs: prior: largest viewpoint change of a pair (optical axes, rays to a point), degrees",
       Positive(), AtMost(180));
@@ -90,10 +90,11 @@ struct PriorPairOptions {
       "pairs: prior: smallest view overlap (frustum samples seen by both, viewpoint-weighted)",
       NonNegative(), Below(1));
     v("prior_max_scale_ratio", prior_max_scale_ratio,
-      "pairs: prior: largest resolution ratio between two views of a scene point", AtLeast(1));
+      "pairs: prior: largest resolution ratio between two views of a scene point", AtLeast(1),
+      AtMost(1000));
     v("prior_scene_depth", prior_scene_depth,
       "pairs: prior: scene depth along the optical axes in pose units; 0 = from the cameras",
-      NonNegative());
+      NonNegative(), AtMost(1e9));
   }
 };
 

@@ -76,7 +76,7 @@ struct PriorOptions {
     v("repair_min_rotation_change_deg", repair_min_rotation_change_deg,
       "Repair 'auto' repairs when the prior's rotations are further than this from the averaged "
       "ones (median over images), degrees",
-      Positive());
+      Positive(), AtMost(180));
     v("strict", strict,
       "Refuse a prior that lacks some images or has poses of images not in the dataset");
     v("sigma_deg", sigma_deg,
@@ -86,7 +86,7 @@ struct PriorOptions {
     v("sigma_m", sigma_m,
       "Stated accuracy of the prior's centres per frame, in its length unit: trusted to place "
       "frames the matches do not hold (0 = not stated)",
-      NonNegative());
+      NonNegative(), AtMost(1e9));
     perturbation.VisitFields(v);  // flat keys: prior.level_deg, prior.seed, ...
   }
   void CheckRelations(const Requirement& require) const {

@@ -42,18 +42,18 @@ struct FrameDoubtOptions {
     v("frame_doubt_centre_change_factor", centre_change_factor,
       "A frame is doubted when its centre moved more than this x the median frame's (after a "
       "Sim(3) fit onto the prior) and its matches fit worse than the others'",
-      Above(1));
+      Above(1), AtMost(1e6));
     v("frame_doubt_min_centre_change_fraction", min_centre_change_fraction,
       "... and more than this fraction of the prior's extent (median distance from its centroid)",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("frame_doubt_residual_ratio", residual_ratio,
       "... and the median of its pairs' median cross-projection residuals is above this x the "
       "median over all pairs",
-      Above(1));
+      Above(1), AtMost(1e6));
     v("frame_doubt_far_residual_ratio", far_residual_ratio,
       "A frame is doubted however little it moved when its pairs' median cross-projection "
       "residual is above this x the median over all pairs",
-      Above(1));
+      Above(1), AtMost(1e6));
   }
 };
 

@@ -239,25 +239,25 @@ struct RefineOptions {
       "1 m deep scene)",
       NonNegative(), AtMost(1e8));
     v("orientation_weight", orientation_weight,
-      "λR, weight of the orientation prior, 1/rad² (§3.3)", NonNegative());
+      "λR, weight of the orientation prior, 1/rad² (§3.3)", NonNegative(), AtMost(1e12));
     v("gauge_orientation_weight", gauge_orientation_weight,
       "Weight of the prior's rotations when fitting the solution's global similarity after the "
       "solve, 1/rad² (0 = centres only)",
-      NonNegative());
+      NonNegative(), AtMost(1e12));
     v("uncertainty_max_cameras", uncertainty_max_cameras,
       "Per-camera pose uncertainty (σ of rotation and centre) up to this many cameras; 0 = off",
-      NonNegative());
+      NonNegative(), AtMost(1e5));
     v("ray_time_init", ray_time_init,
       "Ray-time start: per-image median closest-approach depth under the prior, or the constant "
       "below (§3.2)",
       OneOf({"auto", "constant"}));
     v("ray_time_constant_m", ray_time_constant_m,
       "Start of every ray time with ray_time_init 'constant', prior length units (paper: 1 m)",
-      Positive());
+      Positive(), AtMost(1e9));
     v("max_matches_per_pair", max_matches_per_pair,
       "At most this many matches per image pair, drawn with a per-pair seed (§4.7: 100); 0 keeps "
       "all",
-      NonNegative());
+      NonNegative(), AtMost(1e7));
     v("match_cap_seed", match_cap_seed, "Seed of the per-pair match draw");
     v("refine_focal", refine_focal, "Self-calibrate the focal lengths fx, fy (§3.1, §4.3)");
     v("refine_principal_point", refine_principal_point,
@@ -275,74 +275,78 @@ struct RefineOptions {
       "Solver per pass: the ray-time LM (closed-form ray-time elimination, intrinsics held), "
       "Ceres, or auto (the ray-time LM where no intrinsic is refined, else Ceres)",
       OneOf({"auto", "ceres", "ray_time_lm"}));
-    v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative());
+    v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative(),
+      AtMost(1024));
     v("deterministic", deterministic,
       "Bit-identical results whatever the thread count (Ceres on one thread; the ray-time LM "
       "solver and the self-calibration cache parallel)");
-    v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive());
+    v("max_iterations", max_iterations, "Ceres iteration limit per GNC stage", Positive(),
+      AtMost(1e5));
     v("function_tolerance", function_tolerance,
-      "Relative cost-change tolerance of the GNC stage that gives the solution", Positive());
+      "Relative cost-change tolerance of the GNC stage that gives the solution", Positive(),
+      AtMost(1));
     v("intermediate_function_tolerance", intermediate_function_tolerance,
       "Relative cost-change tolerance of a GNC stage whose solution only starts another (earlier "
       "scales, the basin, the probe, a finish the anneal follows)",
-      Positive());
+      Positive(), AtMost(1));
     v("max_step_doublings", max_step_doublings,
       "Ray-time LM: doublings of an accepted step that beat the model's decrease by 1.5x, while "
       "the cost falls; 0 = off",
-      NonNegative());
+      NonNegative(), AtMost(60));
     v("trust_region", trust_region,
       "Return the prior when the solution moves a frame beyond the thresholds below (§3.6)");
     v("trust_region_rotation_deg", trust_region_rotation_deg,
-      "Trust-region rotation threshold per frame, degrees (§3.6)", Positive());
+      "Trust-region rotation threshold per frame, degrees (§3.6)", Positive(), AtMost(180));
     v("trust_region_translation_m", trust_region_translation_m,
       "Trust-region centre threshold per frame, metres at object scale x length_unit_m (§3.6)",
-      Positive());
+      Positive(), AtMost(1e9));
     v("length_unit_m", length_unit_m,
       "Scene length unit relative to metric object captures; scales the metre thresholds",
-      Positive());
+      Positive(), AtMost(1e9));
     v("wander_test", wander_test,
       "Return the prior when the Sim(3)-aligned median displacement exceeds wander_factor x "
       "expected (§4.3)");
     v("wander_expected_m", wander_expected_m,
       "Expected per-frame displacement of the wander test, metres x length_unit_m (§4.3)",
-      Positive());
+      Positive(), AtMost(1e9));
     v("wander_factor", wander_factor, "Wander test threshold as a multiple of the expected",
-      Positive());
+      Positive(), AtMost(1e9));
     v("inconsistent_pairs_test", inconsistent_pairs_test,
       "Flag a solution that leaves more than max_inconsistent_pair_fraction of pairs unexplained "
       "(cf. §4.11)");
     v("inconsistent_pair_px", inconsistent_pair_px,
-      "A pair is inconsistent above this median positive-ray epipolar distance, pixels",
-      Positive());
+      "A pair is inconsistent above this median positive-ray epipolar distance, pixels", Positive(),
+      AtMost(1e6));
     v("inconsistent_pair_median_multiple", inconsistent_pair_median_multiple,
       "The test's pair threshold rises to this x the median pair's measure when that is higher; "
       "0 = inconsistent_pair_px alone",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("max_inconsistent_pair_fraction", max_inconsistent_pair_fraction,
       "Fraction of inconsistent pairs above which the test fires", NonNegative(), Below(1));
     v("staged", staged,
       "Staged room recipe: poses-only GNC pass, then a warm self-calibration pass (§4.3)");
     v("stage1_orientation_weight", stage1_orientation_weight,
-      "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative());
+      "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative(), AtMost(1e12));
     v("stage1_max_matches_per_pair", stage1_max_matches_per_pair,
-      "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative());
+      "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative(),
+      AtMost(1e7));
     v("basin_first", basin_first,
       "Basin solve (GNC, λR 0, capped), then a probe that keeps the orientation prior only if "
       "the matches agree, then the finish (§4.8, §3.3)");
     v("basin_max_matches_per_pair", basin_max_matches_per_pair,
       "Match cap of the basin solve and the orientation-prior probe; 0 keeps all (§4.7: 100)",
-      NonNegative());
+      NonNegative(), AtMost(1e7));
     v("orientation_prior_max_increase", orientation_prior_max_increase,
       "Relative rise of the median residual under the orientation prior above which the finish "
       "drops it",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("finish_noise_multiple", finish_noise_multiple,
       "Basin-first: after the finish, a pass at arctan scale (this x the basin's median residual)² "
       "px², rotations held at the finish's; 0 = none",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("finish_anneal_hold_ratio", finish_anneal_hold_ratio,
       "The finish anneal's λR towards the finish's rotations, as a multiple of the finish's λR",
-      NonNegative());
+      NonNegative(), AtMost(1e6));
     v("check_frame_doubts", check_frame_doubts,
       "Doubt frames that moved far more than the others and fit their matches worse (wrong "
       "intrinsics, a frame the solve could not place); not for a prior made from the match graph");
@@ -352,7 +356,7 @@ struct RefineOptions {
     v("max_pair_removal_rounds", max_pair_removal_rounds,
       "Basin-first: times the pairs the basin solve leaves above inconsistent_pair_px are removed "
       "and the basin solve rerun; 0 keeps every pair",
-      NonNegative());
+      NonNegative(), AtMost(1000));
   }
 
   // Fixed intrinsics are each image's own: a shared set exists only to be refined.
