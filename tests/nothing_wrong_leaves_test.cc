@@ -110,13 +110,14 @@ TEST_F(NothingWrongLeavesTest, AFullDiskSaysSoInTheFeaturesAndTheRefineStage) {
   mounted_path_ = mount.string();
   const fs::path workdir = mount / "demo";
   const CommandResult result = RunRaytime(Demo(workdir.string()));
-  EXPECT_EQ(result.exit_code, 1) << result.output;
+  EXPECT_EQ(result.exit_code, 3) << result.output;  // a resource ran out (issue 47)
   EXPECT_NE(result.output.find((workdir / "refine.h5").string() + ": cannot write"),
             std::string::npos)
       << result.output;
   EXPECT_NE(result.output.find("no space left on device"), std::string::npos) << result.output;
   const json summary = ReadRunSummary(workdir);
   EXPECT_EQ(summary["status"], "failed");
+  EXPECT_EQ(summary["cause"], "disk_space");
   EXPECT_EQ(summary["stage"], "refine");
   EXPECT_TRUE(TemporariesBelow(workdir).empty());
   // Features do not fit beside the refiner's output's predecessors in 1 MiB.
@@ -124,7 +125,7 @@ TEST_F(NothingWrongLeavesTest, AFullDiskSaysSoInTheFeaturesAndTheRefineStage) {
   ASSERT_EQ(::umount(mount.c_str()), 0);
   ASSERT_EQ(::mount("tmpfs", mount.c_str(), "tmpfs", 0, "size=1m"), 0);
   const CommandResult small = RunRaytime(Demo(workdir.string()));
-  EXPECT_EQ(small.exit_code, 1) << small.output;
+  EXPECT_EQ(small.exit_code, 3) << small.output;
   EXPECT_NE(small.output.find((workdir / "features.h5").string() + ": cannot write"),
             std::string::npos)
       << small.output;

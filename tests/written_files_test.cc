@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -47,6 +48,20 @@ class WrittenFilesTest : public ::testing::Test {
 
   fs::path dir_;
 };
+
+// A copy of the folder (cp -r gives every file a new time) is still raytime's; an edit of the same
+// length is still the user's. The record held sizes and times alone, and a rerun in a copied work
+// directory refused to replace raytime's own cameras.txt ("was not written by raytime").
+TEST_F(WrittenFilesTest, ACopyIsStillRaytimesAnEditOfTheSameLengthIsNot) {
+  const fs::path folder = Export();
+  const fs::path copy = dir_ / "copy";
+  fs::copy(folder, copy, fs::copy_options::recursive);
+  fs::last_write_time(copy / "images.txt",
+                      fs::last_write_time(copy / "images.txt") + std::chrono::seconds(5));
+  EXPECT_TRUE(FilesNotWritten(copy.string()).empty());
+  Write(copy / "images.txt", "raytime's imageS");
+  EXPECT_EQ(FilesNotWritten(copy.string()), (std::vector<std::string>{"images.txt"}));
+}
 
 TEST_F(WrittenFilesTest, TheUsersEntriesAreThoseNotRecordedOrChanged) {
   const fs::path folder = Export();
