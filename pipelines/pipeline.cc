@@ -82,15 +82,10 @@ void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& wor
   const fs::path work = fs::weakly_canonical(fs::absolute(workdir), error);
   if (error) return;
   for (const PipelineStageSpec& stage_spec : spec.stages) {
-    std::vector<std::string> folders;
-    try {
-      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
-      stage->Configure(stage_spec.options, spec.path);
-      folders = stage->InputFolders();
-    } catch (const std::exception&) {
-      continue;  // said by the stage when it runs
-    }
-    for (const std::string& folder : folders) {
+    const std::unique_ptr<Stage> stage =
+        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
+    if (!stage) continue;  // said by the stage when it runs
+    for (const std::string& folder : stage->InputFolders()) {
       const fs::path input = fs::weakly_canonical(fs::absolute(folder), error);
       if (error) continue;
       const fs::path inside = work.lexically_relative(input);

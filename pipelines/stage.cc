@@ -123,6 +123,17 @@ std::unique_ptr<Stage> CreateStage(const std::string& type) {
   throw InputError(UnknownKeyMessage("the pipeline", type, StageTypes(), "stage"));
 }
 
+std::unique_ptr<Stage> ConfiguredStageOrNull(const std::string& type, const YAML::Node& options,
+                                             const std::string& path) {
+  try {
+    std::unique_ptr<Stage> stage = CreateStage(type);
+    stage->Configure(options, path);
+    return stage;
+  } catch (const std::exception&) {
+    return nullptr;
+  }
+}
+
 Provenance MakeProvenance(Stage& stage) {
   Provenance provenance;
   provenance.stage = stage.type();

@@ -187,5 +187,10 @@ class StageWithOptions : public Stage {
 std::vector<std::string> StageTypes();
 // A fresh stage of a type; InputError with the nearest valid type otherwise.
 std::unique_ptr<Stage> CreateStage(const std::string& type);
+// A stage of `type` configured with `options` (from `path`), or null when it does not configure:
+// for the runner's passes over a pipeline that need what a stage would do (its outputs, the
+// folders it reads) and leave the error to the stage's own turn.
+std::unique_ptr<Stage> ConfiguredStageOrNull(const std::string& type, const YAML::Node& options,
+                                             const std::string& path);
 
 }  // namespace raytime

@@ -230,15 +230,11 @@ std::vector<std::string> MoveStaleOutputs(const PipelineSpec& spec, const std::s
       return entry.value("id", "") == stage_spec.id && Completed(entry);
     });
     if (done) continue;
-    std::vector<std::string> outputs;
-    try {
-      std::unique_ptr<Stage> stage = CreateStage(stage_spec.type);
-      stage->Configure(stage_spec.options, spec.path);
-      outputs = stage->ExtraOutputs();
-    } catch (const std::exception&) {
-      continue;  // a stage that does not configure wrote nothing under this configuration
-    }
-    for (const std::string& output : outputs) {
+    // A stage that does not configure wrote nothing under this configuration.
+    const std::unique_ptr<Stage> stage =
+        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
+    if (!stage) continue;
+    for (const std::string& output : stage->ExtraOutputs()) {
       if (MoveAside(workdir, output, "this run did not complete its stage " + stage_spec.id,
                     run_start)) {
         moved.push_back(output);

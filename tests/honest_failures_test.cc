@@ -28,11 +28,6 @@ using nlohmann::json;
 namespace raytime {
 namespace {
 
-json ReadJson(const fs::path& path) {
-  std::ifstream in(path);
-  return json::parse(in, nullptr, false);
-}
-
 std::string StageStatus(const json& summary, const std::string& id) {
   for (const json& stage : summary["stages"]) {
     if (stage["id"] == id) return stage.value("status", "");
@@ -90,7 +85,7 @@ TEST_F(HonestFailuresTest, AThreadCountBeyondTheBoundIsRefusedNotACrash) {
 // finished record naming memory or threads and the limit, and the run page; some run out.
 void ExpectRecordNamesTheResource(const CommandResult& result, const fs::path& workdir,
                                   int* ran_out) {
-  const json summary = ReadJson(workdir / "summary.json");
+  const json summary = ReadJsonFile(workdir / "summary.json");
   ASSERT_TRUE(summary.is_object()) << result.output;
   EXPECT_NE(summary["status"], "running") << result.output;
   if (result.exit_code == 0 || result.exit_code == 2) return;
@@ -156,7 +151,7 @@ void ExpectCrashRecorded(const fs::path& workdir, int signal) {
   int child = 0;
   for (int i = 0; i < 600 && child == 0; ++i) {
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    const json summary = ReadJson(workdir / "summary.json");
+    const json summary = ReadJsonFile(workdir / "summary.json");
     if (summary.is_object() && summary.value("stage", "") == "matches" &&
         summary.value("status", "") == "running") {
       child = summary.value("pid", 0);
@@ -168,7 +163,7 @@ void ExpectCrashRecorded(const fs::path& workdir, int signal) {
   ASSERT_EQ(::waitpid(parent, &status, 0), parent);
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 4) << ReadTextFile(log);
-  const json summary = ReadJson(workdir / "summary.json");
+  const json summary = ReadJsonFile(workdir / "summary.json");
   EXPECT_EQ(summary["status"], "crashed") << summary;
   EXPECT_EQ(summary["signal"], signal) << summary;
   EXPECT_EQ(summary["stage"], "matches") << summary;
@@ -196,7 +191,7 @@ TEST_F(HonestFailuresTest, TransformsPathsOpenThroughASymlinkedWorkdir) {
   fs::create_directory_symlink(real, dir_ / "link");
   workdir_ = dir_ / "link";
   ASSERT_EQ(Demo().exit_code, 0);
-  const json transforms = ReadJson(workdir_ / "refined_transforms.json");
+  const json transforms = ReadJsonFile(workdir_ / "refined_transforms.json");
   ASSERT_FALSE(transforms["frames"].empty());
   for (const json& frame : transforms["frames"]) {
     const std::string path = frame["file_path"];
@@ -248,7 +243,7 @@ TEST_F(HonestFailuresTest, ANameTheExportCannotHoldIsRefusedBeforeAnyWork) {
   EXPECT_EQ(result.exit_code, 2) << result.output;
   EXPECT_NE(result.output.find("'00 03.jpg'"), std::string::npos) << result.output;
   EXPECT_NE(result.output.find("colmap_binary"), std::string::npos) << result.output;
-  const json summary = ReadJson(workdir_ / "summary.json");
+  const json summary = ReadJsonFile(workdir_ / "summary.json");
   EXPECT_EQ(StageStatus(summary, "dataset"), "ran");
   EXPECT_EQ(StageStatus(summary, "features"), "");
   // Formats that hold any name run.
@@ -266,10 +261,10 @@ TEST_F(HonestFailuresTest, ACacheEntryUnderAnotherKeysNameIsComputedAgain) {
   const std::string cache_flag = " --cache-dir " + cache.string();
   workdir_ = dir_ / "seed0";
   ASSERT_EQ(Demo(cache_flag + " --set prior.seed=0").exit_code, 0);
-  const json seed0 = ReadJson(workdir_ / "summary.json");
+  const json seed0 = ReadJsonFile(workdir_ / "summary.json");
   workdir_ = dir_ / "seed5";
   ASSERT_EQ(Demo(cache_flag + " --set prior.seed=5").exit_code, 0);
-  const json seed5 = ReadJson(workdir_ / "summary.json");
+  const json seed5 = ReadJsonFile(workdir_ / "summary.json");
   std::string key0, key5;
   for (const json& stage : seed0["stages"]) {
     if (stage["id"] == "prior") key0 = stage["key"];
@@ -286,7 +281,7 @@ TEST_F(HonestFailuresTest, ACacheEntryUnderAnotherKeysNameIsComputedAgain) {
   const CommandResult again = Demo(cache_flag + " --set prior.seed=0");
   ASSERT_EQ(again.exit_code, 0) << again.output;
   EXPECT_NE(again.output.find("was computed for another key"), std::string::npos) << again.output;
-  const json summary = ReadJson(workdir_ / "summary.json");
+  const json summary = ReadJsonFile(workdir_ / "summary.json");
   EXPECT_EQ(StageStatus(summary, "prior"), "ran");
   EXPECT_EQ(summary["metrics"], seed0["metrics"]);
 }
@@ -318,7 +313,7 @@ TEST_F(HonestFailuresTest, AnImageAtTwiceTheSizeHasItsIntrinsicsRescaled) {
   const CommandResult result = Demo("--set dataset.root=" + scene.string());
   ASSERT_EQ(result.exit_code, 0) << result.output;
   EXPECT_NE(result.output.find("intrinsics_rescaled"), std::string::npos) << result.output;
-  const json transforms = ReadJson(workdir_ / "refined_transforms.json");
+  const json transforms = ReadJsonFile(workdir_ / "refined_transforms.json");
   bool found = false;
   for (const json& frame : transforms["frames"]) {
     if (fs::path(frame["file_path"].get<std::string>()).filename() != "0003.jpg") continue;

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <nlohmann/json.hpp>
 #include <string>
 
 namespace raytime {
@@ -16,6 +17,13 @@ struct CommandResult {
   int exit_code = -1;
   std::string output;  // stdout and stderr
 };
+
+// A JSON file (summary.json, transforms.json) as the tests read it back; discarded (is_discarded)
+// when missing or not JSON.
+inline nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in, nullptr, false);
+}
 
 // Runs a shell command line and collects its stdout.
 inline CommandResult RunShell(const std::string& command) {
