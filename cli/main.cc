@@ -444,12 +444,9 @@ int main(int argc, char** argv) {
   // Every refine pass builds its problem anew and the matcher packs descriptors per pair: blocks
   // of 1 MB to hundreds of MB, allocated and freed again and again. With glibc's defaults each came
   // from a fresh mmap (or was trimmed back to the system) and every page faulted in zeroed on first
-  // touch: 8-9 % of a refine's samples were page faults. Large blocks come from the heap instead
-  // and up to 1 GB of freed memory is kept for the next pass (the peak is what it was). Measured,
-  // auto, 2 threads, back to back (the settings as GLIBC_TUNABLES): fountain-P11 8° refine
-  // 1.74 -> 1.49 s with blocks up to 32 MB kept; the chair (24 frames) and the Record3D desk (193
-  // frames), whose problems are larger, 5.5 -> 4.7 s and 50.1 -> 42.4 s more with every block
-  // kept; peak memory +0-2 % (desk 1.43 GB both).
+  // touch, a large share of a refine's time. Large blocks come from the heap instead and up to
+  // 1 GB of freed memory is kept for the next pass (the peak is what it was; measured:
+  // docs/refine_options.md).
   mallopt(M_MMAP_MAX, 0);
   mallopt(M_TRIM_THRESHOLD, 1 << 30);
   raytime::Commands commands;

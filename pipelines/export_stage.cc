@@ -40,8 +40,9 @@ struct ExportStageOptions {
   // protocol initializes every source from the same random points, §4.5); else a pose set name.
   std::string points_from = "auto";
   TrainerExportOptions trainer;
-  // A refined set's frames the refine stage doubted (refine/frame_verdicts.h: its matches do not
-  // hold it and no trusted prior places it, its pairs are unexplained, its intrinsics look wrong,
+  // A refined set's frames the refine stage doubted (refine/checks/frame_verdicts.h: its matches do
+  // not hold it and no trusted prior places it, its pairs are unexplained, its intrinsics look
+  // wrong,
   // ...): a trainer given a frame the solve did not place learns a wrong view. Frames no solve
   // refined, or whose pose a guardrail returned as the prior's, are never exported as refined.
   bool leave_out_doubted_images = true;

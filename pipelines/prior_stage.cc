@@ -50,7 +50,7 @@ struct PriorOptions {
   bool strict = false;
   // The prior's accuracy per frame as its maker knows it (a survey, a phone's tracking quality):
   // the refine stage trusts a prior stated so to place the frames its matches do not hold, when
-  // they agree with it within 3 sigma (refine/frame_verdicts.h). 0 = not stated.
+  // they agree with it within 3 sigma (refine/checks/frame_verdicts.h). 0 = not stated.
   double sigma_deg = 0.0;
   double sigma_m = 0.0;
 

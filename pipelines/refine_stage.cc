@@ -44,12 +44,8 @@ struct RefineStageOptions {
   bool check_prior_convention = true;
   // Start the passes on all matches from this stage's solution at its previous run in the work
   // directory (issue 34: a capture that grew or lost frames); the capped passes that decide and
-  // the anneal run as without it. Off by default: measured on two grown captures it saves little
-  // and makes the result depend on the work directory's history. The chair, 18 -> 24 frames:
-  // finish 56 -> 24 iterations (2 s of a 33 s run), poses 0.0002° from a fresh run's. The desk,
-  // 153 -> 193 frames: finish 54 -> 68-70 iterations (the solve creeps along a flat valley from
-  // either start), the sweep's first frames 0.13° (3.8 σ) from a fresh run's, where a fresh run
-  // with a 10^4 x tighter function tolerance moves them 0.06°.
+  // the anneal run as without it. Off by default: on grown captures it saves little and makes the
+  // result depend on the work directory's history (docs/refine_options.md).
   bool warm_start = false;
   RefineOptions refine;
 

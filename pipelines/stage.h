@@ -24,15 +24,15 @@ namespace raytime {
 inline constexpr const char* kArtifactImages = "images";
 inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
 // JSON document beside a refined pose set: per image name (every image with a prior pose), its
-// verdict {verdict: held | held_by_prior | doubted, reason, detail} (refine/frame_verdicts.h).
-// Written by refine; the export leaves the doubted frames out (never a silent wrong result) and
-// writes the verdicts beside the poses.
+// verdict {verdict: held | held_by_prior | doubted, reason, detail}
+// (refine/checks/frame_verdicts.h). Written by refine; the export leaves the doubted frames out
+// (never a silent wrong result) and writes the verdicts beside the poses.
 inline constexpr const char* kFrameVerdictsJson = "frame_verdicts";
 // JSON document beside a prior pose set: the accuracy its maker states, {sigma_deg, sigma_m} per
 // frame (prior stage options sigma_deg, sigma_m; absent when none is stated). Read by refine.
 inline constexpr const char* kPriorAccuracyJson = "prior_accuracy";
 // JSON document beside a refined pose set: per image name, σ of its rotation (degrees) and centre
-// (prior length units) at the solution (refine/pose_uncertainty.h). Written by refine.
+// (prior length units) at the solution (refine/checks/pose_uncertainty.h). Written by refine.
 inline constexpr const char* kPoseUncertaintyJson = "pose_uncertainty";
 // JSON document beside a refined pose set: how each solve fits its matches at the solution
 // (refine's SolveDiagnostics): "images" {name: {residual_median_px, num_pairs, num_matches}} and

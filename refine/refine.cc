@@ -1,7 +1,8 @@
-// RefinePoses: the match graph's components, each solved on its own (refine/connected_solve.h:
-// intrinsics blocks -> recipe of passes -> uncertainty -> guardrails -> frame checks), then one
-// verdict per frame from all the evidence (refine/frame_verdicts.h) and the warnings that name
-// what is not simply held (refine/refine_warnings.h).
+// RefinePoses: the match graph's components, each solved on its own
+// (refine/recipes/connected_solve.h: intrinsics blocks -> recipe of passes -> uncertainty ->
+// guardrails -> frame checks), then one verdict per frame from all the evidence
+// (refine/checks/frame_verdicts.h) and the warnings that name what is not simply held
+// (refine/checks/refine_warnings.h).
 #include "refine/refine.h"
 
 #include <fmt/ranges.h>
@@ -20,9 +21,9 @@
 #include "core/options.h"
 #include "core/statistics.h"
 #include "core/timing.h"
-#include "refine/components.h"
-#include "refine/connected_solve.h"
-#include "refine/refine_warnings.h"
+#include "refine/checks/refine_warnings.h"
+#include "refine/recipes/components.h"
+#include "refine/recipes/connected_solve.h"
 
 namespace raytime {
 namespace {

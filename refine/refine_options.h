@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "core/options.h"
-#include "refine/frame_doubt.h"
+#include "refine/checks/frame_doubt.h"
 
 namespace raytime {
 
@@ -25,12 +25,12 @@ struct RefineOptions {
   std::vector<double> gnc_scales = {1e4, 1e3, 1e2};
 
   // λp, weight of the position prior λp/N Σ |O_i - O_i^prior|² / D² (§3.3), D the prior's depth
-  // scale (refine/connected_solve.cc): per length² in the paper, whose captures have D ~ 1 m; per
-  // D² the result does not depend on the prior's unit (issue 46).
+  // scale (refine/recipes/connected_solve.cc): per length² in the paper, whose captures have D ~ 1
+  // m; per D² the result does not depend on the prior's unit (issue 46).
   double position_weight = 1e-2;
   // λR, weight of the orientation prior λR/N Σ |Log(R_i^prior^-1 R_i)|², 1/rad² (§3.3, §3.6).
   double orientation_weight = 1e3;
-  // Weight of the orientation prior when the gauge polish (refine/gauge_polish.h) picks the
+  // Weight of the orientation prior when the gauge polish (refine/solve/gauge_polish.h) picks the
   // solution's global similarity after the solve, 1/rad². A global similarity changes neither the
   // shape nor the match term, so fitting it to the prior's rotations as well as its centres costs
   // no basin width even when the solve itself runs with λR = 0 (the basin preset): the frame
@@ -39,9 +39,8 @@ struct RefineOptions {
   // 0 fits the gauge to the prior centres only. Beyond the paper (its basin arm keeps the
   // solve's own gauge; Table 8).
   double gauge_orientation_weight = 1e3;
-  // Per-camera uncertainty at the solution (refine/pose_uncertainty.h, issue 32): dense in the
-  // cameras, O((6n)³), computed up to this many (2.9 s of a 45 s refine on the 153-frame desk
-  // capture); 0 = off.
+  // Per-camera uncertainty at the solution (refine/checks/pose_uncertainty.h, issue 32): dense in
+  // the cameras, O((6n)³), computed up to this many (its cost: docs/refine_options.md); 0 = off.
   int uncertainty_max_cameras = 300;
 
   // Ray-time initialization (§3.2, SPEC §3): "auto" = per image, the median of the positive
@@ -68,7 +67,7 @@ struct RefineOptions {
   // single-camera capture has the paper's one shared set, §3.1); "shared" = one set for every
   // image, started at the per-parameter median over the images of their cameras' values, with the
   // warning cameras_shared when a given camera differs from that start by more than 1 px on the
-  // image (refine/camera_blocks.h). Per-camera sets need enough observations per camera to be
+  // image (refine/solve/camera_blocks.h). Per-camera sets need enough observations per camera to be
   // determined (a principal point is nearly a rotation of its own camera). With fixed intrinsics
   // the images' cameras are used as given, so "shared" needs a refine_* option.
   std::string intrinsics_sharing = "per_camera";
@@ -81,12 +80,12 @@ struct RefineOptions {
   // Jacobians, slower).
   bool use_evaluation_cache = true;
   // The solver of each pass (§3.4, §3.7): "ray_time_lm" = the ray-time Levenberg–Marquardt solver
-  // (refine/ray_time_lm_solver.h: the ray times eliminated in closed form, no Ceres, any thread
-  // count deterministic), which holds every intrinsic; "ceres" = Ceres' SPARSE_SCHUR for every
-  // pass (the paper's mapping); "auto" = the ray-time LM for the passes that hold every intrinsic,
-  // Ceres for those that self-calibrate. Both minimize the same objective with the same step
-  // rule; their paths differ in the last digits. The only switch: no other option changes it (a
-  // combination that cannot run is refused, CheckRelations).
+  // (refine/solve/ray_time_lm_solver.h: the ray times eliminated in closed form, no Ceres, any
+  // thread count deterministic), which holds every intrinsic; "ceres" = Ceres' SPARSE_SCHUR for
+  // every pass (the paper's mapping); "auto" = the ray-time LM for the passes that hold every
+  // intrinsic, Ceres for those that self-calibrate. Both minimize the same objective with the same
+  // step rule; their paths differ in the last digits. The only switch: no other option changes it
+  // (a combination that cannot run is refused, CheckRelations).
   std::string solver = "auto";
   // Threads for the cache and the ray-time LM solver (and for Ceres when not deterministic);
   // 0 = hardware concurrency.
@@ -104,14 +103,13 @@ struct RefineOptions {
   // The same for a stage whose solution only starts another (beyond the paper, issue 34): the GNC
   // schedule's earlier scales, and every stage of a pass the recipe solves again from (the basin
   // and its removal rounds, the orientation probe, a finish the anneal follows, staged pass 1).
-  // The last stage still stops at function_tolerance. The four Strecha scenes at 0° and 8° with
-  // auto: 1,151 -> 750 iterations, poses within 0.00023° of the 1e-6 solve (0.06 σ), the same
-  // pair removals and probe verdicts (docs/scaling.md).
+  // The last stage still stops at function_tolerance, so the solution is the tight one's (measured:
+  // docs/refine_options.md).
   double intermediate_function_tolerance = 1e-4;
   // Ray-time LM (beyond the paper, issue 34): after an accepted step whose cost fell by more than
   // 1.5x the model's prediction, the step is doubled up to this many times while the cost keeps
-  // falling (one cost evaluation each); 0 = plain Levenberg-Marquardt. Strecha 0°/8° with auto:
-  // 683 -> 565 iterations, poses within 0.2 σ of a 1e-10 solve (docs/scaling.md).
+  // falling (one cost evaluation each); 0 = plain Levenberg-Marquardt (measured:
+  // docs/refine_options.md).
   int max_step_doublings = 3;
 
   // Prior trust region (§3.6 "Prior trust region"): when the solution moves any frame more than
@@ -138,18 +136,13 @@ struct RefineOptions {
   // image pairs match the wrong copy, and the filter-free objective keeps those matches and is
   // pulled off the truth): after the last pass, per image pair, the median over its used matches
   // of the symmetric epipolar distance restricted to positive ray times (per direction the
-  // cross-projection residual minimized over the ray time, refine/pair_consistency.h) at the
+  // cross-projection residual minimized over the ray time, refine/checks/pair_consistency.h) at the
   // solved poses and intrinsics; a pair above inconsistent_pair_px is inconsistent, and the test
   // fires when more than max_inconsistent_pair_fraction of the pairs are. It reads neither the
   // prior, the ground truth nor the solved ray times (from 32° priors some end in the arctan's
   // flat tail, where the residual of a correct pair reaches 10^5 px). Flag only: the solution is
-  // still returned (returning the prior is the trust region's job). Measured on the stored basin
-  // solves (both arms) of the shared Strecha ladder, levels 0–32°, seeds 0–2: on castle-P19 from
-  // an exact prior the pairs above 4 px (6–556 px) are exactly the 44 of 130 (34 %) whose inliers
-  // miss the ground-truth epipolar geometry by more than 4 px, the correct pairs stay at or below
-  // 2.5 px, and after the bootstrap's match filter 1 wrong pair of 87 is left; on the clean scenes
-  // the 122 solves within 1° of the truth keep every pair at or below 1.9 px, and the 4 that end
-  // 3.5–16° off (Herz-Jesus-P8 and entry-P10 from 32°) fire with 20–71 % of their pairs. 0.1
+  // still returned (returning the prior is the trust region's job). 4 px lies between the correct
+  // pairs' and the wrong pairs' measures on the shared scenes (docs/refine_options.md). 0.1
   // tolerates one bad pair in 10; the auto preset, whose wrong-pair removal runs first, tolerates
   // none (configs/presets/refine/auto.yaml says why).
   bool inconsistent_pairs_test = true;
@@ -189,9 +182,8 @@ struct RefineOptions {
   // solved again from the prior without the inconsistent ones, until the solution leaves exactly
   // those it was solved without above the threshold, at most this many times; the probe and the
   // finish then use the remaining pairs. A removal that would split the match graph is not made
-  // (that pair stays; the images it alone holds fire loose_parts, refine/loose_parts.h). The 4 px
-  // threshold separates castle-P19's 44 wrong pairs from its correct ones at the basin solution
-  // from an exact and an 8° prior alike.
+  // (that pair stays; the images it alone holds fire loose_parts, refine/checks/loose_parts.h). The
+  // threshold is the inconsistent-pairs test's (docs/refine_options.md).
   int max_pair_removal_rounds = 0;
   // Basin-first finish anneal (issue 12, beyond the paper's fixed nominal scale): after the
   // nominal-scale finish, one more pass (`finish_anneal`; the finish's λR, held towards the
@@ -206,16 +198,14 @@ struct RefineOptions {
   // The finish anneal's λR as a multiple of the finish's (its hold towards the finish's own
   // rotations). Any positive weight pins what the matches leave free (no drift: a null direction
   // of the match term costs them nothing); a weaker one lets the matches move what they do
-  // constrain. Measured (issue 12; refine/README.md): 0.01 takes castle-P19 from an exact prior
-  // from 0.122° to 0.038° (the classical control: 0.085°) and the desk's every-8th-frame subsample
-  // from 0.066° to 0.024° from COLMAP's mapper (the prior-free solution: 0.023°), the chair
-  // unchanged in agreement; the whole desk moves 0.070° (λR = 0: 0.196°).
+  // constrain (measured for 0.01 and 1: docs/refine_options.md).
   double finish_anneal_hold_ratio = 1.0;
 
-  // Frame checks after the solve (issue 46, refine/frame_verdicts.h): a frame that moved far more
-  // than the others and fits worse (refine/frame_doubt.h; not for a prior whose rotations came
-  // from the matches: its own errors are no independent measure), and a frame whose matches other
-  // intrinsics explain far better (refine/frame_intrinsics.h). A frame either names is doubted.
+  // Frame checks after the solve (issue 46, refine/checks/frame_verdicts.h): a frame that moved far
+  // more than the others and fits worse (refine/checks/frame_doubt.h; not for a prior whose
+  // rotations came from the matches: its own errors are no independent measure), and a frame whose
+  // matches other intrinsics explain far better (refine/checks/frame_intrinsics.h). A frame either
+  // names is doubted.
   bool check_frame_doubts = true;
   FrameDoubtOptions frame_doubt;
   bool check_frame_intrinsics = true;

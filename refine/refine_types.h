@@ -17,11 +17,11 @@
 #include "core/camera.h"
 #include "core/geometry.h"
 #include "core/warnings.h"
-#include "refine/frame_doubt.h"
-#include "refine/frame_verdicts.h"
-#include "refine/gauge_polish.h"
-#include "refine/loose_parts.h"
-#include "refine/pose_uncertainty.h"
+#include "refine/checks/frame_doubt.h"
+#include "refine/checks/frame_verdicts.h"
+#include "refine/checks/loose_parts.h"
+#include "refine/checks/pose_uncertainty.h"
+#include "refine/solve/gauge_polish.h"
 
 namespace raytime {
 
@@ -55,7 +55,8 @@ inline uint64_t WarmRayTimeKey(int image, int keypoint) {
 struct RefineInput {
   // The cameras' intrinsics (SPEC §2) and, per image, the index of its camera: one camera when
   // the images share intrinsics (the paper's setting, §3.1), several for per-frame intrinsics
-  // (phone captures). refine/camera_blocks.h says how they become the solve's parameter blocks.
+  // (phone captures). refine/solve/camera_blocks.h says how they become the solve's parameter
+  // blocks.
   std::vector<CameraIntrinsics> cameras;
   std::vector<int> camera_index;             // one per image, into cameras
   std::vector<Rigid3> prior_world_from_cam;  // one per image
@@ -71,7 +72,7 @@ struct RefineInput {
   std::vector<std::string> names;
   RefineWarmStart warm_start;  // empty: every pass starts as the recipe says
   // The prior's accuracy per frame as the user states it (prior.sigma_deg / prior.sigma_m): a
-  // prior trusted to place the frames its matches do not hold (refine/frame_verdicts.h).
+  // prior trusted to place the frames its matches do not hold (refine/checks/frame_verdicts.h).
   StatedPriorAccuracy stated_prior;
 
   const CameraIntrinsics& CameraOf(int image) const { return cameras[camera_index[image]]; }
@@ -94,8 +95,8 @@ struct SolvedObservations {
   Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> matches;
 };
 
-// One image pair's fit at the solve (refine/pair_consistency.h): the median over its used matches
-// of the symmetric epipolar distance restricted to positive ray times (the cross-projection
+// One image pair's fit at the solve (refine/checks/pair_consistency.h): the median over its used
+// matches of the symmetric epipolar distance restricted to positive ray times (the cross-projection
 // residual minimized over the ray time) at the solved poses and intrinsics.
 struct PairResidual {
   int image1 = 0;  // indices into RefineInput's images
@@ -325,8 +326,8 @@ struct PairRemovalSummary {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PairRemovalSummary, enabled, rounds, removed, kept, stop_reason)
 
-// Parts of the match graph the matches do not hold (refine/loose_parts.h): held by one pair, by
-// two with few matches, or by fewer pairs than the wrong-pair removal took across. The check
+// Parts of the match graph the matches do not hold (refine/checks/loose_parts.h): held by one pair,
+// by two with few matches, or by fewer pairs than the wrong-pair removal took across. The check
 // "loose_parts" fires when there is one (flag only; the refine stage names the images and the
 // export leaves them out).
 struct LoosePartsVerdict {
@@ -335,7 +336,7 @@ struct LoosePartsVerdict {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(LoosePartsVerdict, cuts, images)
 
-// How the images' cameras became the solve's intrinsics blocks (refine/camera_blocks.h).
+// How the images' cameras became the solve's intrinsics blocks (refine/solve/camera_blocks.h).
 struct CameraBlocksSummary {
   std::string sharing;  // RefineOptions::intrinsics_sharing
   int num_cameras = 0;  // distinct cameras among the images (RefineInput::cameras in use)
@@ -378,7 +379,7 @@ struct RefineGuardrails {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineGuardrails, fired, returned_prior, solver_failed,
                                    trust_region, wander, inconsistent_pairs, loose_parts)
 
-// One connected component of the match graph and its solve (refine/components.h).
+// One connected component of the match graph and its solve (refine/recipes/components.h).
 struct ComponentSummary {
   int num_images = 0;
   std::string first_image;  // its first image's label
@@ -410,7 +411,7 @@ struct RefineSummary {
   // "returned_prior" (a check returned the prior).
   std::string decision;
   RefineGuardrails guardrails;
-  // How well the last pass's solution determines each camera (refine/pose_uncertainty.h).
+  // How well the last pass's solution determines each camera (refine/checks/pose_uncertainty.h).
   PoseUncertaintySummary uncertainty;
   // The bins of every GNC stage's residual_histogram (ResidualHistogramEdgesPx()).
   std::vector<double> residual_histogram_edges_px = ResidualHistogramEdgesPx();
@@ -419,12 +420,12 @@ struct RefineSummary {
   double prior_depth = std::numeric_limits<double>::quiet_NaN();
   // The match graph's components (largest first), each with its solve's totals.
   std::vector<ComponentSummary> components;
-  // The frame-doubt check of the largest component (refine/frame_doubt.h), and every solved
-  // frame's intrinsics test (refine/frame_intrinsics.h).
+  // The frame-doubt check of the largest component (refine/checks/frame_doubt.h), and every solved
+  // frame's intrinsics test (refine/checks/frame_intrinsics.h).
   FrameDoubtVerdict frame_doubts;
   std::vector<FrameIntrinsicsTest> frame_intrinsics;
-  // Per image: held, held_by_prior or doubted, and why (refine/frame_verdicts.h); how the prior
-  // was judged.
+  // Per image: held, held_by_prior or doubted, and why (refine/checks/frame_verdicts.h); how the
+  // prior was judged.
   std::vector<FrameVerdict> frame_verdicts;
   PriorTrust prior_trust;
   // What deserves a second look, by image name (core/warnings.h): doubted and held_by_prior

@@ -22,7 +22,7 @@
 
 #include "core/features.h"
 #include "core/types.h"
-#include "refine/prior_convention.h"
+#include "refine/checks/prior_convention.h"
 #include "refine/refine_options.h"
 #include "refine/refine_types.h"
 

@@ -3,7 +3,8 @@
 
 Layers (README "How we write code"): core <- formats <- stages (frontend, bootstrap, refine,
 evaluate) <- pipelines <- cli. Stages never include one another (evaluate may read formats);
-cli reaches everything through pipelines/; inside refine/ only refine.cc and the scene step above
+cli reaches everything through pipelines/; refine/'s rooms point one way (solve <- checks <-
+recipes <- the entry at refine/'s top, REFINE_ROOMS); inside refine/ only refine.cc and the scene step above
 it (scene.cc, the stage's work by image name) include the entry header refine/refine.h (the
 others include refine/refine_types.h), so no arrow runs up.
 
@@ -30,6 +31,23 @@ ALLOWED = {
     "testing": {"core", "refine", "evaluate"},
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([^"]+)"')
+# refine/ in rooms by job (issue 48): the solver, the checks on a solution, the recipes that
+# compose passes and checks; the entry (refine.h, scene.h) above them. Which rooms each room may
+# include (itself implied); every room may read the shared vocabulary refine/refine_types.h and
+# refine/refine_options.h.
+REFINE_ROOMS = {
+    "solve": set(),
+    "checks": {"solve"},
+    "recipes": {"solve", "checks"},
+    "": {"solve", "checks", "recipes"},
+}
+REFINE_VOCABULARY = {"refine/refine_types.h", "refine/refine_options.h"}
+
+
+def refine_room(path):
+    """The room of a path below refine/ ("" for the entry files at its top)."""
+    parts = path.split("/")
+    return parts[1] if len(parts) > 2 else ""
 
 
 def includes():
@@ -58,6 +76,12 @@ def violations():
                 and path not in ("refine/refine.cc", "refine/scene.cc")):
             found.append(f"{path}: includes the entry header refine/refine.h "
                          "(inside refine/ include refine/refine_types.h)")
+        if folder == "refine" and target == "refine" and included not in REFINE_VOCABULARY:
+            source_room, target_room = refine_room(path), refine_room(included)
+            if target_room != source_room and target_room not in REFINE_ROOMS[source_room]:
+                allowed = ", ".join("refine/" + r for r in sorted(REFINE_ROOMS[source_room]))
+                found.append(f"{path}: includes {included} (refine/{source_room or ''} may "
+                             f"include {allowed or 'no other room'}, and the vocabulary)")
     return found
 
 

@@ -249,7 +249,7 @@ double MeanRotationDegSim3(const PoseSet& estimate, const PoseSet& ground_truth)
 // - equal to rounding: at most 7.4e-15 rad and 4.6e-14 m apart;
 // - in 12 of them, apart by a whole-solution similarity: up to 1.09e-9 rad and
 //   1.52e-6 m (scale 1.3e-7 apart) with the same Ceres iterations per GNC stage. The refine's
-//   last step, the gauge polish (refine/gauge_polish.cc: the Sim(3) of the solution that best
+//   last step, the gauge polish (refine/solve/gauge_polish.cc: the Sim(3) of the solution that best
 //   fits the prior), stops on a relative cost change below 1e-14, which is the rounding level of
 //   its cost, at a flat minimum that fixes the Sim(3) only to ~sqrt(machine epsilon): whether it
 //   stops after 3 or 4 iterations depends on the inputs' last bits, and the two stopping points

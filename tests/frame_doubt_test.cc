@@ -1,7 +1,7 @@
-// Per-frame doubt (refine/frame_doubt.h, issue 30 item 3) on a synthetic scene with known poses:
-// a frame whose solved pose moved far from its prior while its observations say it stayed (what
-// wrong intrinsics do) is doubted; a frame whose prior was wrong and whose solved pose fits its
-// observations (a tracking glitch the solve fixed) is not; nor a frame that only fits worse.
+// Per-frame doubt (refine/checks/frame_doubt.h, issue 30 item 3) on a synthetic scene with known
+// poses: a frame whose solved pose moved far from its prior while its observations say it stayed
+// (what wrong intrinsics do) is doubted; a frame whose prior was wrong and whose solved pose fits
+// its observations (a tracking glitch the solve fixed) is not; nor a frame that only fits worse.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,7 +10,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
-#include "refine/frame_doubt.h"
+#include "refine/checks/frame_doubt.h"
 #include "testing/random_draws.h"
 
 namespace raytime {

@@ -1,5 +1,5 @@
-// The frame verdicts' own logic (issue 46, refine/frame_verdicts.h) on constructed evidence: a
-// part the matches do not hold is kept where a trusted prior agrees with it and doubted where it
+// The frame verdicts' own logic (issue 46, refine/checks/frame_verdicts.h) on constructed evidence:
+// a part the matches do not hold is kept where a trusted prior agrees with it and doubted where it
 // does not or nothing vouches for it, swapped frames are named and a tracking glitch is not, the
 // checks' findings come first, a component of its own needs a trusted prior.
 #include <gtest/gtest.h>
@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "refine/frame_verdicts.h"
+#include "refine/checks/frame_verdicts.h"
 #include "refine_stage_util.h"
 #include "refine_test_util.h"
 

@@ -1,7 +1,7 @@
-// Per-camera uncertainty from the solve (refine/pose_uncertainty.h, issue 32): on a synthetic
-// scene with known keypoint noise, the predicted σ of each camera's rotation and centre against
-// the spread of the solutions over independent noise draws (same scene, same prior).
-#include "refine/pose_uncertainty.h"
+// Per-camera uncertainty from the solve (refine/checks/pose_uncertainty.h, issue 32): on a
+// synthetic scene with known keypoint noise, the predicted σ of each camera's rotation and centre
+// against the spread of the solutions over independent noise draws (same scene, same prior).
+#include "refine/checks/pose_uncertainty.h"
 
 #include <gtest/gtest.h>
 

@@ -1,5 +1,5 @@
-// The prior convention check (refine/prior_convention.h, issue 30 item 2) on synthetic camera
-// layouts with known poses: a correct prior, exact or perturbed up to the ladder's 32°, is
+// The prior convention check (refine/checks/prior_convention.h, issue 30 item 2) on synthetic
+// camera layouts with known poses: a correct prior, exact or perturbed up to the ladder's 32°, is
 // accepted; the same prior inverted, with flipped camera axes or both is refused, the named
 // repair (core/geometry.h ApplyPoseConvention) undoes the mistake, and what it repairs is
 // accepted. The relative poses are the truth's with 0.3° of noise, as the front end's are.
@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "core/geometry.h"
-#include "refine/prior_convention.h"
+#include "refine/checks/prior_convention.h"
 #include "testing/random_draws.h"
 
 namespace raytime {

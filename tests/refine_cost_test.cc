@@ -14,10 +14,10 @@
 #include <string>
 
 #include "core/geometry.h"
-#include "refine/cross_projection_cost.h"
-#include "refine/evaluation_cache.h"
-#include "refine/problem_layout.h"
-#include "refine/ray_time_problem.h"
+#include "refine/solve/cross_projection_cost.h"
+#include "refine/solve/evaluation_cache.h"
+#include "refine/solve/problem_layout.h"
+#include "refine/solve/ray_time_problem.h"
 #include "testing/synthetic_scene.h"
 #include "tests/numeric_jacobian.h"
 #include "tests/refine_test_util.h"

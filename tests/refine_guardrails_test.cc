@@ -15,12 +15,12 @@
 #include <utility>
 
 #include "evaluate/pose_errors.h"
-#include "refine/cross_projection_cost.h"
-#include "refine/guardrails.h"
-#include "refine/loose_parts.h"
-#include "refine/pair_consistency.h"
-#include "refine/problem_layout.h"
+#include "refine/checks/guardrails.h"
+#include "refine/checks/loose_parts.h"
+#include "refine/checks/pair_consistency.h"
 #include "refine/refine.h"
+#include "refine/solve/cross_projection_cost.h"
+#include "refine/solve/problem_layout.h"
 #include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 

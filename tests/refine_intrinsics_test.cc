@@ -1,7 +1,7 @@
-// Per-image intrinsics in the refiner (refine/camera_blocks.h; issue 10 "Per-frame intrinsics"):
-// synthetic scenes whose images each have their own camera, as phone captures record them
-// (focal lengths a few % apart, MobileBrick's 0.9–2.9 % per scene, paper §4.6; principal points
-// some pixels apart). The true per-image intrinsics, fixed, give the poses to the synthetic
+// Per-image intrinsics in the refiner (refine/solve/camera_blocks.h; issue 10 "Per-frame
+// intrinsics"): synthetic scenes whose images each have their own camera, as phone captures record
+// them (focal lengths a few % apart, MobileBrick's 0.9–2.9 % per scene, paper §4.6; principal
+// points some pixels apart). The true per-image intrinsics, fixed, give the poses to the synthetic
 // precision while one camera forced on every image does measurably worse; per-camera
 // self-calibration recovers each image's focal length where a shared set cannot; on a single
 // camera nothing changes; and nonsense option combinations are refused.
@@ -13,8 +13,8 @@
 #include <string>
 
 #include "core/error.h"
-#include "refine/camera_blocks.h"
 #include "refine/refine.h"
+#include "refine/solve/camera_blocks.h"
 #include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 

@@ -8,8 +8,8 @@
 
 #include "core/error.h"
 #include "core/statistics.h"
-#include "refine/problem_layout.h"
-#include "refine/ray_time_init.h"
+#include "refine/solve/problem_layout.h"
+#include "refine/solve/ray_time_init.h"
 #include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 

@@ -1,7 +1,7 @@
-// The ray-time LM solver (refine/ray_time_lm_solver.h): its Jacobians against numeric
+// The ray-time LM solver (refine/solve/ray_time_lm_solver.h): its Jacobians against numeric
 // differentiation, its objective and minimum against Ceres' on the same problem, held images, and
 // bit-identical results on any thread count.
-#include "refine/ray_time_lm_solver.h"
+#include "refine/solve/ray_time_lm_solver.h"
 
 #include <gtest/gtest.h>
 
@@ -12,10 +12,10 @@
 #include <random>
 #include <stdexcept>
 
-#include "refine/cross_projection_cost.h"
-#include "refine/pose_prior_cost.h"
-#include "refine/ray_geometry.h"
 #include "refine/refine.h"
+#include "refine/solve/cross_projection_cost.h"
+#include "refine/solve/pose_prior_cost.h"
+#include "refine/solve/ray_geometry.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
 #include "tests/numeric_jacobian.h"
@@ -92,9 +92,9 @@ TEST(RayTimeLmSolverTest, JacobiansMatchNumericDifferentiation) {
   }
 }
 
-// The residual is written once (refine/ray_geometry.h): the LM kernel, the closed-form Ceres cost
-// and the automatic-differentiation cost give the same value for the same poses, the first two bit
-// for bit (the LM is handed RotationFromQuaternion's matrices), autodiff to rounding (it
+// The residual is written once (refine/solve/ray_geometry.h): the LM kernel, the closed-form Ceres
+// cost and the automatic-differentiation cost give the same value for the same poses, the first two
+// bit for bit (the LM is handed RotationFromQuaternion's matrices), autodiff to rounding (it
 // undistorts the pixels itself; here without distortion).
 TEST(RayTimeLmSolverTest, EveryVariantOfTheResidualHasTheSameValue) {
   std::mt19937_64 rng(5);

@@ -11,8 +11,8 @@
 #include <set>
 #include <string>
 
-#include "refine/gauge_polish.h"
 #include "refine/refine.h"
+#include "refine/solve/gauge_polish.h"
 #include "testing/synthetic_scene.h"
 #include "tests/refine_test_util.h"
 
@@ -84,9 +84,9 @@ TEST(RefineSolveTest, ExactPriorStaysWithAutoInitAndConstantIsMeasured) {
   }
 }
 
-// The gauge polish (refine/gauge_polish.h) undoes a similarity of the whole solve exactly, and
-// with λR = 0 (the basin configuration, where only the prior centres pin the global
-// rotation) an exact prior comes back in its own frame.
+// The gauge polish (refine/solve/gauge_polish.h) undoes a similarity of the whole solve exactly,
+// and with λR = 0 (the basin configuration, where only the prior centres pin the global rotation)
+// an exact prior comes back in its own frame.
 TEST(RefineSolveTest, GaugePolishFinishesTheSimilarityDirections) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
   Sim3 similarity;

@@ -15,7 +15,7 @@
 #include "core/camera.h"
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
-#include "refine/problem_layout.h"
+#include "refine/solve/problem_layout.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
 
