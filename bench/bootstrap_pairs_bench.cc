@@ -14,6 +14,7 @@
 #include <fstream>
 #include <map>
 
+#include "bench/bench_main.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
@@ -179,10 +180,5 @@ int Run(int argc, char** argv) {
 }  // namespace raytime
 
 int main(int argc, char** argv) {
-  try {
-    return raytime::Run(argc, argv);
-  } catch (const raytime::InputError& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 2;
-  }
+  return raytime::BenchMain("bootstrap_pairs_bench", raytime::Run, argc, argv);
 }

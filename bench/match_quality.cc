@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_main.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/geometry.h"
@@ -142,13 +143,5 @@ int Main(int argc, char** argv) {
 }  // namespace raytime
 
 int main(int argc, char** argv) {
-  try {
-    return raytime::Main(argc, argv);
-  } catch (const raytime::InputError& e) {
-    std::fprintf(stderr, "match_quality: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "match_quality: %s\n", e.what());
-    return 1;
-  }
+  return raytime::BenchMain("match_quality", raytime::Main, argc, argv);
 }

@@ -26,6 +26,7 @@
 #include <set>
 #include <string>
 
+#include "bench/bench_main.h"
 #include "core/error.h"
 #include "frontend/descriptor_matching.h"
 #include "frontend/feature_extraction.h"
@@ -162,10 +163,5 @@ int Main(int argc, char** argv) {
 }  // namespace raytime
 
 int main(int argc, char** argv) {
-  try {
-    return raytime::Main(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "matcher_bench: %s\n", e.what());
-    return 2;
-  }
+  return raytime::BenchMain("matcher_bench", raytime::Main, argc, argv);
 }

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "bench/bench_main.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
@@ -113,10 +114,5 @@ int Main(int argc, char** argv) {
 }  // namespace raytime
 
 int main(int argc, char** argv) {
-  try {
-    return raytime::Main(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 2;
-  }
+  return raytime::BenchMain("pair_scaling", raytime::Main, argc, argv);
 }

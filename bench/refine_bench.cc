@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_main.h"
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
 #include "refine/refine.h"
@@ -211,4 +212,6 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace raytime
 
-int main(int argc, char** argv) { return raytime::Main(argc, argv); }
+int main(int argc, char** argv) {
+  return raytime::BenchMain("refine_bench", raytime::Main, argc, argv);
+}

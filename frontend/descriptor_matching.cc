@@ -12,6 +12,8 @@
 #include <type_traits>
 
 #include "core/error.h"
+
+#include "core/error.h"
 #include "core/options.h"
 
 namespace raytime {
@@ -520,11 +522,14 @@ MatchKernel ResolveMatchKernel(MatchKernel kernel) {
     return CpuHasAvx2Fma() ? MatchKernel::kAvx2 : MatchKernel::kGemm;
   }
   if (kernel == MatchKernel::kVnni && !CpuHasVnni()) {
-    throw std::runtime_error(
-        "matching kernel 'vnni' requested but this CPU lacks AVX-VNNI and AVX512-VNNI/VL");
+    throw InputError(
+        "matching kernel 'vnni' requested but this CPU lacks AVX-VNNI and AVX512-VNNI/VL (set "
+        "matches.kernel to auto)");
   }
   if (kernel == MatchKernel::kAvx2 && !CpuHasAvx2Fma()) {
-    throw std::runtime_error("matching kernel 'avx2' requested but this CPU lacks AVX2/FMA");
+    throw InputError(
+        "matching kernel 'avx2' requested but this CPU lacks AVX2/FMA (set matches.kernel to "
+        "auto)");
   }
   return kernel;
 }

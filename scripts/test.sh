@@ -13,9 +13,11 @@ scripts/install_deps.sh --test
 scripts/build.sh build -DRAYTIME_BUILD_UNIT_TESTS=OFF -DRAYTIME_BUILD_BENCH=ON
 echo "test.sh: release build done at ${SECONDS} s"
 # The Slurm backend's test (label slurm) on a one-node cluster on this machine; it must run here
-# (RAYTIME_REQUIRE_SLURM), where elsewhere it is skipped without a cluster.
+# (RAYTIME_REQUIRE_SLURM), where elsewhere it is skipped without a cluster. The tests on
+# ../shared/data fail here without it (RAYTIME_REQUIRE_SHARED_DATA), and skip in a lone clone.
 scripts/slurm_local.sh start
-(cd build && RAYTIME_REQUIRE_SLURM=1 RAYTIME_REQUIRE_BROWSER=1 ctest --output-on-failure -j "$jobs")
+(cd build && RAYTIME_REQUIRE_SLURM=1 RAYTIME_REQUIRE_BROWSER=1 RAYTIME_REQUIRE_SHARED_DATA=1 \
+  ctest --output-on-failure -j "$jobs")
 echo "test.sh: tests done at ${SECONDS} s"
 # clang: compiles the instrumented code about twice as fast as gcc, and its UBSan checks pointer
 # overflow, which gcc's lacks (scripts/fuzz.sh uses it too). -g1: line tables only, enough for the
@@ -25,5 +27,5 @@ RAYTIME_TARGET=unit_tests scripts/build.sh build-asan -DCMAKE_BUILD_TYPE=Debug \
   -DRAYTIME_SANITIZE=ON -DRAYTIME_PRECOMPILED_HEADERS=ON
 echo "test.sh: sanitizer build done at ${SECONDS} s"
 (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
-  ctest --output-on-failure -j "$jobs" -L unit)
+  RAYTIME_REQUIRE_SHARED_DATA=1 ctest --output-on-failure -j "$jobs" -L unit)
 echo "test.sh: sanitizer tests done at ${SECONDS} s"

@@ -15,6 +15,7 @@
 #include "formats/npz.h"
 #include "tests/capture_fixtures.h"
 #include "tests/expect_pose.h"
+#include "tests/shared_data.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -465,7 +466,7 @@ const std::string kCaptures = std::string(RAYTIME_SHARED_DATA_DIR) + "/captures"
 
 TEST(RealCaptures, Scanner3dChairHas24FramesOf70Poses) {
   const std::string root = kCaptures + "/3dscanner-chair";
-  if (!fs::exists(root)) GTEST_SKIP() << "shared data not found: " << root;
+  REQUIRE_SHARED_DATA(root);
   const Dataset dataset = Load("scanner3d", root);
   ASSERT_EQ(dataset.images.images.size(), 24u);
   EXPECT_EQ(dataset.num_poses_without_image, 46);
@@ -504,7 +505,7 @@ TEST(RealCaptures, Scanner3dChairHas24FramesOf70Poses) {
 
 TEST(RealCaptures, Record3dDeskHas457PortraitFramesWithPerFrameIntrinsics) {
   const std::string root = kCaptures + "/record3d-desk";
-  if (!fs::exists(root)) GTEST_SKIP() << "shared data not found: " << root;
+  REQUIRE_SHARED_DATA(root);
   const Dataset dataset = Load("record3d", root);
   ASSERT_EQ(dataset.images.images.size(), 457u);
   ASSERT_TRUE(dataset.capture.has_value());

@@ -24,6 +24,7 @@
 #include "formats/strecha.h"
 #include "formats/tum.h"
 #include "testing/random_draws.h"
+#include "tests/shared_data.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -341,7 +342,7 @@ std::string SharedData(const std::string& relative) {
 
 TEST(Formats, StrechaReadsRealCamera) {
   const std::string path = SharedData("strecha/fountain-P11/gt_dense_cameras/0000.jpg.camera");
-  if (!fs::exists(path)) GTEST_SKIP() << "shared data not found: " << path;
+  REQUIRE_SHARED_DATA(path);
   const StrechaCamera camera = ReadStrechaCamera(path);
   EXPECT_EQ(camera.intrinsics.width, 1536);
   EXPECT_EQ(camera.intrinsics.height, 1024);
@@ -359,7 +360,7 @@ TEST(Formats, StrechaReadsRealCamera) {
 
 TEST(Formats, StrechaReadsRealScene) {
   const std::string root = SharedData("strecha/fountain-P11");
-  if (!fs::exists(root)) GTEST_SKIP() << "shared data not found: " << root;
+  REQUIRE_SHARED_DATA(root);
   ImageSet images;
   PoseSet poses;
   ReadStrechaScene(root, &images, &poses);

@@ -17,6 +17,7 @@
 #include "frontend/feature_extraction.h"
 #include "frontend/matching.h"
 #include "frontend/two_view_geometry.h"
+#include "tests/shared_data.h"
 
 namespace raytime {
 namespace {
@@ -174,9 +175,7 @@ TEST(FeatureBudget, DefaultBudgetKeepsTheWholeSampleDetection) {
 // previous whole-octave rule with the doubled first octave kept 64k-83k keypoints per image here.
 TEST(FeatureBudget, HoldsOnARealPhoneImage) {
   const std::string capture = std::string(RAYTIME_SHARED_DATA_DIR) + "/captures/3dscanner-chair";
-  if (!std::filesystem::exists(capture + "/frame_00000.jpg")) {
-    GTEST_SKIP() << capture << " not found";
-  }
+  REQUIRE_SHARED_DATA(capture + "/frame_00000.jpg");
   ImageSet images;
   images.image_root = capture;
   images.cameras.resize(1);

@@ -17,6 +17,7 @@
 
 #include "core/atomic_file.h"
 #include "tests/raytime_command.h"
+#include "tests/shared_data.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -79,8 +80,8 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
   EXPECT_LT(refined["none"]["mean_rotation_deg"].get<double>(), 2.0);
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined" / "images.txt"));
   EXPECT_TRUE(fs::exists(fs::path(run_dir) / "refined_transforms.json"));
-  // Each exported camera's σ from the solve (refine/pose_uncertainty.h) beside its model, per
-  // image: small on this scene (median 0.004° measured) and positive.
+  // Each exported camera's σ from the solve (refine/checks/pose_uncertainty.h) beside its model,
+  // per image: small on this scene (median 0.004° measured) and positive.
   const json uncertainty = ReadJson(fs::path(run_dir) / "refined" / "pose_uncertainty.json");
   ASSERT_EQ(uncertainty["cameras"].size(), 11u);
   for (const auto& [image, sigma] : uncertainty["cameras"].items()) {
@@ -160,7 +161,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
 
 TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   const fs::path scene = fs::path(RAYTIME_SHARED_DATA_DIR) / "strecha" / "entry-P10";
-  if (!fs::exists(scene)) GTEST_SKIP() << "shared data not available at " << scene;
+  REQUIRE_SHARED_DATA(scene);
   const std::string run_dir = (workdir_ / "entry").string();
   CommandResult result =
       RunRaytime("run configs/demo.yaml --workdir " + run_dir +
@@ -181,7 +182,7 @@ TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
 // intrinsics, named, and left out of the export.
 TEST_F(PipelineTest, AFrameGivenAWrongFocalLengthIsNamedAndNotExported) {
   const fs::path shared = fs::path(RAYTIME_SHARED_DATA_DIR) / "strecha" / "Herz-Jesus-P8";
-  if (!fs::exists(shared)) GTEST_SKIP() << "shared data not available at " << shared;
+  REQUIRE_SHARED_DATA(shared);
   const fs::path scene = workdir_ / "scene";
   fs::create_directories(scene / "gt_dense_cameras");
   fs::create_directory_symlink(fs::absolute(shared / "images"), scene / "images");
