@@ -7,7 +7,6 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
-#include <optional>
 #include <unordered_map>
 
 #include "core/statistics.h"
@@ -117,63 +116,57 @@ RayTimeLmProblem BuildRayTimeLmProblem(const RefineInput& input, const ProblemLa
   return problem;
 }
 
-}  // namespace
-
-RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
-                          const PassSettings& settings, const std::vector<Rigid3>& anchor,
-                          PassState* state) {
-  RefinePassSummary pass;
-  pass.name = settings.name;
-  pass.orientation_weight = settings.orientation_weight;
-  pass.self_calibration =
-      settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
-  const auto build_start = std::chrono::steady_clock::now();
+// 1. The poses of an earlier run's solution at this pass (issue 34), where they agree with this
+// run's own start (the capped passes' solution) after the mean rotation between the two: an
+// earlier solution of another problem (another prior, other matches) never takes the solve where
+// the recipe would not. Returns which images start from it (their ray times too).
+std::vector<bool> StartFromEarlierRun(const RefineInput& input, const PassSettings& settings,
+                                      PassState* state, RefinePassSummary* pass,
+                                      double* largest_difference_deg, int* num_too_far) {
+  std::vector<bool> from_earlier_run(state->world_from_cam.size(), false);
   const auto warm = settings.warm_startable ? input.warm_start.world_from_cam.find(settings.name)
                                             : input.warm_start.world_from_cam.end();
-  const bool warm_started = warm != input.warm_start.world_from_cam.end();
-  // Images started from the earlier run (their ray times too): only where that pose agrees with
-  // this run's own start (the capped passes' solution), so an earlier solution of another
-  // problem (another prior, other matches) never takes the solve where the recipe would not.
-  std::vector<bool> from_earlier_run(state->world_from_cam.size(), false);
-  double largest_difference_deg = 0.0;
-  int num_too_far = 0;
-  if (warm_started) {
-    // Two solves of one problem may differ by a gauge rotation (each is held to the prior only
-    // weakly): the differences are judged after the mean one.
-    Eigen::Vector4d sum = Eigen::Vector4d::Zero();
-    for (size_t i = 0; i < warm->second.size() && i < state->world_from_cam.size(); ++i) {
-      if (!warm->second[i]) continue;
-      Eigen::Quaterniond d =
-          warm->second[i]->rotation * state->world_from_cam[i].rotation.inverse();
-      if (d.w() < 0) d.coeffs() = -d.coeffs();
-      sum += d.coeffs();
-    }
-    const Eigen::Quaterniond gauge =
-        sum.norm() > 0 ? Eigen::Quaterniond(sum.normalized()) : Eigen::Quaterniond::Identity();
-    for (size_t i = 0; i < warm->second.size() && i < state->world_from_cam.size(); ++i) {
-      if (!warm->second[i]) continue;
-      const double difference_deg =
-          RotationDistance(warm->second[i]->rotation, gauge * state->world_from_cam[i].rotation) *
-          180.0 / M_PI;
-      if (!(difference_deg <= kMaxWarmStartRotationDeg)) {
-        ++num_too_far;
-        continue;
-      }
-      largest_difference_deg = std::max(largest_difference_deg, difference_deg);
-      state->world_from_cam[i] = *warm->second[i];
-      from_earlier_run[i] = true;
-      ++pass.ray_time_init.num_images_from_earlier_run;
-    }
+  if (warm == input.warm_start.world_from_cam.end()) return from_earlier_run;
+  // Two solves of one problem may differ by a gauge rotation (each is held to the prior only
+  // weakly): the differences are judged after the mean one.
+  Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+  for (size_t i = 0; i < warm->second.size() && i < state->world_from_cam.size(); ++i) {
+    if (!warm->second[i]) continue;
+    Eigen::Quaterniond d = warm->second[i]->rotation * state->world_from_cam[i].rotation.inverse();
+    if (d.w() < 0) d.coeffs() = -d.coeffs();
+    sum += d.coeffs();
   }
-  state->layout =
-      options.parameterization == "anchored"
-          ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
-          : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
+  const Eigen::Quaterniond gauge =
+      sum.norm() > 0 ? Eigen::Quaterniond(sum.normalized()) : Eigen::Quaterniond::Identity();
+  for (size_t i = 0; i < warm->second.size() && i < state->world_from_cam.size(); ++i) {
+    if (!warm->second[i]) continue;
+    const double difference_deg =
+        RotationDistance(warm->second[i]->rotation, gauge * state->world_from_cam[i].rotation) *
+        180.0 / M_PI;
+    if (!(difference_deg <= kMaxWarmStartRotationDeg)) {
+      ++*num_too_far;
+      continue;
+    }
+    *largest_difference_deg = std::max(*largest_difference_deg, difference_deg);
+    state->world_from_cam[i] = *warm->second[i];
+    from_earlier_run[i] = true;
+    ++pass->ray_time_init.num_images_from_earlier_run;
+  }
+  return from_earlier_run;
+}
+
+// 2. Every ray time's start: the initialization (§3.2), then the value an earlier pass solved,
+// or an earlier run's where its image starts from that run, and in the basin-first finish the
+// ones the earlier passes' cap left out at their closest approach at the solved poses.
+std::vector<double> StartRayTimes(const RefineInput& input, const RefineOptions& options,
+                                  const PassSettings& settings, bool warm_started,
+                                  const std::vector<bool>& from_earlier_run,
+                                  double largest_difference_deg, int num_too_far, PassState* state,
+                                  RefinePassSummary* pass) {
   const ProblemLayout& layout = state->layout;
   std::vector<double> ray_times =
       InitialRayTimes(layout, input, state->world_from_cam, state->cameras, options.ray_time_init,
-                      options.ray_time_constant_m, &pass.ray_time_init);
-  // A later pass starts every ray time an earlier pass solved from its solved value ...
+                      options.ray_time_constant_m, &pass->ray_time_init);
   std::vector<bool> unsolved(ray_times.size(), true);
   for (size_t t = 0; t < ray_times.size(); ++t) {
     const auto it = state->ray_time_by_observation.find(
@@ -181,9 +174,8 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
     if (it == state->ray_time_by_observation.end()) continue;
     ray_times[t] = it->second;
     unsolved[t] = false;
-    ++pass.ray_time_init.num_warm_started;
+    ++pass->ray_time_init.num_warm_started;
   }
-  // ... or, from an earlier run's solution, from its value there (with the poses above).
   if (warm_started) {
     for (size_t t = 0; t < ray_times.size(); ++t) {
       const LayoutObservation& obs = layout.observations[layout.ray_time_observation[t]];
@@ -191,71 +183,48 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
       const auto it = input.warm_start.ray_times.find(KeyOf(obs));
       if (it == input.warm_start.ray_times.end()) continue;
       ray_times[t] = it->second;
-      if (unsolved[t]) ++pass.ray_time_init.num_warm_started;
+      if (unsolved[t]) ++pass->ray_time_init.num_warm_started;
       unsolved[t] = false;
-      ++pass.ray_time_init.num_ray_times_from_earlier_run;
+      ++pass->ray_time_init.num_ray_times_from_earlier_run;
     }
     spdlog::info(fmt::format(
         "refine: {}: started from the previous run's solution: {} of {} images (at most {:.3f}° "
         "from this run's start after their mean rotation{}), {} of {} ray times",
-        settings.name, pass.ray_time_init.num_images_from_earlier_run, state->world_from_cam.size(),
-        largest_difference_deg,
+        settings.name, pass->ray_time_init.num_images_from_earlier_run,
+        state->world_from_cam.size(), largest_difference_deg,
         num_too_far == 0 ? std::string()
                          : fmt::format("; {} further than {}° started as without it", num_too_far,
                                        kMaxWarmStartRotationDeg),
-        pass.ray_time_init.num_ray_times_from_earlier_run, ray_times.size()));
+        pass->ray_time_init.num_ray_times_from_earlier_run, ray_times.size()));
   }
-  // ... and, in the basin-first finish, the ones the earlier passes' cap left out at their own
-  // closest approach at the solved poses.
-  if (settings.start_unsolved_at_closest_approach && pass.ray_time_init.num_warm_started > 0) {
-    pass.ray_time_init.num_closest_approach_started = StartRayTimesAtClosestApproach(
+  if (settings.start_unsolved_at_closest_approach && pass->ray_time_init.num_warm_started > 0) {
+    pass->ray_time_init.num_closest_approach_started = StartRayTimesAtClosestApproach(
         layout, input, state->world_from_cam, state->cameras, unsolved, &ray_times);
   }
+  return ray_times;
+}
 
-  const bool self_calibration = pass.self_calibration;
-  pass.solver = options.solver == "ray_time_lm" || (options.solver == "auto" && !self_calibration)
-                    ? "ray_time_lm"
-                    : "ceres";
-  std::vector<double> solved_ray_times;
-  std::vector<bool> camera_observed;
-  std::optional<RayTimeLmProblem> lm_problem;
-  std::optional<RayTimeProblem> ceres_problem;
-  if (pass.solver == "ray_time_lm") {
-    lm_problem.emplace(BuildRayTimeLmProblem(input, layout, anchor, state->world_from_cam,
-                                             state->cameras, options.position_weight,
-                                             settings.orientation_weight, std::move(ray_times)));
-    for (const bool held : lm_problem->held) camera_observed.push_back(!held);
-  } else {
-    RayTimeProblemSettings problem_settings;
-    problem_settings.position_weight = options.position_weight;
-    problem_settings.orientation_weight = settings.orientation_weight;
-    problem_settings.loss_scale_px2 = settings.scales.front();
-    problem_settings.refine_focal = settings.refine_focal;
-    problem_settings.refine_principal_point = settings.refine_principal_point;
-    problem_settings.refine_distortion = settings.refine_distortion;
-    problem_settings.use_evaluation_cache = options.use_evaluation_cache;
-    problem_settings.num_threads = options.Threads();
-    ceres_problem.emplace(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
-                          problem_settings);
-    camera_observed = ceres_problem->camera_observed();
-  }
-  pass.build_seconds = SecondsSince(build_start);
-
-  pass.num_cameras = static_cast<int>(input.prior_world_from_cam.size());
-  pass.num_observations = static_cast<int>(layout.observations.size());
-  pass.num_ray_times = static_cast<int>(layout.ray_time_observation.size());
-  pass.num_tracks = layout.num_tracks;
-  pass.num_matches_input = layout.num_matches_input;
-  pass.num_matches_used = layout.num_matches_used;
-  pass.num_residuals = static_cast<int>(layout.residuals.size());
+// The problem's size in the summary and its log line, once it is built.
+void RecordBuild(const RefineInput& input, const ProblemLayout& layout,
+                 std::chrono::steady_clock::time_point build_start, RefinePassSummary* pass) {
+  pass->build_seconds = SecondsSince(build_start);
+  pass->num_cameras = static_cast<int>(input.prior_world_from_cam.size());
+  pass->num_observations = static_cast<int>(layout.observations.size());
+  pass->num_ray_times = static_cast<int>(layout.ray_time_observation.size());
+  pass->num_tracks = layout.num_tracks;
+  pass->num_matches_input = layout.num_matches_input;
+  pass->num_matches_used = layout.num_matches_used;
+  pass->num_residuals = static_cast<int>(layout.residuals.size());
   spdlog::info(
       fmt::format("refine: {}: {} cameras, {} of {} matches, {} residuals, {} ray times ({} init, "
                   "median depth {:.3g}), built in {:.2f} s, solver {}",
-                  pass.name, pass.num_cameras, pass.num_matches_used, pass.num_matches_input,
-                  pass.num_residuals, pass.num_ray_times, pass.ray_time_init.mode,
-                  pass.ray_time_init.median_depth, pass.build_seconds, pass.solver));
+                  pass->name, pass->num_cameras, pass->num_matches_used, pass->num_matches_input,
+                  pass->num_residuals, pass->num_ray_times, pass->ray_time_init.mode,
+                  pass->ray_time_init.median_depth, pass->build_seconds, pass->solver));
+}
 
-  const auto solve_start = std::chrono::steady_clock::now();
+// The GNC schedule of the pass (§3.5), whichever back-end runs it.
+GncSettings GncSettingsOf(const RefineOptions& options, const PassSettings& settings) {
   GncSettings gnc;
   gnc.scales = settings.scales;
   gnc.max_iterations = options.max_iterations;
@@ -263,41 +232,80 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   gnc.intermediate_function_tolerance = options.intermediate_function_tolerance;
   gnc.ends_solve = !settings.intermediate;
   gnc.max_step_doublings = options.max_step_doublings;
-  if (lm_problem) {
-    gnc.residual_norms = [&] {
-      return ResidualNorms(input, layout, lm_problem->world_from_cam, state->cameras,
-                           lm_problem->ray_times);
-    };
-    gnc.num_threads = options.Threads();
-    pass.stages = SolveGncRayTimeLm(&*lm_problem, gnc);
-    // The eliminated group is every ray time (§3.4), by construction.
-    pass.elimination_group_size = pass.num_ray_times;
-    state->world_from_cam = lm_problem->world_from_cam;
-    solved_ray_times = std::move(lm_problem->ray_times);
-    lm_problem.reset();
-  } else {
-    gnc.residual_norms = [&] {
-      CameraBlocks cameras = state->cameras;
-      cameras.cameras = ceres_problem->Intrinsics();
-      return ResidualNorms(input, layout, ceres_problem->WorldFromCam(), cameras,
-                           ceres_problem->ray_times());
-    };
-    gnc.num_threads = options.deterministic ? 1 : options.Threads();
-    pass.stages = SolveGncWithCeres(&*ceres_problem, gnc, &pass.elimination_group_size);
-    state->world_from_cam = ceres_problem->WorldFromCam();
-    state->cameras.cameras = ceres_problem->Intrinsics();
-    solved_ray_times = ceres_problem->ray_times();
-    ceres_problem.reset();
-  }
-  pass.solve_seconds = SecondsSince(solve_start);
-  pass.gauge_polish =
-      PolishGauge(anchor, camera_observed, options.position_weight, settings.orientation_weight,
-                  options.gauge_orientation_weight, &state->world_from_cam, &solved_ray_times);
-  for (size_t t = 0; t < solved_ray_times.size(); ++t) {
-    state->ray_time_by_observation[KeyOf(layout.observations[layout.ray_time_observation[t]])] =
-        solved_ray_times[t];
-  }
-  // The polish moves cameras and ray times by one similarity: the residuals are the solve's.
+  return gnc;
+}
+
+// 3a. The pass on the ray-time LM (every intrinsic held): built, solved; returns the solved ray
+// times, `camera_observed` the cameras the problem does not hold.
+std::vector<double> SolveOnRayTimeLm(const RefineInput& input, const RefineOptions& options,
+                                     const PassSettings& settings,
+                                     const std::vector<Rigid3>& anchor,
+                                     std::vector<double> ray_times,
+                                     std::chrono::steady_clock::time_point build_start,
+                                     std::vector<bool>* camera_observed, PassState* state,
+                                     RefinePassSummary* pass) {
+  const ProblemLayout& layout = state->layout;
+  RayTimeLmProblem problem = BuildRayTimeLmProblem(
+      input, layout, anchor, state->world_from_cam, state->cameras, options.position_weight,
+      settings.orientation_weight, std::move(ray_times));
+  for (const bool held : problem.held) camera_observed->push_back(!held);
+  RecordBuild(input, layout, build_start, pass);
+  const auto solve_start = std::chrono::steady_clock::now();
+  GncSettings gnc = GncSettingsOf(options, settings);
+  gnc.residual_norms = [&] {
+    return ResidualNorms(input, layout, problem.world_from_cam, state->cameras, problem.ray_times);
+  };
+  gnc.num_threads = options.Threads();
+  pass->stages = SolveGncRayTimeLm(&problem, gnc);
+  // The eliminated group is every ray time (§3.4), by construction.
+  pass->elimination_group_size = pass->num_ray_times;
+  state->world_from_cam = problem.world_from_cam;
+  pass->solve_seconds = SecondsSince(solve_start);
+  return std::move(problem.ray_times);
+}
+
+// 3b. The pass on Ceres (the passes that self-calibrate, or solver: ceres).
+std::vector<double> SolveOnCeres(const RefineInput& input, const RefineOptions& options,
+                                 const PassSettings& settings, const std::vector<Rigid3>& anchor,
+                                 const std::vector<double>& ray_times,
+                                 std::chrono::steady_clock::time_point build_start,
+                                 std::vector<bool>* camera_observed, PassState* state,
+                                 RefinePassSummary* pass) {
+  const ProblemLayout& layout = state->layout;
+  RayTimeProblemSettings problem_settings;
+  problem_settings.position_weight = options.position_weight;
+  problem_settings.orientation_weight = settings.orientation_weight;
+  problem_settings.loss_scale_px2 = settings.scales.front();
+  problem_settings.refine_focal = settings.refine_focal;
+  problem_settings.refine_principal_point = settings.refine_principal_point;
+  problem_settings.refine_distortion = settings.refine_distortion;
+  problem_settings.use_evaluation_cache = options.use_evaluation_cache;
+  problem_settings.num_threads = options.Threads();
+  RayTimeProblem problem(input, layout, anchor, state->world_from_cam, state->cameras, ray_times,
+                         problem_settings);
+  *camera_observed = problem.camera_observed();
+  RecordBuild(input, layout, build_start, pass);
+  const auto solve_start = std::chrono::steady_clock::now();
+  GncSettings gnc = GncSettingsOf(options, settings);
+  gnc.residual_norms = [&] {
+    CameraBlocks cameras = state->cameras;
+    cameras.cameras = problem.Intrinsics();
+    return ResidualNorms(input, layout, problem.WorldFromCam(), cameras, problem.ray_times());
+  };
+  gnc.num_threads = options.deterministic ? 1 : options.Threads();
+  pass->stages = SolveGncWithCeres(&problem, gnc, &pass->elimination_group_size);
+  state->world_from_cam = problem.WorldFromCam();
+  state->cameras.cameras = problem.Intrinsics();
+  pass->solve_seconds = SecondsSince(solve_start);
+  return problem.ray_times();
+}
+
+// 4. The residuals at the solution: per image their median (the frame checks), and the pass's
+// median, 90th percentile and mean match term, logged.
+void MeasureResiduals(const RefineInput& input, const RefineOptions& options,
+                      const std::vector<double>& solved_ray_times, PassState* state,
+                      RefinePassSummary* pass) {
+  const ProblemLayout& layout = state->layout;
   std::vector<double> norms =
       ResidualNorms(input, layout, state->world_from_cam, state->cameras, solved_ray_times);
   std::vector<std::vector<double>> by_image(input.prior_world_from_cam.size());
@@ -313,17 +321,68 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   for (const double norm : norms) {
     loss_sum += options.loss_scale_px2 * std::atan(norm * norm / options.loss_scale_px2);
   }
-  pass.match_cost_px2 = norms.empty() ? 0.0 : loss_sum / static_cast<double>(norms.size());
-  pass.residual_median_px = Median(norms, 0.0);
+  pass->match_cost_px2 = norms.empty() ? 0.0 : loss_sum / static_cast<double>(norms.size());
+  pass->residual_median_px = Median(norms, 0.0);
   if (!norms.empty()) {
     const size_t rank = (norms.size() * 9 + 9) / 10 - 1;  // nearest rank: ceil(0.9 n) - 1
     std::nth_element(norms.begin(), norms.begin() + rank, norms.end());
-    pass.residual_p90_px = norms[rank];
+    pass->residual_p90_px = norms[rank];
   }
   spdlog::info(fmt::format(
       "refine: {}: residuals at the solution: median {:.3g} px, 90th percentile {:.3g} px, mean "
       "match term {:.4g} px²",
-      pass.name, pass.residual_median_px, pass.residual_p90_px, pass.match_cost_px2));
+      pass->name, pass->residual_median_px, pass->residual_p90_px, pass->match_cost_px2));
+}
+
+}  // namespace
+
+RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
+                          const PassSettings& settings, const std::vector<Rigid3>& anchor,
+                          PassState* state) {
+  RefinePassSummary pass;
+  pass.name = settings.name;
+  pass.orientation_weight = settings.orientation_weight;
+  pass.self_calibration =
+      settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
+  // The back-end, chosen once: the ray-time LM holds every intrinsic.
+  pass.solver =
+      options.solver == "ray_time_lm" || (options.solver == "auto" && !pass.self_calibration)
+          ? "ray_time_lm"
+          : "ceres";
+  const auto build_start = std::chrono::steady_clock::now();
+  // 1.
+  double largest_difference_deg = 0.0;
+  int num_too_far = 0;
+  const bool warm_started =
+      settings.warm_startable && input.warm_start.world_from_cam.count(settings.name) > 0;
+  const std::vector<bool> from_earlier_run =
+      StartFromEarlierRun(input, settings, state, &pass, &largest_difference_deg, &num_too_far);
+  // 2.
+  state->layout =
+      options.parameterization == "anchored"
+          ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
+          : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
+  std::vector<double> ray_times =
+      StartRayTimes(input, options, settings, warm_started, from_earlier_run,
+                    largest_difference_deg, num_too_far, state, &pass);
+  // 3.
+  std::vector<bool> camera_observed;
+  std::vector<double> solved_ray_times =
+      pass.solver == "ray_time_lm"
+          ? SolveOnRayTimeLm(input, options, settings, anchor, std::move(ray_times), build_start,
+                             &camera_observed, state, &pass)
+          : SolveOnCeres(input, options, settings, anchor, ray_times, build_start, &camera_observed,
+                         state, &pass);
+  // 4. The gauge (a similarity: the residuals are the solve's), the solved ray times kept for
+  // the later passes, the residuals.
+  pass.gauge_polish =
+      PolishGauge(anchor, camera_observed, options.position_weight, settings.orientation_weight,
+                  options.gauge_orientation_weight, &state->world_from_cam, &solved_ray_times);
+  for (size_t t = 0; t < solved_ray_times.size(); ++t) {
+    state->ray_time_by_observation[KeyOf(
+        state->layout.observations[state->layout.ray_time_observation[t]])] = solved_ray_times[t];
+  }
+  MeasureResiduals(input, options, solved_ray_times, state, &pass);
   state->pass_world_from_cam[settings.name] = state->world_from_cam;
   return pass;
 }
