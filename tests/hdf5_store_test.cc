@@ -14,22 +14,16 @@
 #include "core/error.h"
 #include "core/version.h"
 #include "testing/random_draws.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 
 namespace raytime {
 namespace {
 
-class Hdf5StoreTest : public ::testing::Test {
+class Hdf5StoreTest : public TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_hdf5_" + std::to_string(getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  Hdf5StoreTest() : TempDirTest("hdf5") {}
 
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
   std::vector<std::string> DirectoryEntries() const {
@@ -40,8 +34,6 @@ class Hdf5StoreTest : public ::testing::Test {
     std::sort(names.begin(), names.end());
     return names;
   }
-
-  fs::path dir_;
 };
 
 // The message of the InputError that `f` throws ("" when it throws none).

@@ -21,6 +21,7 @@
 
 #include "core/atomic_file.h"
 #include "tests/raytime_command.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -35,17 +36,13 @@ std::string StageStatus(const json& summary, const std::string& id) {
   return "";
 }
 
-class HonestFailuresTest : public ::testing::Test {
+class HonestFailuresTest : public TempDirTest {
  protected:
+  HonestFailuresTest() : TempDirTest("honest") {}
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_honest_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    TempDirTest::SetUp();
     workdir_ = dir_ / "demo";
   }
-  void TearDown() override { fs::remove_all(dir_); }
 
   CommandResult Demo(const std::string& extra = "", const std::string& environment = "") {
     return RunRaytime("run configs/demo.yaml --workdir " + workdir_.string() + " " + extra,
@@ -64,7 +61,7 @@ class HonestFailuresTest : public ::testing::Test {
     return scene;
   }
 
-  fs::path dir_, workdir_;
+  fs::path workdir_;
 };
 
 // ---- 2. Resource limits and crashes.

@@ -20,6 +20,7 @@
 #include "formats/colmap_model.h"
 #include "formats/strecha.h"
 #include "tests/raytime_command.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -58,25 +59,18 @@ std::vector<std::string> TemporariesBelow(const fs::path& dir) {
   return found;
 }
 
-class NothingWrongLeavesTest : public ::testing::Test {
+class NothingWrongLeavesTest : public TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_leaves_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
+  NothingWrongLeavesTest() : TempDirTest("leaves") {}
   void TearDown() override {
     if (mounted_) ::umount(mounted_path_.c_str());
-    fs::remove_all(dir_);
+    TempDirTest::TearDown();
   }
 
   std::string Demo(const std::string& workdir, const std::string& extra = "") {
     return "run configs/demo.yaml --workdir " + workdir + " " + extra;
   }
 
-  fs::path dir_;
   bool mounted_ = false;
   std::string mounted_path_;
 };

@@ -18,6 +18,7 @@
 #include "core/atomic_file.h"
 #include "tests/raytime_command.h"
 #include "tests/shared_data.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -39,16 +40,13 @@ std::vector<std::string> StageStatuses(const json& summary) {
   return statuses;
 }
 
-class PipelineTest : public ::testing::Test {
+class PipelineTest : public raytime::TempDirTest {
  protected:
+  PipelineTest() : TempDirTest("pipeline_test") {}
   void SetUp() override {
-    workdir_ = fs::temp_directory_path() /
-               ("raytime_pipeline_test_" + std::to_string(::getpid()) + "_" +
-                ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(workdir_);
-    fs::create_directories(workdir_);
+    TempDirTest::SetUp();
+    workdir_ = dir_;
   }
-  void TearDown() override { fs::remove_all(workdir_); }
 
   std::string WriteFile(const std::string& name, const std::string& contents) {
     const fs::path path = workdir_ / name;

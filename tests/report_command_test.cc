@@ -10,6 +10,7 @@
 #include <string>
 
 #include "tests/raytime_command.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 
@@ -29,16 +30,9 @@ bool MatplotlibInstalled() {
   return std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") == 0;
 }
 
-class ReportCommandTest : public ::testing::Test {
+class ReportCommandTest : public raytime::TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_report_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  ReportCommandTest() : TempDirTest("report_test") {}
 
   // Two scenes (the sample and one that does not exist, so its runs fail) x levels 0 and 4 x
   // two seeds; the prior is scored against the ground truth. Returns the sweep's directory.
@@ -63,8 +57,6 @@ sweep:
     EXPECT_TRUE(fs::exists(fs::path(sweep_dir) / "sweep.json")) << run.output;
     return sweep_dir;
   }
-
-  fs::path dir_;
 };
 
 TEST_F(ReportCommandTest, ReportsCountsCellsAndPlotsOfASweep) {

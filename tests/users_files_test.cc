@@ -12,6 +12,7 @@
 
 #include "core/atomic_file.h"
 #include "tests/raytime_command.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -24,17 +25,13 @@ void Write(const fs::path& path, const std::string& text) {
   std::ofstream(path) << text;
 }
 
-class UsersFilesTest : public ::testing::Test {
+class UsersFilesTest : public TempDirTest {
  protected:
+  UsersFilesTest() : TempDirTest("users_files") {}
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_users_files_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    TempDirTest::SetUp();
     workdir_ = dir_ / "demo";
   }
-  void TearDown() override { fs::remove_all(dir_); }
 
   CommandResult Demo(const std::string& extra = "") {
     return RunRaytime("run configs/demo.yaml --workdir " + workdir_.string() +
@@ -55,7 +52,7 @@ class UsersFilesTest : public ::testing::Test {
     EXPECT_EQ(ReadTextFile((workdir_ / "3dgs" / "refined" / "my_split.txt").string()), "0001.jpg");
   }
 
-  fs::path dir_, workdir_;
+  fs::path workdir_;
 };
 
 // A rerun whose export writes again (its options changed) and nothing else: the stages before it

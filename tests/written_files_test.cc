@@ -13,6 +13,7 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
+#include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
 
@@ -24,16 +25,9 @@ void Write(const fs::path& path, const std::string& text) {
   std::ofstream(path) << text;
 }
 
-class WrittenFilesTest : public ::testing::Test {
+class WrittenFilesTest : public TempDirTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("raytime_written_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
+  WrittenFilesTest() : TempDirTest("written") {}
 
   // A folder as an export writes it: two files and one in a subfolder.
   fs::path Export() {
@@ -45,8 +39,6 @@ class WrittenFilesTest : public ::testing::Test {
     });
     return folder;
   }
-
-  fs::path dir_;
 };
 
 // A copy of the folder (cp -r gives every file a new time) is still raytime's; an edit of the same

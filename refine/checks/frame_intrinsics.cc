@@ -22,7 +22,7 @@ namespace raytime {
 namespace {
 
 // Matches sampled per pair: enough for a median, few enough for a small solve per frame.
-constexpr int kSamplesPerPair = 100;
+constexpr int kRefitSamplesPerPair = 100;
 // The robust loss's scale, pixels: matches a few pixels off (outliers, a wrong pair) stop pulling.
 constexpr double kLossScalePx = 2.0;
 constexpr int kMaxIterations = 50;
@@ -120,7 +120,7 @@ struct EpipolarPlaneCost {
   CameraIntrinsics given_;
 };
 
-// The frame's samples: up to kSamplesPerPair evenly spaced matches of each of its pairs.
+// The frame's samples: up to kRefitSamplesPerPair evenly spaced matches of each of its pairs.
 std::vector<EpipolarSample> SamplesOf(int image, const RefineInput& input,
                                       const std::vector<Rigid3>& world_from_cam,
                                       const std::vector<CameraIntrinsics>& intrinsics) {
@@ -130,7 +130,7 @@ std::vector<EpipolarSample> SamplesOf(int image, const RefineInput& input,
     const bool first = pair.image1 == image;
     const int other = first ? pair.image2 : pair.image1;
     const Eigen::Index n = pair.matches.rows();
-    const Eigen::Index stride = std::max<Eigen::Index>(1, n / kSamplesPerPair);
+    const Eigen::Index stride = std::max<Eigen::Index>(1, n / kRefitSamplesPerPair);
     const Eigen::Matrix3d other_rotation = world_from_cam[other].rotation.toRotationMatrix();
     for (Eigen::Index m = 0; m < n; m += stride) {
       const uint32_t own_keypoint = pair.matches(m, first ? 0 : 1);
