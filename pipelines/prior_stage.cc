@@ -218,48 +218,10 @@ class PriorStage : public StageWithOptions<PriorOptions> {
 
   nlohmann::json Run(const StageContext& context) override {
     const ImageSet images = Hdf5Reader(context.Require(kArtifactImages)).ReadImages();
-    PoseSet prior;
     Warnings warnings;
     nlohmann::json summary = {{"source", options_.source}};
-    if (options_.source == "file") {
-      prior = ReadPoseFile(options_.format, options_.path, &images);
-      DropPosesWithoutImages(images, &prior, &warnings);
-    } else if (options_.source == "capture") {
-      if (!context.artifacts.count(PoseArtifact("capture"))) {
-        throw InputError(
-            "prior.source 'capture': this dataset has no capture poses (the dataset formats "
-            "that bring the capture app's poses are " +
-            std::string(kFormatsWithCapturePoses) +
-            "); use prior.source 'file' with the poses' file, or 'perturb' on ground truth");
-      }
-      prior = Hdf5Reader(context.Require(PoseArtifact("capture"))).ReadPoseSet("capture");
-      DropPosesWithoutImages(images, &prior, &warnings);
-    } else if (options_.source == "pose_set") {
-      prior = Hdf5Reader(context.Require(PoseArtifact(options_.pose_set)))
-                  .ReadPoseSet(options_.pose_set);
-    } else if (options_.source == "bootstrap") {
-      prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
-    } else {
-      if (!context.artifacts.count(PoseArtifact("ground_truth"))) {
-        throw InputError("prior.source '" + options_.source + "': " + options_.source +
-                         " needs ground truth; this dataset has none — use source: capture "
-                         "(the capture app's poses, formats " +
-                         kFormatsWithCapturePoses + ") or file");
-      }
-      const PoseSet ground_truth = WithConvention(
-          Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth"));
-      if (options_.source == "ground_truth") {
-        prior = ground_truth;
-      } else {
-        PerturbationSummary perturbation;
-        prior = PerturbPoses(ground_truth, options_.perturbation, &perturbation);
-        summary["translation_m"] = perturbation.translation_m;
-        summary["scene_distance_m"] = perturbation.scene_distance_m;
-        spdlog::info(fmt::format("prior: {} perturbation at {}° / {:.4f} m (seed {})",
-                                 options_.perturbation.mode, options_.perturbation.level_deg,
-                                 perturbation.translation_m, options_.perturbation.seed));
-      }
-    }
+    // 1. The poses of the chosen source, in the convention they were read with.
+    PoseSet prior = SourcePoses(context, images, &summary, &warnings);
     if (options_.source == "file" || options_.source == "capture" ||
         options_.source == "pose_set") {
       prior = WithConvention(prior);
@@ -268,53 +230,9 @@ class PriorStage : public StageWithOptions<PriorOptions> {
       summary["convention"] = options_.convention;
       spdlog::info(fmt::format("prior: poses read with convention {}", options_.convention));
     }
-    if (options_.repair != "none") {
-      const Hdf5Reader bootstrap_reader(context.Require(PoseArtifact("bootstrap")));
-      const PoseSet bootstrap = bootstrap_reader.ReadPoseSet("bootstrap");
-      PriorRepairSummary repair;
-      try {
-        if (options_.repair == "rotations") {
-          prior = RepairRotations(prior, bootstrap, &repair);
-        } else if (options_.repair == "replace") {
-          prior = ReplaceWithBootstrap(prior, bootstrap, &repair);
-        } else {
-          prior = RepairIfCoarse(prior, bootstrap, options_.repair_min_rotation_change_deg,
-                                 !BootstrapIsWeak(bootstrap_reader), &repair);
-        }
-      } catch (const std::exception& e) {  // InputError, or a repair's precondition
-        throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());
-      }
-      summary["repair"] = {{"mode", repair.mode},
-                           {"num_repaired", repair.num_repaired},
-                           {"num_kept_prior", repair.num_kept_prior},
-                           {"scale", repair.scale},
-                           {"median_rotation_change_deg", repair.median_rotation_change_deg}};
-      if (options_.repair == "auto") {
-        summary["repair"]["requested"] = "auto";
-        summary["repair"]["min_rotation_change_deg"] = repair.min_rotation_change_deg;
-        const bool kept = repair.mode == "none";
-        const std::string action =
-            kept ? std::string("prior kept")
-            : repair.mode == "replace"
-                ? fmt::format("coarse: {} poses replaced by the bootstrap's, {} kept",
-                              repair.num_repaired, repair.num_kept_prior)
-                : fmt::format(
-                      "coarse: rotations of {} images repaired (the graph does not "
-                      "support the bootstrap's positions), {} kept",
-                      repair.num_repaired, repair.num_kept_prior);
-        spdlog::log(kept ? spdlog::level::info : spdlog::level::warn,
-                    fmt::format("prior: the prior's rotations are {:.2f}° (median) from the "
-                                "bootstrap's averaged ones, {} the threshold {}° -> {}",
-                                repair.median_rotation_change_deg, kept ? "within" : "beyond",
-                                repair.min_rotation_change_deg, action));
-      } else {
-        spdlog::info(
-            fmt::format("prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
-                        "rotation change {:.2f}°",
-                        repair.mode, repair.num_repaired, repair.num_kept_prior,
-                        repair.median_rotation_change_deg));
-      }
-    }
+    // 2. The repair from the bootstrap's poses, if asked for.
+    if (options_.repair != "none") Repair(context, &prior, &summary);
+    // 3. Checked and written, with what the refine stage reads beside it.
     ReportImagesWithoutPose(images, prior, &warnings);
     RefuseNonFinite(prior);
     Hdf5Writer writer(context.output_path);
@@ -335,6 +253,106 @@ class PriorStage : public StageWithOptions<PriorOptions> {
     summary["num_poses"] = prior.size();
     summary["warnings"] = WarningsToJson(warnings);
     return summary;
+  }
+
+ private:
+  // The poses the source option names (a file, the capture's, another pose set, the bootstrap's,
+  // the ground truth or a perturbation of it); poses of images not in the dataset dropped, with a
+  // warning.
+  PoseSet SourcePoses(const StageContext& context, const ImageSet& images, nlohmann::json* summary,
+                      Warnings* warnings) const {
+    PoseSet prior;
+    if (options_.source == "file") {
+      prior = ReadPoseFile(options_.format, options_.path, &images);
+      DropPosesWithoutImages(images, &prior, warnings);
+    } else if (options_.source == "capture") {
+      if (!context.artifacts.count(PoseArtifact("capture"))) {
+        throw InputError(
+            "prior.source 'capture': this dataset has no capture poses (the dataset formats "
+            "that bring the capture app's poses are " +
+            std::string(kFormatsWithCapturePoses) +
+            "); use prior.source 'file' with the poses' file, or 'perturb' on ground truth");
+      }
+      prior = Hdf5Reader(context.Require(PoseArtifact("capture"))).ReadPoseSet("capture");
+      DropPosesWithoutImages(images, &prior, warnings);
+    } else if (options_.source == "pose_set") {
+      prior = Hdf5Reader(context.Require(PoseArtifact(options_.pose_set)))
+                  .ReadPoseSet(options_.pose_set);
+    } else if (options_.source == "bootstrap") {
+      prior = Hdf5Reader(context.Require(PoseArtifact("bootstrap"))).ReadPoseSet("bootstrap");
+    } else {
+      if (!context.artifacts.count(PoseArtifact("ground_truth"))) {
+        throw InputError("prior.source '" + options_.source + "': " + options_.source +
+                         " needs ground truth; this dataset has none — use source: capture "
+                         "(the capture app's poses, formats " +
+                         kFormatsWithCapturePoses + ") or file");
+      }
+      const PoseSet ground_truth = WithConvention(
+          Hdf5Reader(context.Require(PoseArtifact("ground_truth"))).ReadPoseSet("ground_truth"));
+      if (options_.source == "ground_truth") {
+        prior = ground_truth;
+      } else {
+        PerturbationSummary perturbation;
+        prior = PerturbPoses(ground_truth, options_.perturbation, &perturbation);
+        (*summary)["translation_m"] = perturbation.translation_m;
+        (*summary)["scene_distance_m"] = perturbation.scene_distance_m;
+        spdlog::info(fmt::format("prior: {} perturbation at {}° / {:.4f} m (seed {})",
+                                 options_.perturbation.mode, options_.perturbation.level_deg,
+                                 perturbation.translation_m, options_.perturbation.seed));
+      }
+    }
+    return prior;
+  }
+
+  // Replaces the prior's rotations or poses by the bootstrap's (prior.repair), said in the
+  // summary and the log.
+  void Repair(const StageContext& context, PoseSet* prior_poses, nlohmann::json* summary) const {
+    PoseSet& prior = *prior_poses;
+    const Hdf5Reader bootstrap_reader(context.Require(PoseArtifact("bootstrap")));
+    const PoseSet bootstrap = bootstrap_reader.ReadPoseSet("bootstrap");
+    PriorRepairSummary repair;
+    try {
+      if (options_.repair == "rotations") {
+        prior = RepairRotations(prior, bootstrap, &repair);
+      } else if (options_.repair == "replace") {
+        prior = ReplaceWithBootstrap(prior, bootstrap, &repair);
+      } else {
+        prior = RepairIfCoarse(prior, bootstrap, options_.repair_min_rotation_change_deg,
+                               !BootstrapIsWeak(bootstrap_reader), &repair);
+      }
+    } catch (const std::exception& e) {  // InputError, or a repair's precondition
+      throw InputError(std::string("prior.repair '") + options_.repair + "': " + e.what());
+    }
+    (*summary)["repair"] = {{"mode", repair.mode},
+                            {"num_repaired", repair.num_repaired},
+                            {"num_kept_prior", repair.num_kept_prior},
+                            {"scale", repair.scale},
+                            {"median_rotation_change_deg", repair.median_rotation_change_deg}};
+    if (options_.repair == "auto") {
+      (*summary)["repair"]["requested"] = "auto";
+      (*summary)["repair"]["min_rotation_change_deg"] = repair.min_rotation_change_deg;
+      const bool kept = repair.mode == "none";
+      const std::string action =
+          kept ? std::string("prior kept")
+          : repair.mode == "replace"
+              ? fmt::format("coarse: {} poses replaced by the bootstrap's, {} kept",
+                            repair.num_repaired, repair.num_kept_prior)
+              : fmt::format(
+                    "coarse: rotations of {} images repaired (the graph does not "
+                    "support the bootstrap's positions), {} kept",
+                    repair.num_repaired, repair.num_kept_prior);
+      spdlog::log(kept ? spdlog::level::info : spdlog::level::warn,
+                  fmt::format("prior: the prior's rotations are {:.2f}° (median) from the "
+                              "bootstrap's averaged ones, {} the threshold {}° -> {}",
+                              repair.median_rotation_change_deg, kept ? "within" : "beyond",
+                              repair.min_rotation_change_deg, action));
+    } else {
+      spdlog::info(
+          fmt::format("prior: {} repair from the bootstrap: {} poses repaired, {} kept, median "
+                      "rotation change {:.2f}°",
+                      repair.mode, repair.num_repaired, repair.num_kept_prior,
+                      repair.median_rotation_change_deg));
+    }
   }
 };
 
