@@ -130,6 +130,16 @@ struct RunCommand {
                       "After a sweep, do not write the campaign report (WORKDIR/report.md, plots)");
   }
 
+  // The pipeline file with the --set overrides applied.
+  PipelineSpec Spec() const {
+    PipelineSpec spec = LoadPipeline(pipeline_path);
+    for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
+    return spec;
+  }
+  std::string EffectiveWorkdir(const PipelineSpec& spec) const {
+    return workdir.empty() ? spec.workdir : workdir;
+  }
+
   // The parent's part once the run's process has ended (core/supervise.h): a process killed by
   // a signal, or one that ended leaving its record at "running", crashed; its record is finished
   // here. Returns the exit status.
@@ -149,9 +159,8 @@ struct RunCommand {
     if (cause.empty()) cause = "crash";
     if (command->parsed()) {
       try {
-        PipelineSpec spec = LoadPipeline(pipeline_path);
-        for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
-        const std::string effective = workdir.empty() ? spec.workdir : workdir;
+        const PipelineSpec spec = Spec();
+        const std::string effective = EffectiveWorkdir(spec);
         if (spec.sweep.empty() && RecordCrashedRun(spec, effective, end.child, run_start, message,
                                                    cause, end.status.signal)) {
           spdlog::error(message + " (recorded in " + effective + "/summary.json)");
@@ -173,13 +182,12 @@ struct RunCommand {
           "raytime run: --workdir is empty; give a directory, or leave the option "
           "out to use the pipeline's 'workdir'");
     }
-    PipelineSpec spec = LoadPipeline(pipeline_path);
-    for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
+    const PipelineSpec spec = Spec();
     run_options.workdir = workdir;
     run_options.force = force;
     // A sweep ends with its campaign report, so one command reproduces a ladder's tables and
     // plots; failed runs are listed in it, and the failure is still the exit status.
-    const std::string effective_workdir = workdir.empty() ? spec.workdir : workdir;
+    const std::string effective_workdir = EffectiveWorkdir(spec);
     // With the Slurm backend the collect job writes the report (unless the sweep is awaited).
     const bool report_after = !spec.sweep.empty() && !no_report &&
                               (run_options.backend == "local" || run_options.slurm_wait);

@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <new>
 #include <system_error>
 
@@ -20,7 +21,9 @@ std::string LimitText(int resource, bool bytes) {
   struct rlimit limit {};
   if (::getrlimit(resource, &limit) != 0 || limit.rlim_cur == RLIM_INFINITY) return "unlimited";
   if (!bytes) return std::to_string(limit.rlim_cur);
-  return std::to_string(static_cast<double>(limit.rlim_cur) / 1e9).substr(0, 4) + " GB";
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.2f GB", static_cast<double>(limit.rlim_cur) / 1e9);
+  return text;
 }
 
 }  // namespace
@@ -102,15 +105,11 @@ FailureDescription DescribeFailure(const std::exception& error) {
   return description;
 }
 
-long RaiseOpenFileLimit() {
+void RaiseOpenFileLimit() {
   struct rlimit limit {};
-  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0) return -1;
-  if (limit.rlim_cur < limit.rlim_max) {
-    limit.rlim_cur = limit.rlim_max;
-    ::setrlimit(RLIMIT_NOFILE, &limit);
-    ::getrlimit(RLIMIT_NOFILE, &limit);
-  }
-  return limit.rlim_cur == RLIM_INFINITY ? -1 : static_cast<long>(limit.rlim_cur);
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0 || limit.rlim_cur >= limit.rlim_max) return;
+  limit.rlim_cur = limit.rlim_max;
+  ::setrlimit(RLIMIT_NOFILE, &limit);
 }
 
 }  // namespace raytime

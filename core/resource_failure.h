@@ -40,7 +40,7 @@ std::string ResourceNamedIn(const std::string& text);
 std::string ResourceAdvice(const std::string& cause);
 
 // Raises this process's soft limit on open files to its hard limit (a shell's default soft limit
-// is 1024 where the hard one is often far higher); returns the limit now in force.
-long RaiseOpenFileLimit();
+// is 1024 where the hard one is often far higher).
+void RaiseOpenFileLimit();
 
 }  // namespace raytime

@@ -4,7 +4,6 @@
 #include <poll.h>
 #include <signal.h>
 #include <sys/prctl.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -30,8 +29,9 @@ void KeepTail(std::string* tail, const char* data, size_t size, size_t max_bytes
 }
 
 // Copies the child's stderr to ours until the pipe ends, or until the child has ended and the
-// pipe is drained (a grandchild, COLMAP or a trainer, may hold it open longer); returns the tail.
-std::string PassStderrThrough(int fd, pid_t child, int* status) {
+// pipe is drained (a grandchild, COLMAP or a trainer, may hold it open longer); returns the tail,
+// `status` how the child ended.
+std::string PassStderrThrough(int fd, pid_t child, ProcessStatus* status) {
   std::string tail;
   bool ended = false;
   char buffer[4096];
@@ -49,10 +49,9 @@ std::string PassStderrThrough(int fd, pid_t child, int* status) {
       continue;
     }
     if (ended) break;
-    ended = ::waitpid(child, status, WNOHANG) == child;
+    ended = WaitProcessFor(child, 0, status);
   }
-  while (!ended && ::waitpid(child, status, 0) < 0 && errno == EINTR) {
-  }
+  if (!ended) *status = WaitProcess(child);
   return tail;
 }
 
@@ -96,19 +95,12 @@ std::optional<SupervisedEnd> ForkSupervised() {
   for (const int signal : {SIGINT, SIGTERM, SIGHUP, SIGQUIT}) ::sigaction(signal, &action, nullptr);
   SupervisedEnd end;
   end.child = child;
-  int status = 0;
   if (capture) {
     ::close(pipe_fds[1]);
-    end.stderr_tail = PassStderrThrough(pipe_fds[0], child, &status);
+    end.stderr_tail = PassStderrThrough(pipe_fds[0], child, &end.status);
     ::close(pipe_fds[0]);
   } else {
-    while (::waitpid(child, &status, 0) < 0 && errno == EINTR) {
-    }
-  }
-  if (WIFSIGNALED(status)) {
-    end.status.signal = WTERMSIG(status);
-  } else {
-    end.status.exit_code = WEXITSTATUS(status);
+    end.status = WaitProcess(child);
   }
   return end;
 }

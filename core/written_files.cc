@@ -1,20 +1,18 @@
 #include "core/written_files.h"
 
-#include <xxhash.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
-#include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
-#include <memory>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
 
 #include "core/atomic_file.h"
+#include "core/content_hash.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;
@@ -25,22 +23,6 @@ namespace {
 // Files up to this size are also identified by their contents (a 3dgs folder's images, hundreds
 // of megabytes in all, are each below it; a longer file is identified by size and time alone).
 constexpr std::uintmax_t kHashedFileBytes = 64ull << 20;
-
-// XXH3-64 of a file's contents, as hex.
-std::string ContentHash(const fs::path& file) {
-  std::ifstream in(file, std::ios::binary);
-  std::unique_ptr<XXH3_state_t, decltype(&XXH3_freeState)> state(XXH3_createState(),
-                                                                 &XXH3_freeState);
-  XXH3_64bits_reset(state.get());
-  std::vector<char> buffer(1 << 20);
-  while (in.read(buffer.data(), buffer.size()) || in.gcount() > 0) {
-    XXH3_64bits_update(state.get(), buffer.data(), static_cast<size_t>(in.gcount()));
-  }
-  char hex[17];
-  std::snprintf(hex, sizeof(hex), "%016llx",
-                static_cast<unsigned long long>(XXH3_64bits_digest(state.get())));
-  return hex;
-}
 
 int64_t ModificationNs(const fs::path& file) {
   const auto time = fs::last_write_time(file).time_since_epoch();
@@ -53,7 +35,7 @@ int64_t ModificationNs(const fs::path& file) {
 json Stamp(const fs::path& file) {
   const std::uintmax_t size = fs::file_size(file);
   json stamp = {{"size", size}, {"mtime_ns", ModificationNs(file)}};
-  if (size <= kHashedFileBytes) stamp["xxh3"] = ContentHash(file);
+  if (size <= kHashedFileBytes) stamp["xxh3"] = HashFileContents(file.string());
   return stamp;
 }
 
@@ -63,7 +45,7 @@ bool Matches(const fs::path& file, const json& stamp) {
     return false;
   }
   if (stamp.value("mtime_ns", int64_t(0)) == ModificationNs(file)) return true;
-  return stamp.contains("xxh3") && stamp["xxh3"] == ContentHash(file);
+  return stamp.contains("xxh3") && stamp["xxh3"] == HashFileContents(file.string());
 }
 
 // The record of `folder`: relative path -> stamp; empty when it has none or it does not parse
@@ -209,6 +191,10 @@ std::string UnusedPath(const std::string& wanted) {
   std::string path = wanted;
   for (int k = 1; Exists(path); ++k) path = wanted + "." + std::to_string(k);
   return path;
+}
+
+std::string DatedUnusedPath(const std::string& path) {
+  return UnusedPath(path + "." + std::to_string(std::time(nullptr)));
 }
 
 }  // namespace raytime

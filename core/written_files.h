@@ -41,5 +41,8 @@ void CarryEntriesOver(const std::vector<std::string>& entries, const std::string
 // `wanted` when nothing is there, else the first of `wanted`.1, `wanted`.2, ... that is free: where
 // something raytime keeps (an earlier folder, a stale copy) goes without replacing what is there.
 std::string UnusedPath(const std::string& wanted);
+// UnusedPath of `path`.<seconds since the epoch>: where an earlier move's result is kept when a
+// new one needs its place (a stale/ slot holding the user's files, a trainer's derived files).
+std::string DatedUnusedPath(const std::string& path);
 
 }  // namespace raytime

@@ -229,6 +229,36 @@ Eigen::Matrix3d ScaleK(const Eigen::Matrix3d& K, int width, int height, int new_
   return scaled;
 }
 
+CameraIntrinsics ScaleCamera(const CameraIntrinsics& camera, int width, int height, int new_width,
+                             int new_height) {
+  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+  K(0, 0) = camera.fx();
+  K(1, 1) = camera.fy();
+  K(0, 2) = camera.cx();
+  K(1, 2) = camera.cy();
+  const Eigen::Matrix3d scaled = ScaleK(K, width, height, new_width, new_height);
+  CameraIntrinsics out = camera;
+  out.width = new_width;
+  out.height = new_height;
+  out.params[kFx] = scaled(0, 0);
+  out.params[kFy] = scaled(1, 1);
+  out.params[kCx] = scaled(0, 2);
+  out.params[kCy] = scaled(1, 2);
+  return out;
+}
+
+void RequireRescaledView(int width, int height, const ImageSize& size, const std::string& source,
+                         const std::string& image_path) {
+  const double sx = double(size.width) / width, sy = double(size.height) / height;
+  if (std::abs(sx / sy - 1.0) <= 0.01) return;
+  ThrowInput(source, 0,
+             "intrinsics are for " + std::to_string(width) + "x" + std::to_string(height) +
+                 " pixels but " + image_path + " is " + std::to_string(size.width) + "x" +
+                 std::to_string(size.height) +
+                 ": another aspect ratio (rotated or cropped), not a rescaled image" +
+                 ExifOrientationNote(size));
+}
+
 // Images in the recording's image folder that no frame of its files names have no pose and no
 // intrinsics, so they cannot take part; a user who sees 23 of 24 images refined must be told why
 // (a photo whose metadata file is missing). Only where the frames themselves lie in that folder
@@ -286,15 +316,7 @@ Dataset DatasetFromRecording(CaptureRecording recording) {
     Eigen::Matrix3d K = *frame.K;
     if (frame.width > 0 && frame.height > 0 &&
         (frame.width != size.width || frame.height != size.height)) {
-      const double sx = double(size.width) / frame.width, sy = double(size.height) / frame.height;
-      if (std::abs(sx / sy - 1.0) > 0.01) {
-        ThrowInput(frame.source, 0,
-                   "intrinsics are for " + std::to_string(frame.width) + "x" +
-                       std::to_string(frame.height) + " pixels but " + image_path + " is " +
-                       std::to_string(size.width) + "x" + std::to_string(size.height) +
-                       ": another aspect ratio (rotated or cropped), not a rescaled image" +
-                       ExifOrientationNote(size));
-      }
+      RequireRescaledView(frame.width, frame.height, size, frame.source, image_path);
       K = ScaleK(K, frame.width, frame.height, size.width, size.height);
       rescaled.images.push_back(frame.name);
       rescaled.details["from"] = std::to_string(frame.width) + "x" + std::to_string(frame.height);

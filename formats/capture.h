@@ -96,6 +96,15 @@ ImageSize ReadImageSize(const std::string& path);
 // 0.5).
 Eigen::Matrix3d ScaleK(const Eigen::Matrix3d& K, int width, int height, int new_width,
                        int new_height);
+// The same for a camera's intrinsics (distortion, in normalized coordinates, unchanged).
+CameraIntrinsics ScaleCamera(const CameraIntrinsics& camera, int width, int height, int new_width,
+                             int new_height);
+
+// InputError at `source` (the file holding the intrinsics) unless `image_path`, of `size`, is the
+// width x height view rescaled: the same aspect ratio within 1 %; another is a rotated or cropped
+// image, and the message names its EXIF orientation where it has one.
+void RequireRescaledView(int width, int height, const ImageSize& size, const std::string& source,
+                         const std::string& image_path);
 
 // The dataset of a recording: one image per frame with an image (sizes read from the files;
 // intrinsics at another size of the same aspect are rescaled with an "intrinsics_rescaled"

@@ -228,6 +228,14 @@ std::string CamerasText(const ColmapModel& model) {
   return out.str();
 }
 
+}  // namespace
+
+bool ColmapTextHoldsName(const std::string& name) {
+  return !name.empty() && text::SplitWhitespace(name).size() == 1 && name == text::Trim(name);
+}
+
+namespace {
+
 std::string ImagesText(const ColmapModel& model) {
   size_t num_observations = 0;
   for (const auto& [id, image] : model.images) num_observations += image.points2D.size();
@@ -238,9 +246,7 @@ std::string ImagesText(const ColmapModel& model) {
       << "# Number of images: " << model.images.size() << ", mean observations per image: "
       << (model.images.empty() ? 0.0 : double(num_observations) / model.images.size()) << "\n";
   for (const auto& [id, image] : model.images) {
-    // COLMAP's text reader splits on spaces, so such a name would not survive; binary keeps it.
-    if (image.name.empty() || text::SplitWhitespace(image.name).size() != 1 ||
-        image.name != text::Trim(image.name)) {
+    if (!ColmapTextHoldsName(image.name)) {
       throw InputError("image name '" + image.name +
                        "' is empty or has whitespace; COLMAP text cannot hold it");
     }

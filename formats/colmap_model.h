@@ -62,6 +62,9 @@ ColmapModel ReadColmapModelBinary(const std::string& dir);
 // Writers are atomic per folder; rotations are written as unit quaternions with 17 significant
 // digits so a text round trip preserves poses to 1e-9.
 void WriteColmapModelText(const ColmapModel& model, const std::string& dir);
+// Whether COLMAP's text model holds image `name` as it is: its reader splits lines on spaces, so a
+// name that is empty or has whitespace would not survive (the binary model keeps it).
+bool ColmapTextHoldsName(const std::string& name);
 void WriteColmapModelBinary(const ColmapModel& model, const std::string& dir);
 
 // COLMAP camera -> raytime intrinsics. Supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL,

@@ -2,7 +2,6 @@
 #include "core/atomic_file.h"
 
 #include <algorithm>
-#include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -119,22 +118,11 @@ void FitCamerasToImageFiles(ImageSet* images, Warnings* warnings) {
         (size.width == image.width && size.height == image.height)) {
       continue;
     }
-    const double sx = double(size.width) / image.width, sy = double(size.height) / image.height;
+    RequireRescaledView(image.width, image.height, size, path, path);
     const std::string stated = std::to_string(image.width) + "x" + std::to_string(image.height);
     const std::string actual = std::to_string(size.width) + "x" + std::to_string(size.height);
-    if (std::abs(sx / sy - 1.0) > 0.01) {
-      ThrowInput(path, 0,
-                 "image is " + actual + " but its intrinsics are for " + stated +
-                     " pixels: another aspect ratio (rotated or cropped), not a rescaled image" +
-                     ExifOrientationNote(size));
-    }
-    CameraIntrinsics camera = images->cameras[image.camera_index];
-    camera.params[kFx] *= sx;
-    camera.params[kFy] *= sy;
-    camera.params[kCx] = (camera.params[kCx] + 0.5) * sx - 0.5;
-    camera.params[kCy] = (camera.params[kCy] + 0.5) * sy - 0.5;
-    camera.width = size.width;
-    camera.height = size.height;
+    const CameraIntrinsics camera = ScaleCamera(images->cameras[image.camera_index], image.width,
+                                                image.height, size.width, size.height);
     const auto same = std::find(images->cameras.begin(), images->cameras.end(), camera);
     image.camera_index = static_cast<int>(same - images->cameras.begin());
     if (same == images->cameras.end()) images->cameras.push_back(camera);

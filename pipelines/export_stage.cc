@@ -5,7 +5,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <ctime>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -42,9 +41,9 @@ struct ExportStageOptions {
   TrainerExportOptions trainer;
   // A refined set's frames the refine stage doubted (refine/checks/frame_verdicts.h: its matches do
   // not hold it and no trusted prior places it, its pairs are unexplained, its intrinsics look
-  // wrong,
-  // ...): a trainer given a frame the solve did not place learns a wrong view. Frames no solve
-  // refined, or whose pose a guardrail returned as the prior's, are never exported as refined.
+  // wrong, ...): a trainer given a frame the solve did not place learns a wrong view. Frames no
+  // solve refined, or whose pose a guardrail returned as the prior's, are never exported as
+  // refined.
   bool leave_out_doubted_images = true;
 
   template <class Visitor>
@@ -242,7 +241,7 @@ void MoveTrainerDerivedAside(const std::string& workdir, const std::string& set)
     if (!TrainerDerivedPath(entry)) continue;
     const fs::path to = fs::path(workdir) / "stale" / "3dgs" / set / entry;
     if (fs::exists(fs::symlink_status(to, error))) {
-      fs::rename(to, UnusedPath(to.string() + "." + std::to_string(std::time(nullptr))));
+      fs::rename(to, DatedUnusedPath(to.string()));
     }
     fs::create_directories(to.parent_path());
     fs::rename(folder / entry, to);
@@ -282,7 +281,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     if (text_formats.empty()) return;
     std::vector<std::string> spaced;
     for (const std::string& name : names) {
-      if (name.find_first_of(" \t\n\r\v\f") != std::string::npos) spaced.push_back(name);
+      if (!ColmapTextHoldsName(name)) spaced.push_back(name);
     }
     if (spaced.empty()) return;
     std::string formats;

@@ -9,12 +9,12 @@
 #include <limits>
 #include <map>
 
+#include "core/content_hash.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
 #include "frontend/feature_extraction.h"
 #include "frontend/video_frames.h"
-#include "pipelines/content_hash.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;

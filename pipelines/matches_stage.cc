@@ -8,12 +8,12 @@
 #include <chrono>
 #include <map>
 
+#include "core/content_hash.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
 #include "core/warnings.h"
 #include "frontend/matching.h"
-#include "pipelines/content_hash.h"
 #include "pipelines/pair_selection.h"
 #include "pipelines/stages.h"
 

@@ -15,13 +15,13 @@
 #include <filesystem>
 
 #include "core/atomic_file.h"
+#include "core/content_hash.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "core/written_files.h"
 #include "evaluate/splat_trainer.h"
 #include "evaluate/trainer_export.h"
-#include "pipelines/content_hash.h"
 #include "pipelines/stages.h"
 
 namespace fs = std::filesystem;

@@ -13,6 +13,7 @@
 #include <mutex>
 
 #include "core/atomic_file.h"
+#include "core/content_hash.h"
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/interrupt.h"
@@ -21,7 +22,6 @@
 #include "core/version.h"
 #include "core/warnings.h"
 #include "core/written_files.h"
-#include "pipelines/content_hash.h"
 #include "pipelines/run_report.h"
 #include "pipelines/stage.h"
 
@@ -165,7 +165,7 @@ void ClearStaleSlot(const fs::path& to) {
   std::error_code error;
   if (!fs::exists(fs::symlink_status(to, error))) return;
   if (fs::is_directory(to, error) && !FilesNotWritten(to.string()).empty()) {
-    fs::rename(to, UnusedPath(to.string() + "." + std::to_string(std::time(nullptr))), error);
+    fs::rename(to, DatedUnusedPath(to.string()), error);
     if (!error) return;
   }
   fs::remove_all(to, error);

@@ -41,9 +41,7 @@ class GrowingCaptureTest : public ::testing::Test {
     dir_ = fs::temp_directory_path() / ("raytime_growing_capture_" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    scene_ = dir_ / "scene";
-    fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene_,
-             fs::copy_options::recursive);
+    scene_ = CopySampleScene(dir_ / "scene");
     aside_ = dir_ / "aside";
     fs::create_directories(aside_);
   }

@@ -53,13 +53,6 @@ class HonestFailuresTest : public TempDirTest {
     return RunShell(std::string("cd ") + RAYTIME_SOURCE_DIR + " && bash -c '" + limits + "; exec " +
                     RAYTIME_BINARY + " " + args + "' 2>&1");
   }
-  // A copy of the sample scene at dir_/name.
-  fs::path CopyScene(const std::string& name) {
-    const fs::path scene = dir_ / name;
-    fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data" / "sample" / "fountain-P11", scene,
-             fs::copy_options::recursive);
-    return scene;
-  }
 
   fs::path workdir_;
 };
@@ -198,7 +191,7 @@ TEST_F(HonestFailuresTest, TransformsPathsOpenThroughASymlinkedWorkdir) {
 
 // `--workdir '~/wk'` wrote into a literal ./~/wk; `workdir: ~/wk` and dataset.root=~/ds alike.
 TEST_F(HonestFailuresTest, ATildeIsExpandedAsAShellWould) {
-  CopyScene("ds");
+  CopySampleScene(dir_ / "ds");
   const std::string home = "HOME=" + dir_.string();
   const CommandResult flag =
       RunRaytime("run configs/demo.yaml --workdir '~/wk' --set 'dataset.root=~/ds'", home);
@@ -217,7 +210,7 @@ TEST_F(HonestFailuresTest, ATildeIsExpandedAsAShellWould) {
 // The image folder as the work directory: raytime read its own summary.json as an image ("image
 // without a ground-truth camera: summary.json") and never said why.
 TEST_F(HonestFailuresTest, TheImageFolderIsRefusedAsTheWorkDirectoryBeforeAnythingIsWritten) {
-  const fs::path scene = CopyScene("ds");
+  const fs::path scene = CopySampleScene(dir_ / "ds");
   for (const fs::path& inside : {scene / "images", scene / "images" / "work"}) {
     const CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + inside.string() +
                                             " --set dataset.root=" + scene.string());
@@ -232,7 +225,7 @@ TEST_F(HonestFailuresTest, TheImageFolderIsRefusedAsTheWorkDirectoryBeforeAnythi
 
 // An image name with whitespace was refused by the COLMAP export only after the whole solve.
 TEST_F(HonestFailuresTest, ANameTheExportCannotHoldIsRefusedBeforeAnyWork) {
-  const fs::path scene = CopyScene("ds");
+  const fs::path scene = CopySampleScene(dir_ / "ds");
   fs::rename(scene / "images" / "0003.jpg", scene / "images" / "00 03.jpg");
   fs::rename(scene / "gt_dense_cameras" / "0003.jpg.camera",
              scene / "gt_dense_cameras" / "00 03.jpg.camera");
@@ -301,7 +294,7 @@ TEST_F(HonestFailuresTest, AnExportThatFailsMidwayCallsItsOwnFilesThisRuns) {
 // A same-aspect image at twice its siblings' size was refused by the Strecha reader ("image is
 // 1536x1024 but the image list says 768x512") though docs/formats.md promised the rescale.
 TEST_F(HonestFailuresTest, AnImageAtTwiceTheSizeHasItsIntrinsicsRescaled) {
-  const fs::path scene = CopyScene("ds");
+  const fs::path scene = CopySampleScene(dir_ / "ds");
   const fs::path image = scene / "images" / "0003.jpg";
   const cv::Mat small = cv::imread(image.string());
   cv::Mat large;

@@ -451,9 +451,7 @@ stages:
 }
 
 TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
-  const fs::path scene = workdir_ / "scene";
-  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
-           fs::copy_options::recursive);
+  const fs::path scene = raytime::CopySampleScene(workdir_ / "scene");
   fs::remove(scene / "images" / "0003.jpg");
   const fs::path run_dir = workdir_ / "run";
   CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir.string() +
@@ -472,9 +470,7 @@ TEST_F(PipelineTest, MissingImageIsNamedAndLeavesNoOutput) {
 }
 
 TEST_F(PipelineTest, TruncatedImageFailsTheFeaturesStageNamingTheFile) {
-  const fs::path scene = workdir_ / "scene";
-  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", scene,
-           fs::copy_options::recursive);
+  const fs::path scene = raytime::CopySampleScene(workdir_ / "scene");
   const fs::path image = scene / "images" / "0003.jpg";
   fs::resize_file(image, fs::file_size(image) / 2);
   const fs::path run_dir = workdir_ / "run";

@@ -25,6 +25,14 @@ inline nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
   return nlohmann::json::parse(in, nullptr, false);
 }
 
+// A copy of the sample scene (data/sample/fountain-P11, Strecha layout) at `to`, for a test that
+// changes its files; returns `to`.
+inline std::filesystem::path CopySampleScene(const std::filesystem::path& to) {
+  std::filesystem::copy(std::filesystem::path(RAYTIME_SOURCE_DIR) / "data/sample/fountain-P11", to,
+                        std::filesystem::copy_options::recursive);
+  return to;
+}
+
 // Runs a shell command line and collects its stdout.
 inline CommandResult RunShell(const std::string& command) {
   CommandResult result;

@@ -116,9 +116,7 @@ TEST_F(UsersFilesTest, AFailedRunMovesOnlyRaytimesFilesAside) {
 
 // An image named with escape sequences retitled the terminal and recoloured the log.
 TEST_F(UsersFilesTest, AnImageNamesEscapeSequencesAreShownNotObeyed) {
-  const fs::path scene = dir_ / "scene";
-  fs::copy(fs::path(RAYTIME_SOURCE_DIR) / "data" / "sample" / "fountain-P11", scene,
-           fs::copy_options::recursive);
+  const fs::path scene = CopySampleScene(dir_ / "scene");
   const std::string name = "\x1b]0;owned\x07\x1b[31m0003.jpg";
   fs::rename(scene / "images" / "0003.jpg", scene / "images" / name);
   fs::rename(scene / "gt_dense_cameras" / "0003.jpg.camera",

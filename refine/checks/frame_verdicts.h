@@ -1,8 +1,8 @@
 // A verdict for every frame of a run (issue 46; beyond the paper, cf. its §4.11 "Failure
 // analysis"), made in one place from all the evidence the run has:
 // - its matches: whether they fix the frame to the rest of the match graph
-// (refine/checks/loose_parts.h:
-//   every weakest cut, before and after the wrong-pair removal; a component of its own has none);
+//   (refine/checks/loose_parts.h: every weakest cut, before and after the wrong-pair removal; a
+//   component of its own has none);
 // - its own residuals against the solve's: the checks of each solve name frames whose pairs the
 //   solution leaves unexplained, that moved far more than the others and fit worse, whose matches
 //   another focal length or principal point explains far better (refine/checks/frame_intrinsics.h);

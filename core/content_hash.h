@@ -1,4 +1,5 @@
-// Content hashes (XXH3, 128 bit) that decide whether a stage can be skipped.
+// Content hashes (XXH3, 128 bit): whether a stage can be skipped (pipelines/), whether a file is
+// the one raytime wrote (core/written_files.h).
 #pragma once
 
 #include <string>

@@ -1,4 +1,4 @@
-#include "pipelines/content_hash.h"
+#include "core/content_hash.h"
 
 #include <xxhash.h>
 
