@@ -25,9 +25,9 @@
 #include "pipelines/commands.h"
 #include "pipelines/pipeline.h"
 #include "pipelines/resize_scene.h"
-#include "pipelines/run_report.h"
 #include "pipelines/stage.h"
 #include "pipelines/sweep.h"
+#include "report/run_report.h"
 
 namespace fs = std::filesystem;
 

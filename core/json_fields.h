@@ -2,7 +2,7 @@
 // where a number may be "not reported": a number that is not finite is written as null, and read
 // back a number absent or null (or not a number) is NaN; another field absent, null or of the
 // wrong type takes its default. For records that rows of a sweep carry from summaries written by
-// other runs (evaluate/pose_errors.h's PoseErrorStatistics, pipelines/sweep_row.h): an older
+// other runs (evaluate/pose_errors.h's PoseErrorStatistics, report/sweep_row.h): an older
 // summary without a field reads as "not reported", not as 0. Records whose every field is always
 // set use NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE instead.
 #pragma once

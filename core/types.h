@@ -13,10 +13,10 @@
 namespace raytime {
 
 struct ImageInfo {
-  std::string name;       // relative path below the image root, e.g. "0000.jpg"; the join key
-  int width = 0;          // pixels
-  int height = 0;         // pixels
-  int camera_index = 0;   // index into ImageSet::cameras
+  std::string name;      // relative path below the image root, e.g. "0000.jpg"; the join key
+  int width = 0;         // pixels
+  int height = 0;        // pixels
+  int camera_index = 0;  // index into ImageSet::cameras
 };
 
 // The images of a scene and their intrinsics. Most captures share one camera.
@@ -56,5 +56,9 @@ struct NameJoin {
 NameJoin JoinNames(const std::vector<std::string>& left, const std::vector<std::string>& right);
 std::vector<std::string> Names(const PoseSet& poses);
 std::vector<std::string> Names(const ImageSet& images);
+
+// Capture order of image names, natural name order: runs of digits compare as numbers ("frame2" <
+// "frame10"), the rest as text; equal numbers with different padding fall back to plain text order.
+bool NaturalNameLess(const std::string& a, const std::string& b);
 
 }  // namespace raytime

@@ -37,7 +37,7 @@ struct FrameError {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(FrameError, name, rotation_deg, centre_m)
 
 // The numbers of one pose set's errors under one alignment: what the evaluate stage reports and
-// what a sweep's rows (pipelines/sweep_row.h) and the campaign report read back. Field names are
+// what a sweep's rows (report/sweep_row.h) and the campaign report read back. Field names are
 // the JSON keys and a sweep's CSV columns (VisitFields).
 struct PoseErrorStatistics {
   int num_frames = 0;

@@ -15,13 +15,13 @@
 #include "core/hdf5_store.h"
 #include "core/process.h"
 #include "core/timing.h"
-#include "evaluate/held_out_render.h"
 #include "evaluate/pose_errors.h"
 #include "formats/dataset.h"
-#include "pipelines/campaign_page.h"
-#include "pipelines/html.h"
-#include "pipelines/run_report.h"
-#include "pipelines/sweep_row.h"
+#include "report/campaign_page.h"
+#include "report/html.h"
+#include "report/run_report.h"
+#include "report/sweep_row.h"
+#include "splat/held_out_render.h"
 
 namespace fs = std::filesystem;
 

@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "pipelines/campaign_report.h"
+#include "report/campaign_report.h"
 
 namespace raytime {
 

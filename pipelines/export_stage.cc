@@ -1,7 +1,7 @@
 // The `export` stage: pose sets out of the work directory in the formats users train on
 // (COLMAP model for 3DGS, nerfstudio transforms.json, TUM trajectory; SPEC §7), and the
 // trainer-ready 3DGS folders (format 3dgs: undistorted images, PINHOLE model, initial points from
-// the ray times, split; evaluate/trainer_export.h).
+// the ray times, split; splat/trainer_export.h).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -14,11 +14,11 @@
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "core/written_files.h"
-#include "evaluate/trainer_export.h"
 #include "formats/colmap_model.h"
 #include "formats/nerfstudio.h"
 #include "formats/tum.h"
 #include "pipelines/stages.h"
+#include "splat/trainer_export.h"
 
 namespace fs = std::filesystem;
 

@@ -137,34 +137,6 @@ std::vector<double> SceneDepths(const std::vector<PairSelectionView>& views, dou
   return depths;
 }
 
-bool NaturalNameLess(const std::string& a, const std::string& b) {
-  const auto digit = [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; };
-  size_t i = 0, j = 0;
-  while (i < a.size() && j < b.size()) {
-    if (digit(a[i]) && digit(b[j])) {
-      size_t i_end = i, j_end = j;
-      while (i_end < a.size() && digit(a[i_end])) ++i_end;
-      while (j_end < b.size() && digit(b[j_end])) ++j_end;
-      // Compare the runs as numbers without overflow: strip leading zeros, then length, then text.
-      size_t i_lead = i, j_lead = j;
-      while (i_lead + 1 < i_end && a[i_lead] == '0') ++i_lead;
-      while (j_lead + 1 < j_end && b[j_lead] == '0') ++j_lead;
-      const std::string_view x(a.data() + i_lead, i_end - i_lead);
-      const std::string_view y(b.data() + j_lead, j_end - j_lead);
-      if (x.size() != y.size()) return x.size() < y.size();
-      if (x != y) return x < y;
-      i = i_end;
-      j = j_end;
-    } else {
-      if (a[i] != b[j]) return a[i] < b[j];
-      ++i;
-      ++j;
-    }
-  }
-  if ((a.size() - i) != (b.size() - j)) return a.size() - i < b.size() - j;
-  return a < b;
-}
-
 std::vector<PairSelectionView> PairSelectionViews(const ImageSet& images, const PoseSet& poses) {
   std::vector<PairSelectionView> views(images.images.size());
   std::vector<int> order(images.images.size());

@@ -48,10 +48,6 @@ struct PairSelectionView {
   int sequence = 0;
 };
 
-// Natural name order: runs of digits compare as numbers ("frame2" < "frame10"), the rest as text;
-// equal numbers with different padding fall back to plain text order.
-bool NaturalNameLess(const std::string& a, const std::string& b);
-
 // Options of `matches` with `pairs: prior` (YAML keys = field names, flat in the matches stage).
 struct PriorPairOptions {
   // Partners kept per image, the best by view overlap; the union over images is symmetric, so an

@@ -20,9 +20,9 @@
 #include "core/hdf5_store.h"
 #include "core/warnings.h"
 #include "core/written_files.h"
-#include "evaluate/splat_trainer.h"
-#include "evaluate/trainer_export.h"
 #include "pipelines/stages.h"
+#include "splat/splat_trainer.h"
+#include "splat/trainer_export.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;

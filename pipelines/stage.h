@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/artifacts.h"
 #include "core/options.h"
 
 // CLI11 is header-only and heavy: only stage.cc and the CLI need its definitions.
@@ -18,31 +19,6 @@ class App;
 }
 
 namespace raytime {
-
-// Artifact names: what a stage reads and writes. Each lives in the HDF5 file of the stage that
-// wrote it last.
-inline constexpr const char* kArtifactImages = "images";
-inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
-// JSON document beside a refined pose set: per image name (every image with a prior pose), its
-// verdict {verdict: held | held_by_prior | doubted, reason, detail}
-// (refine/checks/frame_verdicts.h). Written by refine; the export leaves the doubted frames out
-// (never a silent wrong result) and writes the verdicts beside the poses.
-inline constexpr const char* kFrameVerdictsJson = "frame_verdicts";
-// JSON document beside a prior pose set: the accuracy its maker states, {sigma_deg, sigma_m} per
-// frame (prior stage options sigma_deg, sigma_m; absent when none is stated). Read by refine.
-inline constexpr const char* kPriorAccuracyJson = "prior_accuracy";
-// JSON document beside a refined pose set: per image name, σ of its rotation (degrees) and centre
-// (prior length units) at the solution (refine/checks/pose_uncertainty.h). Written by refine.
-inline constexpr const char* kPoseUncertaintyJson = "pose_uncertainty";
-// JSON document beside a refined pose set: how each solve fits its matches at the solution
-// (refine's SolveDiagnostics): "images" {name: {residual_median_px, num_pairs, num_matches}} and
-// "pairs" [[name1, name2, num_matches, median_px], ...] (the pairs each solve used) and "removed"
-// (the same for the pairs the wrong-pair removal took, with their measure when removed). Written by
-// refine, read by the run page.
-inline constexpr const char* kSolveDiagnosticsJson = "solve_diagnostics";
-// JSON document beside a repaired prior pose set: what the prior stage's repair did (mode "none",
-// "rotations" or "replace", and "pose_set"). Written by prior, read by refine.
-inline constexpr const char* kPriorRepairJson = "prior_repair";
 
 class Hdf5Reader;
 

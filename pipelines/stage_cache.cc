@@ -22,8 +22,8 @@
 #include "core/version.h"
 #include "core/warnings.h"
 #include "core/written_files.h"
-#include "pipelines/run_report.h"
 #include "pipelines/stage.h"
+#include "report/run_report.h"
 
 namespace fs = std::filesystem;
 using nlohmann::json;

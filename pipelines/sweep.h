@@ -2,7 +2,7 @@
 // thread-safe), up to `jobs` at once, each in WORKDIR/runs/<label>/ with its resolved
 // pipeline.yaml and run.log. They share a content-addressed cache of stage outputs
 // (WORKDIR/cache), so stages identical across runs (a scene's features and matches) are
-// computed once. One row per run (pipelines/sweep_row.h) in WORKDIR/sweep.json and sweep.csv,
+// computed once. One row per run (report/sweep_row.h) in WORKDIR/sweep.json and sweep.csv,
 // rewritten after every run so an interrupted sweep keeps its rows. WORKDIR/runs.json lists the
 // runs (label, swept values, directory). options.backend "slurm" submits the runs to a Slurm
 // cluster instead (pipelines/slurm_backend.h).
@@ -12,7 +12,7 @@
 #include <string>
 
 #include "pipelines/stage_cache.h"
-#include "pipelines/sweep_row.h"
+#include "report/sweep_row.h"
 
 namespace raytime {
 

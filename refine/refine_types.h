@@ -84,7 +84,7 @@ struct RefineInput {
 };
 
 // The last pass's observations and where the solve put them (paper §3.2, X = O + t·D): what an
-// export turns into initial 3D points without triangulating (evaluate/trainer_export.h).
+// export turns into initial 3D points without triangulating (splat/trainer_export.h).
 struct SolvedObservations {
   // Rows: image (index into RefineInput's images), keypoint (row of its keypoints); sorted.
   Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> observations;

@@ -2,8 +2,9 @@
 """The folder-level include graph of raytime, and a check that its layers hold.
 
 Layers (README "How we write code"): core <- formats <- stages (frontend, bootstrap, refine,
-evaluate) <- pipelines <- cli. Stages never include one another (evaluate may read formats);
-cli reaches everything through pipelines/; refine/'s rooms point one way (solve <- checks <-
+evaluate, splat) <- report <- pipelines <- cli. Stages never include one another (evaluate and
+splat may read formats); report/ reads what the stages wrote through core's names and evaluate's
+pose errors, never a stage adapter; cli reaches everything through pipelines/ (and report/); refine/'s rooms point one way (solve <- checks <-
 recipes <- the entry at refine/'s top, REFINE_ROOMS); inside refine/ only refine.cc and the scene step above
 it (scene.cc, the stage's work by image name) include the entry header refine/refine.h (the
 others include refine/refine_types.h), so no arrow runs up.
@@ -26,8 +27,11 @@ ALLOWED = {
     "bootstrap": {"core"},
     "refine": {"core"},
     "evaluate": {"core", "formats"},
-    "pipelines": {"core", "formats", "frontend", "bootstrap", "refine", "evaluate"},
-    "cli": {"core", "pipelines"},
+    "splat": {"core", "formats"},
+    "report": {"core", "formats", "evaluate"},
+    "pipelines": {"core", "formats", "frontend", "bootstrap", "refine", "evaluate", "splat",
+                  "report"},
+    "cli": {"core", "pipelines", "report"},
     "testing": {"core", "refine", "evaluate"},
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([^"]+)"')

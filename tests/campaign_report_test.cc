@@ -16,9 +16,9 @@
 #include <vector>
 
 #include "core/error.h"
-#include "pipelines/campaign_report.h"
-#include "pipelines/html.h"
-#include "pipelines/sweep_row.h"
+#include "report/campaign_report.h"
+#include "report/html.h"
+#include "report/sweep_row.h"
 #include "tests/temp_dir.h"
 
 namespace raytime {

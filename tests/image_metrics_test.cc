@@ -1,8 +1,8 @@
-// raytime's own PSNR and SSIM (evaluate/image_metrics.h) against answers derived by hand:
+// raytime's own PSNR and SSIM (splat/image_metrics.h) against answers derived by hand:
 // noise of known energy, constant images, a checkerboard against its inverse and against a
 // contrast-scaled copy (whose local statistics are exact because a period-2 pattern is its own
 // mirror image at every border), and the folder layouts the trainers write.
-#include "evaluate/image_metrics.h"
+#include "splat/image_metrics.h"
 
 #include <gtest/gtest.h>
 

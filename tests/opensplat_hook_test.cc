@@ -1,4 +1,4 @@
-// `trainer: opensplat` in the splat hook (evaluate/splat_trainer.h, issue 33) with a stand-in
+// `trainer: opensplat` in the splat hook (splat/splat_trainer.h, issue 33) with a stand-in
 // OpenSplat (a shell script: the real one is built by scripts/install_opensplat.sh, not in CI):
 // the command line it gets, the train-only view it trains on (no held-out image in its model),
 // and raytime's own render of the held-out views from the .ply it leaves, scored against the
@@ -16,10 +16,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
-#include "evaluate/held_out_render.h"
-#include "evaluate/splat_render.h"
-#include "evaluate/splat_trainer.h"
 #include "formats/colmap_model.h"
+#include "splat/held_out_render.h"
+#include "splat/splat_render.h"
+#include "splat/splat_trainer.h"
 
 namespace fs = std::filesystem;
 

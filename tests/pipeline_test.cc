@@ -87,7 +87,7 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
     EXPECT_LT(sigma["rotation_deg"].get<double>(), 0.05) << image;
     EXPECT_GT(sigma["centre"].get<double>(), 0.0) << image;
   }
-  // The run's page (pipelines/run_report.h): the verdict, every image in the camera table and
+  // The run's page (report/run_report.h): the verdict, every image in the camera table and
   // with a panel (its image inlined) that the views link to, a residual histogram per GNC stage,
   // the pair matrix with every used pair, no fetch from the network (it opens offline; the browser
   // test run_page_in_browser clicks it).

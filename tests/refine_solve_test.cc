@@ -560,7 +560,7 @@ void CollectKeyPaths(const nlohmann::json& value, const std::string& path,
   }
 }
 
-// RefineOutput::solved_observations (the export's initial 3D points, evaluate/trainer_export.h):
+// RefineOutput::solved_observations (the export's initial 3D points, splat/trainer_export.h):
 // from an exact prior on noise-free keypoints, every observation's ray point O + t·R·ray(û) is
 // the scene point it sees, the used matches are listed, the anchored variant leaves its
 // non-anchors without a ray time, and the residual statistics of the pass are ~0 px.

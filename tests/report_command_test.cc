@@ -84,7 +84,7 @@ TEST_F(ReportCommandTest, ReportsCountsCellsAndPlotsOfASweep) {
   EXPECT_NE(cells.find("\n(all),4,prior,prior,2,2,0,0,"), std::string::npos) << cells;
   EXPECT_NE(cells.find("\nfountain-P11,4,prior,prior,0,2,0,0,"), std::string::npos) << cells;
 
-  // The campaign page (pipelines/campaign_page.h): the same cells, a success and an error plot
+  // The campaign page (report/campaign_page.h): the same cells, a success and an error plot
   // per scene and pooled, the arm toggles, every run listed under its scene with a link to its own
   // page that resolves to a file (written now for runs that have a summary), the failed ones too.
   const std::string page = ReadFile(out / "report.html");

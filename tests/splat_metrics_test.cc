@@ -1,8 +1,8 @@
-// The trainers' metrics files (evaluate/splat_metrics.h) read from fixtures in the formats the
+// The trainers' metrics files (splat/splat_metrics.h) read from fixtures in the formats the
 // trainers write (tests/data/splat: gsplat's stats/val_step<N>.json, Inria's results.json,
 // nerfstudio's ns-eval output), the step each belongs to, malformed files, and where each trainer
 // leaves its held-out renders.
-#include "evaluate/splat_metrics.h"
+#include "splat/splat_metrics.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// raytime's 3DGS renderer (evaluate/splat_render.h, issue 33) against analytic cases: one
+// raytime's 3DGS renderer (splat/splat_render.h, issue 33) against analytic cases: one
 // Gaussian's image is its EWA footprint (opacity × exp(−½ r² / (f²σ²/z² + 0.3))) in its SH colour;
 // a nearer Gaussian hides a farther one whatever their order in the file; an elongated Gaussian
 // turned by 90° about the view axis turns its footprint; the spherical harmonics are the 3DGS
@@ -16,7 +16,7 @@
 #include <string>
 
 #include "core/error.h"
-#include "evaluate/splat_render.h"
+#include "splat/splat_render.h"
 
 namespace fs = std::filesystem;
 

@@ -1,8 +1,8 @@
-// The trainer hook (evaluate/splat_trainer.h) on stand-in shell commands: the default command
+// The trainer hook (splat/splat_trainer.h) on stand-in shell commands: the default command
 // lines, placeholders and quoting, a run that writes a trainer's output format, a non-zero exit, a
 // success without metrics, a timeout that stops what the command started, a missing working
 // directory, and reading an earlier result without running again.
-#include "evaluate/splat_trainer.h"
+#include "splat/splat_trainer.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

@@ -1,4 +1,4 @@
-// The trainer-ready 3DGS export's kernels (evaluate/undistortion.h, evaluate/trainer_export.h,
+// The trainer-ready 3DGS export's kernels (splat/undistortion.h, splat/trainer_export.h,
 // issue 11): the undistorted camera against a case computed by hand, the resampled image against
 // the analytic one, track merging (a chained match, a disagreeing chain, a point behind a camera),
 // the every-8th split, and a whole export of a small synthetic scene (layout, identical images
@@ -17,9 +17,9 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "evaluate/trainer_export.h"
-#include "evaluate/undistortion.h"
 #include "formats/colmap_model.h"
+#include "splat/trainer_export.h"
+#include "splat/undistortion.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;

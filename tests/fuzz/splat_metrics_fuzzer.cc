@@ -1,4 +1,4 @@
-// libFuzzer target: the 3DGS trainers' metrics files (evaluate/splat_metrics.h,
+// libFuzzer target: the 3DGS trainers' metrics files (splat/splat_metrics.h,
 // ReadTrainerMetrics). The input's first byte picks the trainer ('g' gsplat, 'i' inria, 'n'
 // nerfstudio, any other byte by its value modulo 3); the rest is the file, written where that
 // trainer puts it in its result folder (stats/val_step29999.json, results.json, eval.json).
@@ -7,7 +7,7 @@
 #include <string_view>
 
 #include "core/error.h"
-#include "evaluate/splat_metrics.h"
+#include "splat/splat_metrics.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,11 +1,11 @@
-// libFuzzer target: a sweep's sweep.json as `raytime report` reads it (pipelines/sweep_row.h:
-// ReadSweepRows; pipelines/campaign_report.h: AggregateCampaign, then the report formats). The
+// libFuzzer target: a sweep's sweep.json as `raytime report` reads it (report/sweep_row.h:
+// ReadSweepRows; report/campaign_report.h: AggregateCampaign, then the report formats). The
 // input is the file.
 #include <string>
 #include <string_view>
 
 #include "core/error.h"
-#include "pipelines/campaign_report.h"
+#include "report/campaign_report.h"
 #include "tests/fuzz/fuzz_util.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

@@ -1,4 +1,4 @@
-#include "evaluate/trainer_export.h"
+#include "splat/trainer_export.h"
 
 #include <spdlog/spdlog.h>
 
@@ -231,7 +231,7 @@ std::vector<MergedTrack> MergeTracks(const TrackObservations& obs,
 namespace {
 
 // The pinhole images of the export (`ordered`, name order): one pinhole camera per distorted
-// camera in use, numbered in order of first use (evaluate/undistortion.h); the undistortion's
+// camera in use, numbered in order of first use (splat/undistortion.h); the undistortion's
 // scale per camera into *summary.
 ImageSet PinholeImagesOf(const std::vector<const ImageInfo*>& ordered, const ImageSet& images,
                          const UndistortionOptions& undistortion, TrainerExportSummary* summary) {

@@ -13,7 +13,7 @@
 //               ns-eval --render-output-path DIR       DIR/eval_img_{i:04d}.png, [ground truth |
 //                                                      render] side by side
 //
-// The trainer hook (evaluate/splat_trainer.h) fixes where the nerfstudio files go:
+// The trainer hook (splat/splat_trainer.h) fixes where the nerfstudio files go:
 // RESULT/eval.json and RESULT/eval_renders/.
 #pragma once
 
@@ -22,7 +22,7 @@
 #include <string>
 #include <vector>
 
-#include "evaluate/image_metrics.h"
+#include "splat/image_metrics.h"
 
 namespace raytime {
 

@@ -1,4 +1,4 @@
-#include "evaluate/splat_metrics.h"
+#include "splat/splat_metrics.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "pipelines/html.h"
+#include "report/html.h"
 
 #include <cmath>
 #include <cstdio>

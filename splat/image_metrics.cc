@@ -1,4 +1,4 @@
-#include "evaluate/image_metrics.h"
+#include "splat/image_metrics.h"
 
 #include <algorithm>
 #include <cmath>

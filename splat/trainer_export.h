@@ -1,7 +1,7 @@
 // The trainer-ready export of pose sets for 3D Gaussian Splatting (SPEC §7, issue 11): per pose set
 // a folder the gsplat, Inria and nerfstudio trainers read as it is,
 //
-//   <root>/<pose set>/images/<name>            undistorted (evaluate/undistortion.h), identical
+//   <root>/<pose set>/images/<name>            undistorted (splat/undistortion.h), identical
 //                                               for every pose set
 //                    sparse/0/{cameras,images,points3D}.{bin,txt}   PINHOLE cameras
 //                    transforms.json, sparse_pc.ply                 nerfstudio
@@ -27,7 +27,7 @@
 #include "core/options.h"
 #include "core/types.h"
 #include "core/warnings.h"
-#include "evaluate/undistortion.h"
+#include "splat/undistortion.h"
 
 namespace raytime {
 

@@ -5,7 +5,7 @@
 // own frame").
 //
 // An arm is a scored pose set: `prior` (the perturbed input, the baseline), `refined@gnc`,
-// `classical`, `classical@mapper`, ... Rows are pipelines/sweep_row.h's SweepRow: per arm and
+// `classical`, `classical@mapper`, ... Rows are report/sweep_row.h's SweepRow: per arm and
 // alignment its errors, per stage its time, which stage wrote each arm, and the swept values.
 #pragma once
 
@@ -15,7 +15,7 @@
 #include <utility>
 #include <vector>
 
-#include "pipelines/sweep_row.h"
+#include "report/sweep_row.h"
 
 namespace raytime {
 

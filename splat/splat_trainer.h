@@ -1,9 +1,9 @@
 // The 3DGS trainer hook (SPEC §7; paper §4.5, Table 4): an external trainer (gsplat, the Inria
 // reference code, nerfstudio's splatfacto, OpenSplat) run by a shell command on one trainer-ready
-// export of a pose set, its held-out metrics read back (evaluate/splat_metrics.h) and its held-out
-// renders scored by raytime itself (evaluate/image_metrics.h). OpenSplat (issue 33) trains on a
+// export of a pose set, its held-out metrics read back (splat/splat_metrics.h) and its held-out
+// renders scored by raytime itself (splat/image_metrics.h). OpenSplat (issue 33) trains on a
 // train-only view of the export and writes only its .ply: raytime renders the held-out cameras
-// from it (evaluate/held_out_render.h) and scores those.
+// from it (splat/held_out_render.h) and scores those.
 //
 // The command is a template: {data_dir} (the export, WORKDIR/3dgs/<pose set>), {result_dir} (the
 // trainer's output folder, emptied first), {pose_set}, {train_dir} (RESULT/train_view: the
@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "core/options.h"
-#include "evaluate/splat_metrics.h"
+#include "splat/splat_metrics.h"
 
 namespace raytime {
 

@@ -1,4 +1,4 @@
-#include "evaluate/held_out_render.h"
+#include "splat/held_out_render.h"
 
 #include <algorithm>
 #include <cmath>

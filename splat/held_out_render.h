@@ -1,5 +1,5 @@
 // Held-out views of a trainer-ready export rendered by raytime itself and scored (issue 33): the
-// same renderer (evaluate/splat_render.h) and the same metrics (evaluate/image_metrics.h) for every
+// same renderer (splat/splat_render.h) and the same metrics (splat/image_metrics.h) for every
 // trainer and pose source, so Table 4's columns differ only by the poses. Also the train-only view
 // of an export a trainer is given, so a held-out frame never reaches it.
 #pragma once
@@ -7,8 +7,8 @@
 #include <string>
 #include <vector>
 
-#include "evaluate/image_metrics.h"
-#include "evaluate/splat_render.h"
+#include "splat/image_metrics.h"
+#include "splat/splat_render.h"
 
 namespace raytime {
 

@@ -1,4 +1,4 @@
-// The run page's orbit view (pipelines/run_report.cc inlines this file): the cameras as frusta,
+// The run page's orbit view (report/run_report.cc inlines this file): the cameras as frusta,
 // prior grey, ground truth blue, refined coloured by its correction; drag to turn, wheel to zoom,
 // click a camera to open its panel (the page's #cam-NAME target). Coordinates come in the
 // centres' principal frame (x: main direction, z: least), so z is drawn up.

@@ -1,4 +1,4 @@
-#include "evaluate/splat_trainer.h"
+#include "splat/splat_trainer.h"
 
 #include <signal.h>
 
@@ -18,7 +18,7 @@
 #include "core/process.h"
 #include "core/progress.h"
 #include "core/timing.h"
-#include "evaluate/held_out_render.h"
+#include "splat/held_out_render.h"
 
 namespace fs = std::filesystem;
 

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "pipelines/campaign_report.h"
-#include "pipelines/sweep_row.h"
+#include "report/campaign_report.h"
+#include "report/sweep_row.h"
 
 namespace raytime {
 

@@ -1,4 +1,4 @@
-#include "evaluate/undistortion.h"
+#include "splat/undistortion.h"
 
 #include <algorithm>
 #include <cmath>

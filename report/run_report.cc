@@ -1,4 +1,4 @@
-#include "pipelines/run_report.h"
+#include "report/run_report.h"
 
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
@@ -13,16 +13,15 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/artifacts.h"
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/geometry.h"
 #include "core/hdf5_store.h"
 #include "core/timing.h"
 #include "core/types.h"
-#include "pipelines/html.h"
-#include "pipelines/pair_selection.h"
-#include "pipelines/stage.h"
-#include "run_report_orbit_js.h"  // generated from pipelines/run_report_orbit.js
+#include "report/html.h"
+#include "run_report_orbit_js.h"  // generated from report/run_report_orbit.js
 
 namespace fs = std::filesystem;
 

@@ -1,4 +1,4 @@
-#include "pipelines/sweep_row.h"
+#include "report/sweep_row.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,10 +1,10 @@
-#include "pipelines/campaign_page.h"
+#include "report/campaign_page.h"
 
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
-#include "pipelines/html.h"
+#include "report/html.h"
 
 namespace raytime {
 namespace {

@@ -1,4 +1,4 @@
-#include "pipelines/campaign_report.h"
+#include "report/campaign_report.h"
 
 #include <algorithm>
 #include <cmath>
@@ -11,7 +11,7 @@
 #include "core/atomic_file.h"
 #include "core/error.h"
 #include "core/statistics.h"
-#include "pipelines/sweep_row.h"
+#include "report/sweep_row.h"
 
 namespace raytime {
 

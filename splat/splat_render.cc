@@ -1,4 +1,4 @@
-#include "evaluate/splat_render.h"
+#include "splat/splat_render.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
