@@ -105,13 +105,10 @@ class Linearization {
   std::vector<Eigen::Vector3d> b_;
 };
 
-}  // namespace
-
-RotationAveragingResult AverageRotations(int num_nodes, const std::vector<RelativeRotation>& edges,
-                                         const RotationAveragingOptions& options) {
-  ValidateOptions(options, "rotation averaging");
+// Throws std::invalid_argument on an edge outside [0, num_nodes), a self-edge, a non-finite
+// rotation or a non-positive weight.
+void CheckEdges(int num_nodes, const std::vector<RelativeRotation>& edges) {
   if (num_nodes < 0) throw std::invalid_argument("AverageRotations: negative node count");
-  std::vector<std::pair<int, int>> pairs;
   for (const auto& e : edges) {
     if (e.i < 0 || e.j < 0 || e.i >= num_nodes || e.j >= num_nodes || e.i == e.j) {
       throw std::invalid_argument("AverageRotations: bad edge (" + std::to_string(e.i) + ", " +
@@ -123,16 +120,15 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
                                   std::to_string(e.j) +
                                   ") has a non-finite rotation or a non-positive weight");
     }
-    pairs.emplace_back(e.i, e.j);
   }
+}
 
-  RotationAveragingResult result;
-  result.world_from_cam.assign(num_nodes, Eigen::Matrix3d::Identity());
-  result.registered.assign(num_nodes, false);
-  result.edge_residual_deg.assign(edges.size(), std::numeric_limits<double>::quiet_NaN());
-  if (num_nodes == 0) return result;
-
-  // Largest connected component: the only part with a common frame.
+// The largest connected component, the only part with a common frame: marks its nodes registered,
+// picks as root its node of largest summed edge weight, and returns its edges.
+std::vector<int> LargestComponent(int num_nodes, const std::vector<RelativeRotation>& edges,
+                                  RotationAveragingResult* result) {
+  std::vector<std::pair<int, int>> pairs;
+  for (const auto& e : edges) pairs.emplace_back(e.i, e.j);
   const std::vector<int> labels = ConnectedComponents(num_nodes, pairs);
   std::vector<int> used;
   for (size_t k = 0; k < edges.size(); ++k) {
@@ -147,18 +143,19 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
   for (int node = 0; node < num_nodes; ++node) {
     if (labels[node] == 0 && (root < 0 || strength[node] > strength[root])) root = node;
   }
-  result.root = root;
-  for (int node = 0; node < num_nodes; ++node) result.registered[node] = labels[node] == 0;
-  result.num_registered =
-      static_cast<int>(std::count(result.registered.begin(), result.registered.end(), true));
-  result.num_edges_used = static_cast<int>(used.size());
-  if (used.empty()) {
-    result.converged = true;
-    return result;
-  }
+  result->root = root;
+  for (int node = 0; node < num_nodes; ++node) result->registered[node] = labels[node] == 0;
+  result->num_registered =
+      static_cast<int>(std::count(result->registered.begin(), result->registered.end(), true));
+  result->num_edges_used = static_cast<int>(used.size());
+  return used;
+}
 
-  // Maximum-spanning-tree initialization weighted by inlier counts (paper §4.8): the most
-  // supported pairs define the first estimate, propagated breadth-first from the root.
+// Maximum-spanning-tree initialization weighted by inlier counts (paper §4.8): the most supported
+// pairs define the first estimate, propagated breadth-first from the root.
+void SpanningTreeStart(int num_nodes, const std::vector<RelativeRotation>& edges,
+                       const std::vector<int>& used, int root,
+                       std::vector<Eigen::Matrix3d>* world_from_cam) {
   std::vector<std::pair<int, int>> used_pairs;
   std::vector<double> used_weights;
   for (int k : used) {
@@ -182,74 +179,126 @@ RotationAveragingResult AverageRotations(int num_nodes, const std::vector<Relati
       const int other = e.i == node ? e.j : e.i;
       if (placed[other]) continue;
       // R_ji = R_j^T R_i  =>  R_j = R_i R_ji^T  and  R_i = R_j R_ji.
-      const Eigen::Matrix3d& known = result.world_from_cam[node];
-      result.world_from_cam[other] = e.i == node
-                                         ? Eigen::Matrix3d(known * e.cam_j_from_cam_i.transpose())
-                                         : Eigen::Matrix3d(known * e.cam_j_from_cam_i);
+      const Eigen::Matrix3d& known = (*world_from_cam)[node];
+      (*world_from_cam)[other] = e.i == node
+                                     ? Eigen::Matrix3d(known * e.cam_j_from_cam_i.transpose())
+                                     : Eigen::Matrix3d(known * e.cam_j_from_cam_i);
       placed[other] = true;
       frontier.push(other);
     }
   }
+}
 
-  std::vector<int> variable(num_nodes, -1);
+// The edges and the variables the refinement steps share: every registered node but the root.
+struct Refinement {
+  const std::vector<RelativeRotation>& edges;
+  const std::vector<int>& used;
+  std::vector<int> variable;
   int num_variables = 0;
-  for (int node = 0; node < num_nodes; ++node) {
-    if (result.registered[node] && node != root) variable[node] = num_variables++;
+  double tolerance = 0.0;  // radians
+};
+
+// Up to `iterations` L1 steps: each the convex problem min sum_k |w_i - w_j - b_k| on the current
+// linearization, solved by IRLS from its least-squares solution. True when a step fell below the
+// tolerance.
+bool L1Steps(const Refinement& problem, int iterations, RotationAveragingResult* result) {
+  std::vector<double> weights(problem.used.size());
+  for (int it = 0; it < iterations; ++it) {
+    const Linearization linear(problem.edges, problem.used, problem.variable, problem.num_variables,
+                               result->world_from_cam);
+    std::fill(weights.begin(), weights.end(), 1.0);
+    Eigen::MatrixXd omega = linear.Solve(weights);
+    for (int inner = 0; inner < kL1InnerIterations; ++inner) {
+      const std::vector<double> r = linear.Residuals(omega);
+      for (size_t k = 0; k < problem.used.size(); ++k) {
+        weights[k] = 1.0 / std::max(r[k], kL1FloorRad);
+      }
+      const Eigen::MatrixXd next = linear.Solve(weights);
+      const double change = (next - omega).cwiseAbs().maxCoeff();
+      omega = next;
+      if (change < problem.tolerance) break;
+    }
+    ++result->l1_iterations;
+    if (linear.Apply(omega, &result->world_from_cam) < problem.tolerance) return true;
   }
-  const double tolerance = RadiansFromDegrees(options.rotation_tolerance_deg);
-  const double sigma = RadiansFromDegrees(options.robust_scale_deg);
-  std::vector<double> weights(used.size());
-  bool l1_converged = options.l1_iterations == 0;
-  bool irls_converged = options.irls_iterations == 0;
-  if (num_variables > 0) {
-    for (int it = 0; it < options.l1_iterations; ++it) {
-      // One L1 step: the convex problem min sum_k |w_i - w_j - b_k| on this linearization,
-      // solved by IRLS from its least-squares solution.
-      const Linearization linear(edges, used, variable, num_variables, result.world_from_cam);
-      std::fill(weights.begin(), weights.end(), 1.0);
-      Eigen::MatrixXd omega = linear.Solve(weights);
-      for (int inner = 0; inner < kL1InnerIterations; ++inner) {
-        const std::vector<double> r = linear.Residuals(omega);
-        for (size_t k = 0; k < used.size(); ++k) weights[k] = 1.0 / std::max(r[k], kL1FloorRad);
-        const Eigen::MatrixXd next = linear.Solve(weights);
-        const double change = (next - omega).cwiseAbs().maxCoeff();
-        omega = next;
-        if (change < tolerance) break;
-      }
-      ++result.l1_iterations;
-      if (linear.Apply(omega, &result.world_from_cam) < tolerance) {
-        l1_converged = true;
-        break;
-      }
+  return iterations == 0;
+}
+
+// Up to `iterations` Geman-McClure IRLS steps: rho(r) = r^2 s^2 / (r^2 + s^2), weight
+// s^4 / (r^2 + s^2)^2 (scaled to 1 at r = 0 so the normal matrix stays well conditioned). True when
+// a step fell below the tolerance.
+bool IrlsSteps(const Refinement& problem, int iterations, double sigma,
+               RotationAveragingResult* result) {
+  std::vector<double> weights(problem.used.size());
+  for (int it = 0; it < iterations; ++it) {
+    for (size_t k = 0; k < problem.used.size(); ++k) {
+      const double r2 =
+          EdgeError(problem.edges[problem.used[k]], result->world_from_cam).squaredNorm();
+      const double s2 = sigma * sigma;
+      weights[k] = std::max(s2 * s2 / ((r2 + s2) * (r2 + s2)), 1e-12);
     }
-    for (int it = 0; it < options.irls_iterations; ++it) {
-      // Geman-McClure: rho(r) = r^2 s^2 / (r^2 + s^2), IRLS weight s^4 / (r^2 + s^2)^2 (scaled
-      // to 1 at r = 0 so the normal matrix stays well conditioned).
-      for (size_t k = 0; k < used.size(); ++k) {
-        const double r2 = EdgeError(edges[used[k]], result.world_from_cam).squaredNorm();
-        const double s2 = sigma * sigma;
-        weights[k] = std::max(s2 * s2 / ((r2 + s2) * (r2 + s2)), 1e-12);
-      }
-      ++result.irls_iterations;
-      const Linearization linear(edges, used, variable, num_variables, result.world_from_cam);
-      if (linear.Apply(linear.Solve(weights), &result.world_from_cam) < tolerance) {
-        irls_converged = true;
-        break;
-      }
+    ++result->irls_iterations;
+    const Linearization linear(problem.edges, problem.used, problem.variable, problem.num_variables,
+                               result->world_from_cam);
+    if (linear.Apply(linear.Solve(weights), &result->world_from_cam) < problem.tolerance) {
+      return true;
     }
-  } else {
-    l1_converged = irls_converged = true;
+  }
+  return iterations == 0;
+}
+
+// Every used edge's residual at the solution, with their mean and median.
+void MeasureResiduals(const std::vector<RelativeRotation>& edges, const std::vector<int>& used,
+                      RotationAveragingResult* result) {
+  std::vector<double> residuals;
+  for (int k : used) {
+    const double r = DegreesFromRadians(EdgeError(edges[k], result->world_from_cam).norm());
+    result->edge_residual_deg[k] = r;
+    residuals.push_back(r);
+  }
+  result->mean_residual_deg = FiniteMean(residuals);
+  result->median_residual_deg = FiniteUpperMedian(residuals);
+}
+
+}  // namespace
+
+RotationAveragingResult AverageRotations(int num_nodes, const std::vector<RelativeRotation>& edges,
+                                         const RotationAveragingOptions& options) {
+  ValidateOptions(options, "rotation averaging");
+  CheckEdges(num_nodes, edges);
+  RotationAveragingResult result;
+  result.world_from_cam.assign(num_nodes, Eigen::Matrix3d::Identity());
+  result.registered.assign(num_nodes, false);
+  result.edge_residual_deg.assign(edges.size(), std::numeric_limits<double>::quiet_NaN());
+  if (num_nodes == 0) return result;
+
+  // 1. The largest connected component and its root.
+  const std::vector<int> used = LargestComponent(num_nodes, edges, &result);
+  if (used.empty()) {
+    result.converged = true;
+    return result;
+  }
+  // 2. The first estimate from the maximum spanning tree.
+  SpanningTreeStart(num_nodes, edges, used, result.root, &result.world_from_cam);
+
+  // 3. L1 steps, then robust IRLS steps, on every registered node but the root.
+  Refinement problem{edges, used, std::vector<int>(num_nodes, -1)};
+  for (int node = 0; node < num_nodes; ++node) {
+    if (result.registered[node] && node != result.root) {
+      problem.variable[node] = problem.num_variables++;
+    }
+  }
+  problem.tolerance = RadiansFromDegrees(options.rotation_tolerance_deg);
+  bool l1_converged = true, irls_converged = true;
+  if (problem.num_variables > 0) {
+    l1_converged = L1Steps(problem, options.l1_iterations, &result);
+    irls_converged = IrlsSteps(problem, options.irls_iterations,
+                               RadiansFromDegrees(options.robust_scale_deg), &result);
   }
   result.converged = options.irls_iterations > 0 ? irls_converged : l1_converged;
 
-  std::vector<double> residuals;
-  for (int k : used) {
-    const double r = DegreesFromRadians(EdgeError(edges[k], result.world_from_cam).norm());
-    result.edge_residual_deg[k] = r;
-    residuals.push_back(r);
-  }
-  result.mean_residual_deg = FiniteMean(residuals);
-  result.median_residual_deg = FiniteUpperMedian(residuals);
+  // 4. The residuals at the solution.
+  MeasureResiduals(edges, used, &result);
   return result;
 }
 

@@ -150,6 +150,77 @@ std::string LargestMapperModel(const std::string& mapper_dir, const std::string&
   return best;
 }
 
+// COLMAP's mapper (incremental SfM, no prior) on the database: one "round", the largest model.
+void RunMapper(const ClassicalControlOptions& options, const std::vector<std::string>& io,
+               const std::string& workdir, ClassicalControlSummary* result) {
+  const std::string refine = Flag(options.refine_intrinsics);
+  const std::string mapper_dir = (fs::path(workdir) / "mapper").string();
+  fs::create_directories(mapper_dir);
+  const auto t = std::chrono::steady_clock::now();
+  const std::string output = RunColmap(
+      Concat(Concat(Concat({options.colmap, "mapper"}, io), {"--output_path", mapper_dir}),
+             Concat(GateArguments(options), {"--Mapper.ba_refine_focal_length", refine,
+                                             "--Mapper.ba_refine_principal_point", refine,
+                                             "--Mapper.ba_refine_extra_params", refine})),
+      result->log_path);
+  ClassicalRoundSummary round_summary;
+  round_summary.triangulate_s = SecondsSince(t);
+  round_summary.colmap_final_cost_px = LastFinalCost(output);
+  result->model_dir = LargestMapperModel(mapper_dir, result->log_path);
+  result->per_round.push_back(round_summary);
+}
+
+// options.rounds of point_triangulator + bundle_adjuster from the prior, each from the last one's
+// adjusted model.
+void RunTriangulateAdjustRounds(const ImageSet& images, const PoseSet& prior,
+                                const ClassicalControlOptions& options,
+                                const std::vector<std::string>& io, const std::string& workdir,
+                                ClassicalControlSummary* result) {
+  const std::string refine = Flag(options.refine_intrinsics);
+  // The prior as a model with no points; ids agree with the database (ToColmapModel).
+  ColmapModel prior_model = ToColmapModel(images, prior);
+  if (prior_model.images.size() < 2) {
+    throw InputError("the classical control needs a prior pose for at least two images (" +
+                     std::to_string(prior_model.images.size()) + " of " +
+                     std::to_string(images.images.size()) + " have one)");
+  }
+  if (options.refine_intrinsics) {
+    // ToColmapModel's camera ids are camera_index + 1.
+    for (auto& [id, camera] : prior_model.cameras) {
+      camera = ColmapCameraWithModel(images.cameras[id - 1], id, "OPENCV");
+    }
+  }
+  std::string input = (fs::path(workdir) / "prior").string();
+  WriteColmapModelText(prior_model, input);
+  for (int r = 1; r <= options.rounds; ++r) {
+    const fs::path round_dir = fs::path(workdir) / ("round_" + std::to_string(r));
+    const std::string triangulated = (round_dir / "triangulated").string();
+    const std::string adjusted = (round_dir / "adjusted").string();
+    fs::create_directories(triangulated);
+    fs::create_directories(adjusted);
+    ClassicalRoundSummary round_summary;
+    auto t = std::chrono::steady_clock::now();
+    RunColmap(Concat(Concat(Concat({options.colmap, "point_triangulator"}, io),
+                            {"--input_path", input, "--output_path", triangulated}),
+                     GateArguments(options)),
+              result->log_path);
+    round_summary.triangulate_s = SecondsSince(t);
+    t = std::chrono::steady_clock::now();
+    const std::string output =
+        RunColmap({options.colmap, "bundle_adjuster", "--input_path", triangulated, "--output_path",
+                   adjusted, "--BundleAdjustment.refine_focal_length", refine,
+                   "--BundleAdjustment.refine_principal_point", refine,
+                   "--BundleAdjustment.refine_extra_params", refine},
+                  result->log_path);
+    round_summary.adjust_s = SecondsSince(t);
+    round_summary.colmap_final_cost_px = LastFinalCost(output);
+    round_summary.num_points = static_cast<int>(ReadColmapModel(adjusted).points3D.size());
+    result->per_round.push_back(round_summary);
+    input = adjusted;
+  }
+  result->model_dir = input;
+}
+
 }  // namespace
 
 ClassicalControlOptions ClassicalControlOptions::Tuned() {
@@ -193,68 +264,13 @@ PoseSet RunClassicalControl(const std::string& database_path, const ImageSet& im
   }
   result.log_path = (fs::path(workdir) / "colmap.log").string();
   std::ofstream(result.log_path, std::ios::trunc);
-  const std::string refine = Flag(options.refine_intrinsics);
   const std::vector<std::string> io = {"--database_path", database_path, "--image_path",
                                        images.image_root};
 
   if (options.mode == "mapper") {
-    const std::string mapper_dir = (fs::path(workdir) / "mapper").string();
-    fs::create_directories(mapper_dir);
-    const auto t = std::chrono::steady_clock::now();
-    const std::string output = RunColmap(
-        Concat(Concat(Concat({options.colmap, "mapper"}, io), {"--output_path", mapper_dir}),
-               Concat(GateArguments(options), {"--Mapper.ba_refine_focal_length", refine,
-                                               "--Mapper.ba_refine_principal_point", refine,
-                                               "--Mapper.ba_refine_extra_params", refine})),
-        result.log_path);
-    ClassicalRoundSummary round_summary;
-    round_summary.triangulate_s = SecondsSince(t);
-    round_summary.colmap_final_cost_px = LastFinalCost(output);
-    result.model_dir = LargestMapperModel(mapper_dir, result.log_path);
-    result.per_round.push_back(round_summary);
+    RunMapper(options, io, workdir, &result);
   } else {
-    // The prior as a model with no points; ids agree with the database (ToColmapModel).
-    ColmapModel prior_model = ToColmapModel(images, prior);
-    if (prior_model.images.size() < 2) {
-      throw InputError("the classical control needs a prior pose for at least two images (" +
-                       std::to_string(prior_model.images.size()) + " of " +
-                       std::to_string(images.images.size()) + " have one)");
-    }
-    if (options.refine_intrinsics) {
-      // ToColmapModel's camera ids are camera_index + 1.
-      for (auto& [id, camera] : prior_model.cameras) {
-        camera = ColmapCameraWithModel(images.cameras[id - 1], id, "OPENCV");
-      }
-    }
-    std::string input = (fs::path(workdir) / "prior").string();
-    WriteColmapModelText(prior_model, input);
-    for (int r = 1; r <= options.rounds; ++r) {
-      const fs::path round_dir = fs::path(workdir) / ("round_" + std::to_string(r));
-      const std::string triangulated = (round_dir / "triangulated").string();
-      const std::string adjusted = (round_dir / "adjusted").string();
-      fs::create_directories(triangulated);
-      fs::create_directories(adjusted);
-      ClassicalRoundSummary round_summary;
-      auto t = std::chrono::steady_clock::now();
-      RunColmap(Concat(Concat(Concat({options.colmap, "point_triangulator"}, io),
-                              {"--input_path", input, "--output_path", triangulated}),
-                       GateArguments(options)),
-                result.log_path);
-      round_summary.triangulate_s = SecondsSince(t);
-      t = std::chrono::steady_clock::now();
-      const std::string output =
-          RunColmap({options.colmap, "bundle_adjuster", "--input_path", triangulated,
-                     "--output_path", adjusted, "--BundleAdjustment.refine_focal_length", refine,
-                     "--BundleAdjustment.refine_principal_point", refine,
-                     "--BundleAdjustment.refine_extra_params", refine},
-                    result.log_path);
-      round_summary.adjust_s = SecondsSince(t);
-      round_summary.colmap_final_cost_px = LastFinalCost(output);
-      round_summary.num_points = static_cast<int>(ReadColmapModel(adjusted).points3D.size());
-      result.per_round.push_back(round_summary);
-      input = adjusted;
-    }
-    result.model_dir = input;
+    RunTriangulateAdjustRounds(images, prior, options, io, workdir, &result);
   }
 
   const ColmapModel model = ReadColmapModel(result.model_dir);

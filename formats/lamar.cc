@@ -102,31 +102,25 @@ std::map<std::string, std::vector<StampedPose>> ReadTrajectories(
   return by_device;
 }
 
-}  // namespace
+// A camera of sensors.txt: its intrinsics (OpenCV's pixel convention) and image size.
+struct LamarCamera {
+  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+  int width = 0, height = 0;
+};
 
-CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& options) {
-  const fs::path root(path);
-  const std::string sensors_path = (root / "sensors.txt").string();
-  const std::string images_path = (root / "images.txt").string();
-  const std::string trajectories_path = (root / "trajectories.txt").string();
-  const std::string rigs_path = (root / "rigs.txt").string();
-  const std::string aligned_path = (root / "proc" / "alignment_trajectories.txt").string();
-  CaptureRecording recording;
-  recording.format = "lamar";
-  recording.image_root = (root / "raw_data").string();
-  recording.files = {sensors_path, images_path, trajectories_path};
-
-  // Cameras.
-  std::map<std::string, std::pair<Eigen::Matrix3d, std::pair<int, int>>> cameras;
+// The cameras of sensors.txt by sensor id (PINHOLE and SIMPLE_PINHOLE; other sensors skipped).
+std::map<std::string, LamarCamera> ReadCameras(const std::string& sensors_path) {
+  std::map<std::string, LamarCamera> cameras;
   for (const Row& row : ReadCsv(sensors_path)) {
     if (row.fields.size() < 3 || row.fields[2] != "camera") continue;
     const std::string& id = row.fields[0];
     const std::string model = row.fields.size() > 3 ? row.fields[3] : "";
-    const int width =
+    LamarCamera camera;
+    camera.width =
         PixelSize(Number(sensors_path, row, 4, "width"), sensors_path, row.line, "width (field 5)");
-    const int height = PixelSize(Number(sensors_path, row, 5, "height"), sensors_path, row.line,
-                                 "height (field 6)");
-    Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+    camera.height = PixelSize(Number(sensors_path, row, 5, "height"), sensors_path, row.line,
+                              "height (field 6)");
+    Eigen::Matrix3d& K = camera.K;
     if (model == "PINHOLE") {
       K(0, 0) = Number(sensors_path, row, 6, "fx");
       K(1, 1) = Number(sensors_path, row, 7, "fy");
@@ -144,46 +138,70 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     // COLMAP's pixel convention (top-left pixel centre at 0.5) to OpenCV's.
     K(0, 2) -= 0.5;
     K(1, 2) -= 0.5;
-    cameras[id] = {K, {width, height}};
+    cameras[id] = camera;
   }
+  return cameras;
+}
 
-  // Rigs: sensor -> (rig, rig_from_sensor).
-  std::map<std::string, std::pair<std::string, Rigid3>> rig_of;
-  if (fs::exists(rigs_path)) {
-    recording.files.push_back(rigs_path);
-    for (const Row& row : ReadCsv(rigs_path)) {
-      if (row.fields.size() < 2)
-        ThrowInput(rigs_path, row.line, "expected rig_id, sensor_id, pose");
-      rig_of[row.fields[1]] = {row.fields[0], PoseAt(rigs_path, row, 2)};
+// One trajectory file: the poses at their exact (timestamp, device) and each device's trajectory.
+struct Trajectories {
+  std::map<std::pair<int64_t, std::string>, Rigid3> exact;
+  std::map<std::string, std::vector<StampedPose>> by_device;
+
+  bool empty() const { return by_device.empty(); }
+};
+
+// The poses of the recording's cameras: rigs (sensor -> rig, rig_from_sensor) and trajectories.
+class LamarPoses {
+ public:
+  LamarPoses(const fs::path& root, const TimestampJoinOptions& options,
+             std::vector<std::string>* files)
+      : options_(options) {
+    const std::string rigs_path = (root / "rigs.txt").string();
+    if (fs::exists(rigs_path)) {
+      files->push_back(rigs_path);
+      for (const Row& row : ReadCsv(rigs_path)) {
+        if (row.fields.size() < 2)
+          ThrowInput(rigs_path, row.line, "expected rig_id, sensor_id, pose");
+        rig_of_[row.fields[1]] = {row.fields[0], PoseAt(rigs_path, row, 2)};
+      }
+    }
+    capture_.by_device = ReadTrajectories((root / "trajectories.txt").string(), &capture_.exact);
+    const std::string aligned_path = (root / "proc" / "alignment_trajectories.txt").string();
+    if (fs::exists(aligned_path)) {
+      files->push_back(aligned_path);
+      aligned_.by_device = ReadTrajectories(aligned_path, &aligned_.exact);
     }
   }
 
-  std::map<std::pair<int64_t, std::string>, Rigid3> capture_exact, aligned_exact;
-  const auto capture_by_device = ReadTrajectories(trajectories_path, &capture_exact);
-  std::map<std::string, std::vector<StampedPose>> aligned_by_device;
-  if (fs::exists(aligned_path)) {
-    recording.files.push_back(aligned_path);
-    aligned_by_device = ReadTrajectories(aligned_path, &aligned_exact);
+  // The capture pose and the ground truth (the alignment's) of camera `sensor` at `timestamp`.
+  void Attach(int64_t timestamp, const std::string& sensor, CaptureFrame* frame,
+              TimestampJoin* unjoined) const {
+    frame->capture = PoseOf(capture_, timestamp, sensor, unjoined, frame->name);
+    if (!aligned_.empty()) {
+      TimestampJoin ignored;
+      frame->ground_truth = PoseOf(aligned_, timestamp, sensor, &ignored, frame->name);
+    }
   }
 
+ private:
   // The pose of camera `sensor` at `timestamp`: its own, or its rig's times sensor-to-rig; joined
   // by time when the trajectory has no pose at that timestamp. nullopt when there is none.
-  const auto pose_of = [&](const std::map<std::pair<int64_t, std::string>, Rigid3>& exact,
-                           const std::map<std::string, std::vector<StampedPose>>& by_device,
-                           int64_t timestamp, const std::string& sensor, TimestampJoin* unjoined,
-                           const std::string& name) -> std::optional<Rigid3> {
+  std::optional<Rigid3> PoseOf(const Trajectories& trajectories, int64_t timestamp,
+                               const std::string& sensor, TimestampJoin* unjoined,
+                               const std::string& name) const {
     std::string device = sensor;
     Rigid3 device_from_sensor;
-    if (!by_device.count(sensor) && rig_of.count(sensor)) {
-      device = rig_of.at(sensor).first;
-      device_from_sensor = rig_of.at(sensor).second;
+    if (!trajectories.by_device.count(sensor) && rig_of_.count(sensor)) {
+      device = rig_of_.at(sensor).first;
+      device_from_sensor = rig_of_.at(sensor).second;
     }
-    const auto it = exact.find({timestamp, device});
-    if (it != exact.end()) return it->second * device_from_sensor;
-    const auto trajectory = by_device.find(device);
-    if (trajectory == by_device.end()) return std::nullopt;
+    const auto it = trajectories.exact.find({timestamp, device});
+    if (it != trajectories.exact.end()) return it->second * device_from_sensor;
+    const auto trajectory = trajectories.by_device.find(device);
+    if (trajectory == trajectories.by_device.end()) return std::nullopt;
     const TimestampJoin join =
-        JoinByTimestamp({{name, timestamp * 1e-6}}, trajectory->second, options);
+        JoinByTimestamp({{name, timestamp * 1e-6}}, trajectory->second, options_);
     if (join.poses.size() == 0) {
       unjoined->left_out.push_back(name);
       unjoined->num_before_start += join.num_before_start;
@@ -192,7 +210,26 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
       return std::nullopt;
     }
     return join.poses.world_from_cam.at(name) * device_from_sensor;
-  };
+  }
+
+  const TimestampJoinOptions& options_;
+  std::map<std::string, std::pair<std::string, Rigid3>> rig_of_;
+  Trajectories capture_, aligned_;
+};
+
+}  // namespace
+
+CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& options) {
+  const fs::path root(path);
+  const std::string sensors_path = (root / "sensors.txt").string();
+  const std::string images_path = (root / "images.txt").string();
+  const std::string trajectories_path = (root / "trajectories.txt").string();
+  CaptureRecording recording;
+  recording.format = "lamar";
+  recording.image_root = (root / "raw_data").string();
+  recording.files = {sensors_path, images_path, trajectories_path};
+  const std::map<std::string, LamarCamera> cameras = ReadCameras(sensors_path);
+  const LamarPoses poses(root, options, &recording.files);
 
   TimestampJoin unjoined;  // images without a capture pose
   std::set<std::string> names;
@@ -214,17 +251,11 @@ CaptureRecording ReadLamar(const std::string& path, const TimestampJoinOptions& 
     // The name comes from the file: a path the system cannot even look up (too long, say) is an
     // image that is not there, reported as such, not an escaping filesystem_error.
     frame.has_image = PathExists((root / "raw_data" / frame.name).string());
-    frame.K = camera->second.first;
-    frame.width = camera->second.second.first;
-    frame.height = camera->second.second.second;
+    frame.K = camera->second.K;
+    frame.width = camera->second.width;
+    frame.height = camera->second.height;
     frame.time_s = timestamp * 1e-6;
-    frame.capture =
-        pose_of(capture_exact, capture_by_device, timestamp, sensor, &unjoined, frame.name);
-    if (!aligned_by_device.empty()) {
-      TimestampJoin ignored;
-      frame.ground_truth =
-          pose_of(aligned_exact, aligned_by_device, timestamp, sensor, &ignored, frame.name);
-    }
+    poses.Attach(timestamp, sensor, &frame, &unjoined);
     if (!frame.capture && !frame.ground_truth) continue;  // no pose at all: not a frame
     recording.frames.push_back(std::move(frame));
   }

@@ -142,115 +142,136 @@ RobustEstimator ParseRobustEstimator(const std::string& name, const std::string&
   throw InputError(UnknownKeyMessage(what, name, {"magsac", "ransac"}, "estimator"));
 }
 
+namespace {
+
+// The rows `indices` of an N x 2 point matrix.
+cv::Mat InlierRows(const cv::Mat& points, const std::vector<int>& indices) {
+  cv::Mat rows(static_cast<int>(indices.size()), 2, CV_64F);
+  for (int k = 0; k < rows.rows; ++k) points.row(indices[k]).copyTo(rows.row(k));
+  return rows;
+}
+
+// The calibrated case: five-point RANSAC/MAGSAC on normalized points, the pose recovered from its
+// inliers, polished, then the inliers of the polished model at max_error_px.
+GeometryEstimate CalibratedGeometry(const PointList& x1, const PointList& x2,
+                                    const Eigen::Matrix3d& K1, const Eigen::Matrix3d& K2,
+                                    RobustEstimator estimator, double ransac_error_px,
+                                    double max_error_px, double confidence, int max_iterations) {
+  GeometryEstimate result;
+  cv::Mat mask;
+  const PointList n1 = Normalize(x1, K1), n2 = Normalize(x2, K2);
+  const cv::Mat p1 = ToCv(n1), p2 = ToCv(n2);
+  const double focal = 0.25 * (K1(0, 0) + K1(1, 1) + K2(0, 0) + K2(1, 1));
+  const int method = estimator == RobustEstimator::kMagsac ? static_cast<int>(cv::USAC_MAGSAC)
+                                                           : static_cast<int>(cv::RANSAC);
+  const cv::Mat identity = cv::Mat::eye(3, 3, CV_64F);
+  cv::Mat E = cv::findEssentialMat(p1, p2, identity, method, confidence, ransac_error_px / focal,
+                                   max_iterations, mask);
+  // The five-point solver may return up to 10 stacked solutions when it cannot choose; a failed
+  // estimation returns none.
+  if (E.rows < 3 || E.cols != 3 || mask.empty()) return result;
+  E = E.rowRange(0, 3).clone();
+  result.inliers = MaskIndices(mask);
+  if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
+    result.inliers.clear();
+    return result;
+  }
+  cv::Mat R, t;
+  cv::recoverPose(E, InlierRows(p1, result.inliers), InlierRows(p2, result.inliers), identity, R,
+                  t);
+  Eigen::Matrix3d R_eigen;
+  Eigen::Vector3d t_eigen;
+  cv::cv2eigen(R, R_eigen);
+  cv::cv2eigen(t, t_eigen);
+  t_eigen.normalize();
+  // Polish on the robust inliers, then take the inliers of the polished model at max_error_px
+  // (Sampson distance in normalized units times the focal length is pixels).
+  RefineRelativePose(n1, n2, result.inliers, ransac_error_px / focal, &R_eigen, &t_eigen);
+  std::vector<int> all(n1.rows());
+  std::iota(all.begin(), all.end(), 0);
+  const Eigen::VectorXd residuals = SampsonResiduals(R_eigen, t_eigen, n1, n2, all);
+  result.inliers.clear();
+  for (int k = 0; k < residuals.size(); ++k) {
+    if (std::abs(residuals(k)) * focal < max_error_px) result.inliers.push_back(k);
+  }
+  if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
+    result.inliers.clear();
+    return result;
+  }
+  TwoViewGeometry& g = result.geometry;
+  g.config = TwoViewConfig::kCalibrated;
+  g.E = Skew(t_eigen) * R_eigen;
+  g.F = K2.inverse().transpose() * g.E * K1.inverse();
+  g.cam2_from_cam1 = Rigid3(Eigen::Quaterniond(R_eigen).normalized(), t_eigen);
+  return result;
+}
+
+// The uncalibrated case: a fundamental matrix by RANSAC/MAGSAC, polished by the normalized
+// eight-point fit to its inliers (least squares); whichever of the two models has more inliers at
+// max_error_px is kept.
+GeometryEstimate UncalibratedGeometry(const PointList& x1, const PointList& x2,
+                                      RobustEstimator estimator, double ransac_error_px,
+                                      double max_error_px, double confidence, int max_iterations) {
+  GeometryEstimate result;
+  cv::Mat mask;
+  const int method = estimator == RobustEstimator::kMagsac ? static_cast<int>(cv::USAC_MAGSAC)
+                                                           : static_cast<int>(cv::FM_RANSAC);
+  const cv::Mat F = cv::findFundamentalMat(ToCv(x1), ToCv(x2), method, ransac_error_px, confidence,
+                                           max_iterations, mask);
+  if (F.rows != 3 || F.cols != 3 || mask.empty()) return result;
+  result.inliers = MaskIndices(mask);
+  if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
+    result.inliers.clear();
+    return result;
+  }
+  Eigen::Matrix3d F_eigen;
+  cv::cv2eigen(F, F_eigen);
+  const auto inliers_of = [&](const Eigen::Matrix3d& candidate) {
+    const Eigen::VectorXd distances = SampsonDistances(candidate, x1, x2);
+    std::vector<int> inliers;
+    for (int k = 0; k < distances.size(); ++k) {
+      if (distances(k) < max_error_px) inliers.push_back(k);
+    }
+    return inliers;
+  };
+  const cv::Mat F_fit = cv::findFundamentalMat(InlierRows(ToCv(x1), result.inliers),
+                                               InlierRows(ToCv(x2), result.inliers), cv::FM_8POINT);
+  result.inliers = inliers_of(F_eigen);
+  if (F_fit.rows == 3 && F_fit.cols == 3) {
+    Eigen::Matrix3d candidate;
+    cv::cv2eigen(F_fit, candidate);
+    std::vector<int> inliers = inliers_of(candidate);
+    if (inliers.size() >= result.inliers.size()) {
+      F_eigen = candidate;
+      result.inliers = std::move(inliers);
+    }
+  }
+  if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
+    result.inliers.clear();
+    return result;
+  }
+  result.geometry.config = TwoViewConfig::kUncalibrated;
+  result.geometry.F = F_eigen;
+  return result;
+}
+
+}  // namespace
+
 GeometryEstimate EstimateTwoViewGeometry(const PointList& x1, const PointList& x2,
                                          const Eigen::Matrix3d* K1, const Eigen::Matrix3d* K2,
                                          RobustEstimator estimator, double ransac_error_px,
                                          double max_error_px, double confidence,
                                          int max_iterations) {
-  GeometryEstimate result;
   if (x1.rows() != x2.rows()) {
     throw std::invalid_argument("EstimateTwoViewGeometry: point counts differ");
   }
-  if (x1.rows() < kMinCorrespondences) return result;
-  const bool calibrated = K1 != nullptr && K2 != nullptr;
-  cv::Mat mask;
-  if (calibrated) {
-    const PointList n1 = Normalize(x1, *K1), n2 = Normalize(x2, *K2);
-    const cv::Mat p1 = ToCv(n1), p2 = ToCv(n2);
-    const double focal = 0.25 * ((*K1)(0, 0) + (*K1)(1, 1) + (*K2)(0, 0) + (*K2)(1, 1));
-    const int method = estimator == RobustEstimator::kMagsac ? static_cast<int>(cv::USAC_MAGSAC)
-                                                             : static_cast<int>(cv::RANSAC);
-    const cv::Mat identity = cv::Mat::eye(3, 3, CV_64F);
-    cv::Mat E = cv::findEssentialMat(p1, p2, identity, method, confidence, ransac_error_px / focal,
-                                     max_iterations, mask);
-    // The five-point solver may return up to 10 stacked solutions when it cannot choose; a
-    // failed estimation returns none.
-    if (E.rows < 3 || E.cols != 3 || mask.empty()) return result;
-    E = E.rowRange(0, 3).clone();
-    result.inliers = MaskIndices(mask);
-    if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
-      result.inliers.clear();
-      return result;
-    }
-    cv::Mat q1(static_cast<int>(result.inliers.size()), 2, CV_64F), q2 = q1.clone();
-    for (int k = 0; k < q1.rows; ++k) {
-      p1.row(result.inliers[k]).copyTo(q1.row(k));
-      p2.row(result.inliers[k]).copyTo(q2.row(k));
-    }
-    cv::Mat R, t;
-    cv::recoverPose(E, q1, q2, identity, R, t);
-    Eigen::Matrix3d R_eigen;
-    Eigen::Vector3d t_eigen;
-    cv::cv2eigen(R, R_eigen);
-    cv::cv2eigen(t, t_eigen);
-    t_eigen.normalize();
-    // Polish on the robust inliers, then take the inliers of the polished model at max_error_px
-    // (Sampson distance in normalized units times the focal length is pixels).
-    RefineRelativePose(n1, n2, result.inliers, ransac_error_px / focal, &R_eigen, &t_eigen);
-    std::vector<int> all(n1.rows());
-    std::iota(all.begin(), all.end(), 0);
-    const Eigen::VectorXd residuals = SampsonResiduals(R_eigen, t_eigen, n1, n2, all);
-    result.inliers.clear();
-    for (int k = 0; k < residuals.size(); ++k) {
-      if (std::abs(residuals(k)) * focal < max_error_px) result.inliers.push_back(k);
-    }
-    if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
-      result.inliers.clear();
-      return result;
-    }
-    TwoViewGeometry& g = result.geometry;
-    g.config = TwoViewConfig::kCalibrated;
-    g.E = Skew(t_eigen) * R_eigen;
-    g.F = K2->inverse().transpose() * g.E * K1->inverse();
-    g.cam2_from_cam1 = Rigid3(Eigen::Quaterniond(R_eigen).normalized(), t_eigen);
-  } else {
-    const int method = estimator == RobustEstimator::kMagsac ? static_cast<int>(cv::USAC_MAGSAC)
-                                                             : static_cast<int>(cv::FM_RANSAC);
-    const cv::Mat F = cv::findFundamentalMat(ToCv(x1), ToCv(x2), method, ransac_error_px,
-                                             confidence, max_iterations, mask);
-    if (F.rows != 3 || F.cols != 3 || mask.empty()) return result;
-    result.inliers = MaskIndices(mask);
-    if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
-      result.inliers.clear();
-      return result;
-    }
-    // Polish: the normalized eight-point fit to the robust inliers (least squares); keep whichever
-    // of the two models has more inliers at max_error_px.
-    Eigen::Matrix3d F_eigen;
-    cv::cv2eigen(F, F_eigen);
-    const auto inliers_of = [&](const Eigen::Matrix3d& candidate) {
-      const Eigen::VectorXd distances = SampsonDistances(candidate, x1, x2);
-      std::vector<int> inliers;
-      for (int k = 0; k < distances.size(); ++k) {
-        if (distances(k) < max_error_px) inliers.push_back(k);
-      }
-      return inliers;
-    };
-    const cv::Mat p1 = ToCv(x1), p2 = ToCv(x2);
-    cv::Mat q1(static_cast<int>(result.inliers.size()), 2, CV_64F), q2 = q1.clone();
-    for (int k = 0; k < q1.rows; ++k) {
-      p1.row(result.inliers[k]).copyTo(q1.row(k));
-      p2.row(result.inliers[k]).copyTo(q2.row(k));
-    }
-    const cv::Mat F_fit = cv::findFundamentalMat(q1, q2, cv::FM_8POINT);
-    result.inliers = inliers_of(F_eigen);
-    if (F_fit.rows == 3 && F_fit.cols == 3) {
-      Eigen::Matrix3d candidate;
-      cv::cv2eigen(F_fit, candidate);
-      std::vector<int> inliers = inliers_of(candidate);
-      if (inliers.size() >= result.inliers.size()) {
-        F_eigen = candidate;
-        result.inliers = std::move(inliers);
-      }
-    }
-    if (static_cast<int>(result.inliers.size()) < kMinCorrespondences) {
-      result.inliers.clear();
-      return result;
-    }
-    result.geometry.config = TwoViewConfig::kUncalibrated;
-    result.geometry.F = F_eigen;
+  if (x1.rows() < kMinCorrespondences) return GeometryEstimate();
+  if (K1 != nullptr && K2 != nullptr) {
+    return CalibratedGeometry(x1, x2, *K1, *K2, estimator, ransac_error_px, max_error_px,
+                              confidence, max_iterations);
   }
-  return result;
+  return UncalibratedGeometry(x1, x2, estimator, ransac_error_px, max_error_px, confidence,
+                              max_iterations);
 }
 
 Eigen::VectorXd SampsonDistances(const Eigen::Matrix3d& F, const PointList& x1,

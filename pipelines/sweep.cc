@@ -170,6 +170,147 @@ void ThrowIfRunsFailed(int failures, size_t num_runs, const std::string& workdir
                    " sweep runs failed (see " + workdir + "/sweep.csv and each run.log)");
 }
 
+namespace {
+
+// Each run's folder with its pipeline.yaml, and WORKDIR/runs.json listing them; returns the
+// folders, in the runs' order.
+std::vector<std::string> PrepareRuns(const std::vector<SweepRun>& runs,
+                                     const std::string& workdir) {
+  std::vector<std::string> run_dirs;
+  for (const SweepRun& run : runs) {
+    run_dirs.push_back((fs::path(workdir) / "runs" / run.label).string());
+    fs::create_directories(run_dirs.back());
+    WriteTextFileAtomically((fs::path(run_dirs.back()) / "pipeline.yaml").string(),
+                            PipelineToYaml(run.spec));
+  }
+  json run_list = json::array();
+  for (size_t i = 0; i < runs.size(); ++i) {
+    run_list.push_back({{"label", runs[i].label}, {"swept", runs[i].swept}, {"dir", run_dirs[i]}});
+  }
+  WriteTextFileAtomically((fs::path(workdir) / "runs.json").string(), run_list.dump(2));
+  return run_dirs;
+}
+
+// The local backend: the runs as child processes, `jobs` at a time; a row per finished run and
+// the tables rewritten after each. On SIGINT/SIGTERM the running children are stopped, every row
+// finished so far kept, and the sweep said to be interrupted.
+class LocalSweep {
+ public:
+  LocalSweep(const PipelineSpec& spec, const std::string& workdir,
+             const std::vector<SweepRun>& runs, const std::vector<std::string>& run_dirs,
+             const std::string& cache_dir, bool force, int jobs)
+      : spec_(spec),
+        workdir_(workdir),
+        runs_(runs),
+        run_dirs_(run_dirs),
+        cache_dir_(cache_dir),
+        force_(force),
+        jobs_(jobs),
+        rows_(runs.size()),
+        finished_(runs.size(), false) {}
+
+  void Run() {
+    const InterruptAction on_interrupt([&](int signal) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      StopRunning();
+      Write("interrupted");
+      spdlog::error(fmt::format(
+          "sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
+          std::count(finished_.begin(), finished_.end(), true), runs_.size(), workdir_));
+    });
+    size_t done = 0;
+    while (done < runs_.size()) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        StartRuns();
+      }
+      const pid_t pid = WaitAnyProcess().pid;
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto it = running_.find(pid);
+      if (it == running_.end()) continue;
+      const size_t index = it->second;
+      running_.erase(it);
+      ++done;
+      Finish(index, done);
+      Write(done < runs_.size() ? "running" : (failures_ ? "failed" : "ok"));
+    }
+    ThrowIfRunsFailed(failures_, runs_.size(), workdir_);
+  }
+
+ private:
+  // Starts runs until `jobs` are under way (the caller holds mutex_). A run that cannot start
+  // stops the sweep: the runs not started are not rows, the summary says it failed and why, never
+  // "running" with nothing left running; runs under way are stopped and keep their rows.
+  void StartRuns() {
+    while (next_ < runs_.size() && static_cast<int>(running_.size()) < jobs_) {
+      try {
+        running_[SpawnRun(run_dirs_[next_], cache_dir_, force_)] = next_;
+      } catch (const std::exception& e) {
+        StopRunning();
+        const std::string error = std::string("run ") + runs_[next_].label + ": " + e.what();
+        Write("failed", error);
+        throw std::runtime_error("sweep stopped: " + error);
+      }
+      ++next_;
+    }
+  }
+
+  // The row of the finished run `index`, the `done`-th, with its line in the log.
+  void Finish(size_t index, size_t done) {
+    rows_[index] = SweepRowFromRun(runs_[index].label, runs_[index].swept, run_dirs_[index]);
+    finished_[index] = true;
+    const SweepRow& row = rows_[index];
+    if (!row.Succeeded()) ++failures_;
+    spdlog::info(fmt::format("sweep: {}/{} {} {} ({:.1f} s)", done, runs_.size(), row.run,
+                             row.status, row.seconds));
+    if (!row.Succeeded()) {
+      spdlog::error(fmt::format("sweep run {} failed: {}", row.run,
+                                row.error.empty() ? std::string("see run.log") : row.error));
+    }
+  }
+
+  // Stops the running children (each writes its own "interrupted" summary) and keeps their rows;
+  // the caller holds mutex_.
+  void StopRunning() {
+    for (const auto& [pid, index] : running_) SignalProcess(pid, SIGTERM);
+    for (const auto& [pid, index] : running_) {
+      WaitProcess(pid);
+      rows_[index] = SweepRowFromRun(runs_[index].label, runs_[index].swept, run_dirs_[index]);
+      finished_[index] = true;
+    }
+    running_.clear();
+  }
+
+  void Write(const std::string& status, const std::string& error = "") {
+    std::vector<SweepRow> table;
+    for (size_t i = 0; i < runs_.size(); ++i) {
+      if (finished_[i]) table.push_back(rows_[i]);
+    }
+    json fields = {{"pipeline", spec_.path},   {"name", spec_.name},
+                   {"num_runs", runs_.size()}, {"failures", failures_},
+                   {"status", status},         {"seconds", SecondsSince(start_)}};
+    if (!error.empty()) fields["error"] = error;
+    WriteSweepOutputs(workdir_, table, fields);
+  }
+
+  const PipelineSpec& spec_;
+  const std::string& workdir_;
+  const std::vector<SweepRun>& runs_;
+  const std::vector<std::string>& run_dirs_;
+  const std::string& cache_dir_;
+  const bool force_;
+  const int jobs_;
+  const std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::mutex mutex_;  // rows and running children, shared with the interrupt watcher
+  std::vector<SweepRow> rows_;
+  std::vector<bool> finished_;
+  std::map<pid_t, size_t> running_;
+  size_t next_ = 0;
+  int failures_ = 0;
+};
+
+}  // namespace
+
 json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOptions& options) {
   const std::vector<SweepRun> runs = ExpandSweep(spec);
   const int jobs = options.jobs > 0
@@ -180,103 +321,14 @@ json RunSweep(const PipelineSpec& spec, const std::string& workdir, const RunOpt
   fs::create_directories(workdir);
   RemoveStaleTemporaryFiles(workdir);
   spdlog::info(fmt::format("sweep: {} runs, {} at a time, cache {}", runs.size(), jobs, cache_dir));
-
-  std::vector<std::string> run_dirs;
-  for (const SweepRun& run : runs) {
-    run_dirs.push_back((fs::path(workdir) / "runs" / run.label).string());
-    fs::create_directories(run_dirs.back());
-    WriteTextFileAtomically((fs::path(run_dirs.back()) / "pipeline.yaml").string(),
-                            PipelineToYaml(run.spec));
-  }
-
-  json run_list = json::array();
-  for (size_t i = 0; i < runs.size(); ++i) {
-    run_list.push_back({{"label", runs[i].label}, {"swept", runs[i].swept}, {"dir", run_dirs[i]}});
-  }
-  WriteTextFileAtomically((fs::path(workdir) / "runs.json").string(), run_list.dump(2));
+  const std::vector<std::string> run_dirs = PrepareRuns(runs, workdir);
   if (options.backend == "slurm") {
     return SubmitSweepToSlurm(spec, workdir, runs, run_dirs, cache_dir, options);
   }
   if (options.backend != "local") {
     throw InputError("sweep: unknown backend '" + options.backend + "' (local or slurm)");
   }
-
-  const auto start = std::chrono::steady_clock::now();
-  std::mutex mutex;  // rows and running children, shared with the interrupt watcher
-  std::vector<SweepRow> rows(runs.size());
-  std::vector<bool> finished(runs.size(), false);
-  std::map<pid_t, size_t> running;
-  int failures = 0;
-  const auto write = [&](const std::string& status, const std::string& error = "") {
-    std::vector<SweepRow> table;
-    for (size_t i = 0; i < runs.size(); ++i) {
-      if (finished[i]) table.push_back(rows[i]);
-    }
-    json fields = {{"pipeline", spec.path}, {"name", spec.name}, {"num_runs", runs.size()},
-                   {"failures", failures},  {"status", status},  {"seconds", SecondsSince(start)}};
-    if (!error.empty()) fields["error"] = error;
-    WriteSweepOutputs(workdir, table, fields);
-  };
-  // Stops the running children (each writes its own "interrupted" summary) and keeps their rows;
-  // the caller holds `mutex`.
-  const auto stop_running = [&] {
-    for (const auto& [pid, index] : running) SignalProcess(pid, SIGTERM);
-    for (const auto& [pid, index] : running) {
-      WaitProcess(pid);
-      rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
-      finished[index] = true;
-    }
-    running.clear();
-  };
-  // On SIGINT/SIGTERM: stop the running children, keep every row finished so far, and say the
-  // sweep was interrupted.
-  const InterruptAction on_interrupt([&](int signal) {
-    std::lock_guard<std::mutex> lock(mutex);
-    stop_running();
-    write("interrupted");
-    spdlog::error(fmt::format(
-        "sweep interrupted (signal {}): {} of {} runs have rows in {}/sweep.csv", signal,
-        std::count(finished.begin(), finished.end(), true), runs.size(), workdir));
-  });
-
-  size_t next = 0, done = 0;
-  while (done < runs.size()) {
-    {
-      std::lock_guard<std::mutex> lock(mutex);
-      while (next < runs.size() && static_cast<int>(running.size()) < jobs) {
-        try {
-          running[SpawnRun(run_dirs[next], cache_dir, options.force)] = next;
-        } catch (const std::exception& e) {
-          // The runs not started are not rows: the summary says the sweep failed and why, never
-          // "running" with nothing left running. Runs under way are stopped and keep their rows.
-          stop_running();
-          const std::string error = std::string("run ") + runs[next].label + ": " + e.what();
-          write("failed", error);
-          throw std::runtime_error("sweep stopped: " + error);
-        }
-        ++next;
-      }
-    }
-    const pid_t pid = WaitAnyProcess().pid;
-    std::lock_guard<std::mutex> lock(mutex);
-    const auto it = running.find(pid);
-    if (it == running.end()) continue;
-    const size_t index = it->second;
-    running.erase(it);
-    ++done;
-    rows[index] = SweepRowFromRun(runs[index].label, runs[index].swept, run_dirs[index]);
-    finished[index] = true;
-    const SweepRow& row = rows[index];
-    if (!row.Succeeded()) ++failures;
-    spdlog::info(fmt::format("sweep: {}/{} {} {} ({:.1f} s)", done, runs.size(), row.run,
-                             row.status, row.seconds));
-    if (!row.Succeeded()) {
-      spdlog::error(fmt::format("sweep run {} failed: {}", row.run,
-                                row.error.empty() ? std::string("see run.log") : row.error));
-    }
-    write(done < runs.size() ? "running" : (failures ? "failed" : "ok"));
-  }
-  ThrowIfRunsFailed(failures, runs.size(), workdir);
+  LocalSweep(spec, workdir, runs, run_dirs, cache_dir, options.force, jobs).Run();
   return json::parse(ReadTextFile((fs::path(workdir) / "summary.json").string()));
 }
 

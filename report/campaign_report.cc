@@ -646,6 +646,48 @@ std::string CsvNumber(double value) {
   return text;
 }
 
+// A cell per scene, level and arm with runs.
+void AddSceneCells(const std::vector<RunRecord>& runs, const CampaignReportOptions& options,
+                   CampaignReport* report) {
+  for (const auto& scene : report->scenes) {
+    for (const double level : report->levels) {
+      std::vector<const RunRecord*> cell_runs;
+      for (const RunRecord& run : runs) {
+        if (run.scene == scene && run.level_deg == level) cell_runs.push_back(&run);
+      }
+      for (const auto& arm : report->arms) {
+        CampaignCell cell = MakeCell(scene, level, arm, cell_runs, options);
+        if (cell.sim3.runs > 0 || cell.none.runs > 0) report->cells.push_back(cell);
+      }
+    }
+  }
+}
+
+// A cell per level and arm over every scene, with how many scenes succeed in every run (after
+// AddSceneCells).
+void AddPooledCells(const std::vector<RunRecord>& runs, const CampaignReportOptions& options,
+                    CampaignReport* report) {
+  for (const double level : report->levels) {
+    std::vector<const RunRecord*> level_runs;
+    for (const RunRecord& run : runs) {
+      if (run.level_deg == level) level_runs.push_back(&run);
+    }
+    for (const auto& arm : report->arms) {
+      CampaignCell cell = MakeCell(CampaignReport::kAllScenes, level, arm, level_runs, options);
+      if (cell.sim3.runs == 0 && cell.none.runs == 0) continue;
+      for (const auto& scene : report->scenes) {
+        const CampaignCell* scene_cell = report->Find(scene, level, arm);
+        if (scene_cell == nullptr || scene_cell->sim3.runs == 0) continue;
+        ++cell.scene_success.scenes;
+        if (scene_cell->sim3.successes == scene_cell->sim3.runs) {
+          ++cell.scene_success.scenes_all_succeed;
+        }
+      }
+      report->cells.push_back(cell);
+    }
+  }
+}
+
 }  // namespace
 
 ProportionInterval WilsonInterval(int successes, int trials, double z) {
@@ -748,37 +790,8 @@ CampaignReport AggregateCampaign(const std::vector<SweepRow>& rows,
     report.pooled_keys.emplace_back(key, static_cast<int>(values.size()));
   }
 
-  for (const auto& scene : report.scenes) {
-    for (const double level : report.levels) {
-      std::vector<const RunRecord*> cell_runs;
-      for (const RunRecord& run : runs) {
-        if (run.scene == scene && run.level_deg == level) cell_runs.push_back(&run);
-      }
-      for (const auto& arm : report.arms) {
-        CampaignCell cell = MakeCell(scene, level, arm, cell_runs, options);
-        if (cell.sim3.runs > 0 || cell.none.runs > 0) report.cells.push_back(cell);
-      }
-    }
-  }
-  for (const double level : report.levels) {
-    std::vector<const RunRecord*> level_runs;
-    for (const RunRecord& run : runs) {
-      if (run.level_deg == level) level_runs.push_back(&run);
-    }
-    for (const auto& arm : report.arms) {
-      CampaignCell cell = MakeCell(CampaignReport::kAllScenes, level, arm, level_runs, options);
-      if (cell.sim3.runs == 0 && cell.none.runs == 0) continue;
-      for (const auto& scene : report.scenes) {
-        const CampaignCell* scene_cell = report.Find(scene, level, arm);
-        if (scene_cell == nullptr || scene_cell->sim3.runs == 0) continue;
-        ++cell.scene_success.scenes;
-        if (scene_cell->sim3.successes == scene_cell->sim3.runs) {
-          ++cell.scene_success.scenes_all_succeed;
-        }
-      }
-      report.cells.push_back(cell);
-    }
-  }
+  AddSceneCells(runs, options, &report);
+  AddPooledCells(runs, options, &report);
   report.splat_cells = AggregateSplat(runs, report.scenes, options.baseline_arm);
   return report;
 }

@@ -191,9 +191,8 @@ void InjectFault(const CaptureOptions& o, ImageSet* images, std::vector<ImageFea
   }
 }
 
-int Main(int argc, char** argv) {
-  CaptureOptions o;
-  CLI::App app("Synthetic corridor capture in raytime's HDF5 schema (issue 14 scaling benchmark)");
+// The command line, onto `o`.
+void AddOptions(CLI::App& app, CaptureOptions& o) {
   app.add_option("--cameras", o.cameras, "Frames")->check(CLI::PositiveNumber);
   app.add_option("--keypoints", o.keypoints, "Points each frame sees, about")
       ->check(CLI::PositiveNumber);
@@ -224,99 +223,137 @@ int Main(int argc, char** argv) {
   faults->add_option("--foreign", o.foreign, "I: image I shows another scene");
   faults->require_option(0, 1);
   app.add_option("--out", o.out, "Output directory")->required();
-  CLI11_PARSE(app, argc, argv);
+}
 
-  // A frame's footprint on the wall at the median depth is kWidth / kFocal * depth wide; the
-  // spacing puts the last frame of the window half a footprint along, so neighbours share most
-  // points and the window's far end about half.
+// The corridor's layout. A frame's footprint on the wall at the median depth is kWidth / kFocal *
+// depth wide; the spacing puts the last frame of the window half a footprint along, so neighbours
+// share most points and the window's far end about half.
+struct Corridor {
+  explicit Corridor(const CaptureOptions& o)
+      : spacing(footprint / (2.0 * o.window)),
+        per_lap((o.cameras + o.laps - 1) / o.laps),
+        length((per_lap - 1) * spacing + 2 * margin) {}
+
+  int Position(int frame) const { return frame % per_lap; }
+
   const double footprint = kWidth / kFocal * kMedianDepth;
-  const double spacing = footprint / (2.0 * o.window);
   const double height = std::min(2.0 * kWallHalfHeight, kHeight / kFocal * kMedianDepth);
-  const double density = o.keypoints / (footprint * height);  // points per m² of wall
   const double margin = footprint;
-  const int per_lap = (o.cameras + o.laps - 1) / o.laps;  // frame positions along the corridor
-  const auto position = [&](int i) { return i % per_lap; };
-  const double length = (per_lap - 1) * spacing + 2 * margin;
-  std::mt19937_64 rng(o.seed);
+  const double spacing;
+  const int per_lap;  // frame positions along the corridor
+  const double length;
+};
+
+// The wall's points, sorted along the corridor, about `keypoints` in each frame's footprint.
+std::vector<Eigen::Vector3d> WallPoints(const CaptureOptions& o, const Corridor& corridor,
+                                        std::mt19937_64* rng) {
   std::uniform_real_distribution<double> unit(0.0, 1.0);
-  std::normal_distribution<double> noise(0.0, o.noise_px);
-  const int num_points = static_cast<int>(density * length * 2 * kWallHalfHeight);
+  const double density = o.keypoints / (corridor.footprint * corridor.height);  // per m² of wall
+  const int num_points = static_cast<int>(density * corridor.length * 2 * kWallHalfHeight);
   std::vector<Eigen::Vector3d> points(num_points);
   for (Eigen::Vector3d& p : points) {
-    p = Eigen::Vector3d(-margin + length * unit(rng),
-                        kNearDepth + (kFarDepth - kNearDepth) * unit(rng),
-                        kWallHalfHeight * (2 * unit(rng) - 1));
+    p = Eigen::Vector3d(-corridor.margin + corridor.length * unit(*rng),
+                        kNearDepth + (kFarDepth - kNearDepth) * unit(*rng),
+                        kWallHalfHeight * (2 * unit(*rng) - 1));
   }
   std::sort(points.begin(), points.end(),
             [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return a.x() < b.x(); });
+  return points;
+}
 
+// The frames: images, true poses and noisy keypoints, with per frame the keypoint of each point it
+// sees, by point index (sorted).
+struct Frames {
+  ImageSet images;
+  PoseSet ground_truth;
+  std::vector<ImageFeatures> features;
+  std::vector<std::vector<std::pair<int, int>>> seen;
+};
+
+// Frame i's keypoints: the points in its footprint that land inside the image, with noise.
+void Observe(int i, const Rigid3& pose, const std::vector<Eigen::Vector3d>& points,
+             const Corridor& corridor, std::normal_distribution<double>* noise,
+             std::mt19937_64* rng, Frames* frames) {
+  const Rigid3 cam_from_world = pose.Inverse();
+  const double x_min = pose.translation.x() - corridor.footprint;
+  const auto first = std::lower_bound(points.begin(), points.end(), x_min,
+                                      [](const Eigen::Vector3d& p, double x) { return p.x() < x; });
+  std::vector<Eigen::Vector2d> pixels;
+  for (auto it = first; it != points.end() && it->x() < pose.translation.x() + corridor.footprint;
+       ++it) {
+    const Eigen::Vector3d p = cam_from_world * *it;
+    const Eigen::Vector2d u(kFocal * p.x() / p.z() + kWidth / 2.0,
+                            kFocal * p.y() / p.z() + kHeight / 2.0);
+    if (u.x() < 0 || u.x() >= kWidth || u.y() < 0 || u.y() >= kHeight) continue;
+    frames->seen[i].emplace_back(static_cast<int>(it - points.begin()),
+                                 static_cast<int>(pixels.size()));
+    pixels.push_back(u + Eigen::Vector2d((*noise)(*rng), (*noise)(*rng)));
+  }
+  auto& keypoints = frames->features[i].keypoints;
+  keypoints.resize(static_cast<Eigen::Index>(pixels.size()), 4);
+  for (size_t k = 0; k < pixels.size(); ++k) {
+    keypoints.row(static_cast<Eigen::Index>(k)) << static_cast<float>(pixels[k].x()),
+        static_cast<float>(pixels[k].y()), 2.0f, 0.0f;
+  }
+}
+
+Frames WalkCorridor(const CaptureOptions& o, const Corridor& corridor,
+                    const std::vector<Eigen::Vector3d>& points, std::mt19937_64* rng) {
+  std::normal_distribution<double> noise(0.0, o.noise_px);
   // Camera frame: x = world x, y = world -z (image down), z = world y (towards the wall).
   Eigen::Matrix3d world_from_cam_rotation;
   world_from_cam_rotation << 1, 0, 0, 0, 0, 1, 0, -1, 0;
-  ImageSet images;
+  Frames frames;
   CameraIntrinsics camera;
   camera.params = {kFocal, kFocal, kWidth / 2.0, kHeight / 2.0, 0, 0, 0, 0};
-  images.cameras = {camera};
-  PoseSet ground_truth;
-  std::vector<ImageFeatures> features(o.cameras);
-  // Per frame: the keypoint of each point it sees, by point index (sorted).
-  std::vector<std::vector<std::pair<int, int>>> seen(o.cameras);
+  frames.images.cameras = {camera};
+  frames.features.resize(o.cameras);
+  frames.seen.resize(o.cameras);
   for (int i = 0; i < o.cameras; ++i) {
     char name[32];
     std::snprintf(name, sizeof(name), "%06d.png", i);
-    images.images.push_back({name, kWidth, kHeight, 0});
+    frames.images.images.push_back({name, kWidth, kHeight, 0});
     // A hand-held walk, not a rail: the centre sways ±10 cm in depth and height (collinear
     // centres would leave the roll about the corridor to the gauge and Sim(3) alignment undefined).
     // Each lap sways on its own phase, so revisits see the wall from other centres.
-    const double phase = 1.7 * (i / per_lap);
-    const Rigid3 pose(Eigen::Quaterniond(world_from_cam_rotation),
-                      Eigen::Vector3d(position(i) * spacing, 0.1 * std::sin(0.13 * i + phase),
-                                      0.1 * std::sin(0.07 * i + phase)));
-    ground_truth.world_from_cam[name] = pose;
-    const Rigid3 cam_from_world = pose.Inverse();
-    const double x_min = pose.translation.x() - footprint;
-    const auto first =
-        std::lower_bound(points.begin(), points.end(), x_min,
-                         [](const Eigen::Vector3d& p, double x) { return p.x() < x; });
-    std::vector<Eigen::Vector2d> pixels;
-    for (auto it = first; it != points.end() && it->x() < pose.translation.x() + footprint; ++it) {
-      const Eigen::Vector3d p = cam_from_world * *it;
-      const Eigen::Vector2d u(kFocal * p.x() / p.z() + kWidth / 2.0,
-                              kFocal * p.y() / p.z() + kHeight / 2.0);
-      if (u.x() < 0 || u.x() >= kWidth || u.y() < 0 || u.y() >= kHeight) continue;
-      seen[i].emplace_back(static_cast<int>(it - points.begin()), static_cast<int>(pixels.size()));
-      pixels.push_back(u + Eigen::Vector2d(noise(rng), noise(rng)));
-    }
-    features[i].keypoints.resize(static_cast<Eigen::Index>(pixels.size()), 4);
-    for (size_t k = 0; k < pixels.size(); ++k) {
-      features[i].keypoints.row(static_cast<Eigen::Index>(k)) << static_cast<float>(pixels[k].x()),
-          static_cast<float>(pixels[k].y()), 2.0f, 0.0f;
-    }
+    const double phase = 1.7 * (i / corridor.per_lap);
+    const Rigid3 pose(
+        Eigen::Quaterniond(world_from_cam_rotation),
+        Eigen::Vector3d(corridor.Position(i) * corridor.spacing, 0.1 * std::sin(0.13 * i + phase),
+                        0.1 * std::sin(0.07 * i + phase)));
+    frames.ground_truth.world_from_cam[name] = pose;
+    Observe(i, pose, points, corridor, &noise, rng, &frames);
   }
+  return frames;
+}
 
+// Every pair of frames at most `window` positions apart with at least 20 common points, matched on
+// them, an `outliers` fraction of each pair's matches replaced by a random keypoint of the second.
+std::vector<PairMatches> MatchFrames(const CaptureOptions& o, const Corridor& corridor,
+                                     const Frames& frames, std::mt19937_64* rng) {
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::vector<PairMatches> pairs;
-  long long num_matches = 0;
   for (int i = 0; i < o.cameras; ++i) {
     for (int j = i + 1; j < o.cameras; ++j) {
-      if (std::abs(position(j) - position(i)) > o.window) continue;
+      if (std::abs(corridor.Position(j) - corridor.Position(i)) > o.window) continue;
+      const auto& seen_i = frames.seen[i];
+      const auto& seen_j = frames.seen[j];
       std::vector<std::pair<uint32_t, uint32_t>> matches;
-      auto a = seen[i].begin();
-      auto b = seen[j].begin();
-      while (a != seen[i].end() && b != seen[j].end()) {
+      auto a = seen_i.begin();
+      auto b = seen_j.begin();
+      while (a != seen_i.end() && b != seen_j.end()) {
         if (a->first < b->first) {
           ++a;
         } else if (b->first < a->first) {
           ++b;
         } else {
-          matches.emplace_back(a->second, b->second);
-          ++a;
-          ++b;
+          matches.emplace_back((a++)->second, (b++)->second);
         }
       }
       if (matches.size() < 20) continue;
-      const auto keypoints_j = static_cast<uint32_t>(seen[j].size());
+      const auto keypoints_j = static_cast<uint32_t>(seen_j.size());
       for (auto& m : matches) {
-        if (unit(rng) < o.outliers) m.second = static_cast<uint32_t>(unit(rng) * keypoints_j);
+        if (unit(*rng) < o.outliers) m.second = static_cast<uint32_t>(unit(*rng) * keypoints_j);
       }
       PairMatches pair;
       pair.image1 = i;
@@ -327,24 +364,15 @@ int Main(int argc, char** argv) {
       }
       pair.geometry.config = TwoViewConfig::kCalibrated;
       pair.geometry.inlier_matches = pair.matches;
-      num_matches += static_cast<long long>(matches.size());
       pairs.push_back(std::move(pair));
     }
   }
+  return pairs;
+}
 
-  if (o.weak_link > 0) KeepOnePairAcross(o, position, &pairs);
-  SetRelativePoses(images, ground_truth, &pairs);
-  InjectFault(o, &images, &features, &pairs, &rng);
-  num_matches = 0;
-  for (const PairMatches& pair : pairs) num_matches += pair.matches.rows();
-
-  PerturbationOptions perturbation;
-  perturbation.level_deg = o.level_deg;
-  perturbation.translation_unit = "metres";
-  perturbation.translation_per_deg = 0.0125 * kMedianDepth;
-  perturbation.seed = o.seed;
-  const PoseSet prior = PerturbPoses(ground_truth, perturbation);
-
+// DIR/dataset.h5, features.h5, matches.h5 and prior.h5, with the options as provenance.
+void WriteCapture(const CaptureOptions& o, const Frames& frames,
+                  const std::vector<PairMatches>& pairs, const PoseSet& prior) {
   std::filesystem::create_directories(o.out);
   Provenance provenance;
   provenance.stage = "synthetic_capture";
@@ -363,13 +391,13 @@ int Main(int argc, char** argv) {
                         {"foreign", o.foreign}};
   {
     Hdf5Writer writer(o.out + "/dataset.h5");
-    writer.WriteImages(images);
-    writer.WritePoseSet("ground_truth", ground_truth, PoseRole::kGroundTruth, provenance);
+    writer.WriteImages(frames.images);
+    writer.WritePoseSet("ground_truth", frames.ground_truth, PoseRole::kGroundTruth, provenance);
     writer.Commit();
   }
   {
     Hdf5Writer writer(o.out + "/features.h5");
-    writer.WriteFeatures(features, provenance);
+    writer.WriteFeatures(frames.features, provenance);
     writer.Commit();
   }
   {
@@ -382,14 +410,47 @@ int Main(int argc, char** argv) {
     writer.WritePoseSet("prior", prior, PoseRole::kPrior, provenance);
     writer.Commit();
   }
-  long long num_keypoints = 0;
-  for (const ImageFeatures& f : features) num_keypoints += f.keypoints.rows();
+}
+
+int Main(int argc, char** argv) {
+  CaptureOptions o;
+  CLI::App app("Synthetic corridor capture in raytime's HDF5 schema (issue 14 scaling benchmark)");
+  AddOptions(app, o);
+  CLI11_PARSE(app, argc, argv);
+
+  // 1. The wall, the walk along it and the matches (one generator: the scene, the noise and the
+  // outliers in this order, then the fault).
+  const Corridor corridor(o);
+  std::mt19937_64 rng(o.seed);
+  const std::vector<Eigen::Vector3d> points = WallPoints(o, corridor, &rng);
+  Frames frames = WalkCorridor(o, corridor, points, &rng);
+  std::vector<PairMatches> pairs = MatchFrames(o, corridor, frames, &rng);
+
+  // 2. The weak link and the fault the options ask for.
+  const auto position = [&](int i) { return corridor.Position(i); };
+  if (o.weak_link > 0) KeepOnePairAcross(o, position, &pairs);
+  SetRelativePoses(frames.images, frames.ground_truth, &pairs);
+  InjectFault(o, &frames.images, &frames.features, &pairs, &rng);
+
+  // 3. The prior: the ground truth perturbed by the ladder protocol.
+  PerturbationOptions perturbation;
+  perturbation.level_deg = o.level_deg;
+  perturbation.translation_unit = "metres";
+  perturbation.translation_per_deg = 0.0125 * kMedianDepth;
+  perturbation.seed = o.seed;
+  const PoseSet prior = PerturbPoses(frames.ground_truth, perturbation);
+
+  // 4. The files and one JSON line.
+  WriteCapture(o, frames, pairs, prior);
+  long long num_keypoints = 0, num_matches = 0;
+  for (const ImageFeatures& f : frames.features) num_keypoints += f.keypoints.rows();
+  for (const PairMatches& pair : pairs) num_matches += pair.matches.rows();
   std::printf("%s\n", nlohmann::json({{"cameras", o.cameras},
-                                      {"points", num_points},
+                                      {"points", points.size()},
                                       {"keypoints", num_keypoints},
                                       {"pairs", pairs.size()},
                                       {"matches", num_matches},
-                                      {"spacing_m", spacing}})
+                                      {"spacing_m", corridor.spacing}})
                           .dump()
                           .c_str());
   return 0;
