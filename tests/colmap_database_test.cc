@@ -18,6 +18,7 @@
 #include "core/error.h"
 #include "formats/colmap_database.h"
 #include "testing/random_draws.h"
+#include "tests/input_error_of.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -51,15 +52,6 @@ std::string SqlBlob(const std::string& path, const std::string& sql) {
   sqlite3_finalize(stmt);
   sqlite3_close(db);
   return blob;
-}
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 Eigen::Matrix3d RandomMatrix(std::mt19937& rng) {
@@ -323,11 +315,11 @@ TEST(ColmapDatabase, OpencvCameraModelOnRequest) {
   EXPECT_EQ(params.size(), 8 * sizeof(double));
   const ColmapDatabase db = ReadColmapDatabase(dir / "database.db");
   EXPECT_EQ(db.images.cameras[0], s.images.cameras[0]);
-  EXPECT_NE(ErrorOf([&] {
+  EXPECT_NE(InputErrorOf([&] {
               WriteColmapDatabase(dir / "p.db", s.images, s.features, s.pairs, "PINHOLE");
             }).find("distortion"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] {
+  EXPECT_NE(InputErrorOf([&] {
               WriteColmapDatabase(dir / "p.db", s.images, s.features, s.pairs, "FOV");
             }).find("'FOV'"),
             std::string::npos);
@@ -411,18 +403,19 @@ TEST(ColmapDatabase, ImportsAffineKeypointsAndSwappedPairs) {
 
 TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
   TempDir dir("colmapdb");
-  EXPECT_NE(ErrorOf([&] { ReadColmapDatabase(dir / "missing.db"); }).find("missing.db: no such"),
-            std::string::npos);
+  EXPECT_NE(
+      InputErrorOf([&] { ReadColmapDatabase(dir / "missing.db"); }).find("missing.db: no such"),
+      std::string::npos);
   {
     std::ofstream(dir / "text.db") << "this is not an SQLite file, it is long enough to have a "
                                       "header that SQLite would check: 0123456789abcdef0123";
   }
-  const std::string not_sqlite = ErrorOf([&] { ReadColmapDatabase(dir / "text.db"); });
+  const std::string not_sqlite = InputErrorOf([&] { ReadColmapDatabase(dir / "text.db"); });
   EXPECT_NE(not_sqlite.find("text.db"), std::string::npos) << not_sqlite;
   EXPECT_NE(not_sqlite.find("not a readable SQLite database"), std::string::npos) << not_sqlite;
 
   Sql(dir / "other.db", "CREATE TABLE images (id INTEGER); CREATE TABLE notes (t TEXT);");
-  const std::string other = ErrorOf([&] { ReadColmapDatabase(dir / "other.db"); });
+  const std::string other = InputErrorOf([&] { ReadColmapDatabase(dir / "other.db"); });
   EXPECT_NE(other.find("not a COLMAP database: missing table(s) cameras, keypoints"),
             std::string::npos)
       << other;
@@ -434,7 +427,7 @@ TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
   const std::string copy = dir / "corrupt.db";
   fs::copy_file(path, copy);
   Sql(copy, "UPDATE keypoints SET rows = rows + 1 WHERE image_id = 2;");
-  const std::string blob_error = ErrorOf([&] { ReadColmapDatabase(copy); });
+  const std::string blob_error = InputErrorOf([&] { ReadColmapDatabase(copy); });
   EXPECT_NE(blob_error.find("corrupt.db"), std::string::npos) << blob_error;
   EXPECT_NE(blob_error.find("table keypoints, image_id 2 (a/0001.jpg)"), std::string::npos)
       << blob_error;
@@ -445,21 +438,21 @@ TEST(ColmapDatabase, ForeignOrCorruptFilesNameTheProblem) {
   Sql(copy,
       "UPDATE keypoints SET rows = 1, data = substr(data, 1, 16) WHERE image_id = 2;"
       "UPDATE descriptors SET rows = 0, data = x'' WHERE image_id = 2;");
-  const std::string range_error = ErrorOf([&] { ReadColmapDatabase(copy); });
+  const std::string range_error = InputErrorOf([&] { ReadColmapDatabase(copy); });
   EXPECT_NE(range_error.find("table matches, pair_id 2147483649"), std::string::npos)
       << range_error;
   EXPECT_NE(range_error.find("out of range"), std::string::npos) << range_error;
 
   fs::copy_file(path, copy, fs::copy_options::overwrite_existing);
   Sql(copy, "UPDATE cameras SET model = 42 WHERE camera_id = 2;");
-  const std::string model_error = ErrorOf([&] { ReadColmapDatabase(copy); });
+  const std::string model_error = InputErrorOf([&] { ReadColmapDatabase(copy); });
   EXPECT_NE(model_error.find("table cameras, camera_id 2: unknown camera model id 42"),
             std::string::npos)
       << model_error;
 
   fs::copy_file(path, copy, fs::copy_options::overwrite_existing);
   Sql(copy, "UPDATE images SET camera_id = 9 WHERE image_id = 4;");
-  const std::string camera_error = ErrorOf([&] { ReadColmapDatabase(copy); });
+  const std::string camera_error = InputErrorOf([&] { ReadColmapDatabase(copy); });
   EXPECT_NE(camera_error.find("b/0001.jpg): refers to missing camera 9"), std::string::npos)
       << camera_error;
 }
@@ -474,12 +467,13 @@ TEST(ColmapDatabase, ExportIsAtomicAndChecksItsInput) {
   // Bad input: nothing is written and the existing database survives.
   std::vector<PairMatches> bad = s.pairs;
   bad[0].matches(0, 1) = 100000;
-  const std::string error = ErrorOf([&] { WriteColmapDatabase(path, s.images, s.features, bad); });
+  const std::string error =
+      InputErrorOf([&] { WriteColmapDatabase(path, s.images, s.features, bad); });
   EXPECT_NE(error.find("pair 0_1 (a/0000.jpg / a/0001.jpg): a match refers to a keypoint beyond"),
             std::string::npos)
       << error;
   std::vector<ImageFeatures> too_few(s.features.begin(), s.features.end() - 1);
-  EXPECT_NE(ErrorOf([&] {
+  EXPECT_NE(InputErrorOf([&] {
               WriteColmapDatabase(path, s.images, too_few, s.pairs);
             }).find("3 feature sets for 4 images"),
             std::string::npos);

@@ -24,6 +24,7 @@
 #include "formats/strecha.h"
 #include "formats/tum.h"
 #include "testing/random_draws.h"
+#include "tests/input_error_of.h"
 #include "tests/shared_data.h"
 #include "tests/temp_dir.h"
 
@@ -37,29 +38,6 @@ constexpr double kPoseTolerance = 1e-9;
 void WriteFile(const std::string& path, const std::string& contents) {
   fs::create_directories(fs::path(path).parent_path());
   std::ofstream(path, std::ios::binary) << contents;
-}
-
-// Files left in `dir` whose names mark them as temporaries of the atomic writers.
-std::vector<std::string> TemporaryFiles(const fs::path& dir) {
-  std::vector<std::string> found;
-  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
-    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
-      found.push_back(entry.path().string());
-    }
-  }
-  return found;
-}
-
-// Runs `fn`, which must throw InputError, and returns the message.
-template <typename Fn>
-std::string InputErrorOf(Fn&& fn) {
-  try {
-    fn();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an InputError";
-  return "";
 }
 
 // A principal point survives the +0.5 / -0.5 of the COLMAP and nerfstudio conventions exactly
@@ -166,7 +144,7 @@ TEST(Formats, ColmapTextBinaryAndTransformsJsonRoundTrip) {
   ExpectImagesEqual(scene.images, images_json);
   ExpectPosesEqual(scene.poses, poses_json);
   EXPECT_EQ(images_json.image_root, tmp / "ns/images");
-  EXPECT_TRUE(TemporaryFiles(tmp.path()).empty());
+  EXPECT_TRUE(TemporaryFilesBelow(tmp.path()).empty());
 }
 
 TEST(Formats, ColmapCameraConventions) {
@@ -598,7 +576,7 @@ TEST(FormatsBadInput, WritersLeaveNoPartialFiles) {
 
   EXPECT_THROW(WriteTumTrajectory(tmp / "t.txt", scene.poses, {"1", "2"}), std::invalid_argument);
   EXPECT_FALSE(fs::exists(tmp / "t.txt"));
-  EXPECT_TRUE(TemporaryFiles(tmp.path()).empty());
+  EXPECT_TRUE(TemporaryFilesBelow(tmp.path()).empty());
   std::vector<std::string> entries;
   for (const auto& entry : fs::directory_iterator(tmp.path())) {
     entries.push_back(entry.path().filename().string());

@@ -20,6 +20,7 @@
 #include "formats/colmap_model.h"
 #include "formats/strecha.h"
 #include "tests/raytime_command.h"
+#include "tests/temp_dir.h"
 #include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
@@ -46,17 +47,6 @@ bool HasWarning(const json& summary, const std::string& code) {
     if (warning["code"] == code) return true;
   }
   return false;
-}
-
-// Temporary files (".NAME.tmp.PID.N") anywhere below `dir`.
-std::vector<std::string> TemporariesBelow(const fs::path& dir) {
-  std::vector<std::string> found;
-  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
-    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
-      found.push_back(entry.path().string());
-    }
-  }
-  return found;
 }
 
 class NothingWrongLeavesTest : public TempDirTest {
@@ -89,7 +79,7 @@ TEST_F(NothingWrongLeavesTest, AFailingWriteIsAnErrorNamingTheFileNotACrash) {
   EXPECT_NE(result.output.find("File too large"), std::string::npos) << result.output;
   EXPECT_EQ(ReadRunSummary(workdir)["status"], "failed");
   EXPECT_FALSE(fs::exists(workdir / "features.h5"));
-  EXPECT_TRUE(TemporariesBelow(workdir).empty());
+  EXPECT_TRUE(TemporaryFilesBelow(workdir).empty());
 }
 
 // A real full disk: a 9 MiB tmpfs holds the front end's files but not the refiner's. Needs the
@@ -113,7 +103,7 @@ TEST_F(NothingWrongLeavesTest, AFullDiskSaysSoInTheFeaturesAndTheRefineStage) {
   EXPECT_EQ(summary["status"], "failed");
   EXPECT_EQ(summary["cause"], "disk_space");
   EXPECT_EQ(summary["stage"], "refine");
-  EXPECT_TRUE(TemporariesBelow(workdir).empty());
+  EXPECT_TRUE(TemporaryFilesBelow(workdir).empty());
   // Features do not fit beside the refiner's output's predecessors in 1 MiB.
   fs::remove_all(workdir);
   ASSERT_EQ(::umount(mount.c_str()), 0);

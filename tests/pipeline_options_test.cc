@@ -13,6 +13,7 @@
 #include "pipelines/pipeline_spec.h"
 #include "pipelines/stage.h"
 #include "temp_dir.h"
+#include "tests/input_error_of.h"
 
 namespace raytime {
 namespace {
@@ -24,15 +25,6 @@ std::string WritePipeline(const TempDir& dir, const std::string& stages) {
                       << "/data/sample/fountain-P11}\nstages:\n"
                       << stages;
   return path;
-}
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(PipelineOptionsTest, OverridesApplyInAnyOrderAndAreValidatedOnce) {
@@ -51,7 +43,7 @@ TEST(PipelineOptionsTest, OverridesApplyInAnyOrderAndAreValidatedOnce) {
   // The same values missing one: refused once everything is in place, naming file and line.
   PipelineSpec spec = LoadPipeline(path);
   ApplyOverride(&spec, "prior.source=file");
-  const std::string message = ErrorOf([&] { ValidatePipeline(spec); });
+  const std::string message = InputErrorOf([&] { ValidatePipeline(spec); });
   EXPECT_NE(message.find(path + ":4:"), std::string::npos) << message;
   EXPECT_NE(message.find("prior.path is not set"), std::string::npos) << message;
 }
@@ -59,13 +51,13 @@ TEST(PipelineOptionsTest, OverridesApplyInAnyOrderAndAreValidatedOnce) {
 TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
   TempDir dir("options");
   PipelineSpec spec = LoadPipeline(WritePipeline(dir, "  - prior: {}\n"));
-  EXPECT_NE(ErrorOf([&] { ApplyOverride(&spec, "prior.sed=1"); }).find("did you mean 'seed'"),
+  EXPECT_NE(InputErrorOf([&] { ApplyOverride(&spec, "prior.sed=1"); }).find("did you mean 'seed'"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=[1, 2]"); }).find("a number"),
+  EXPECT_NE(InputErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=[1, 2]"); }).find("a number"),
             std::string::npos);
   // A value of the right type but outside its own rule is refused as it arrives, blamed on the
   // override (not on the pipeline's line), naming the rule, the value and what the option means.
-  const std::string message = ErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=-3"); });
+  const std::string message = InputErrorOf([&] { ApplyOverride(&spec, "prior.level_deg=-3"); });
   EXPECT_EQ(message.rfind("--set prior.level_deg: ", 0), 0u) << message;
   EXPECT_NE(message.find("option 'level_deg' must be non-negative, got -3.0"), std::string::npos)
       << message;
@@ -74,7 +66,7 @@ TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
   // YAML's .nan and .inf are numbers to yaml-cpp: refused as such, not reported as "got null".
   for (const char* value : {".nan", ".inf", "-.inf"}) {
     const std::string refused =
-        ErrorOf([&] { ApplyOverride(&spec, std::string("prior.level_deg=") + value); });
+        InputErrorOf([&] { ApplyOverride(&spec, std::string("prior.level_deg=") + value); });
     EXPECT_NE(refused.find("option 'level_deg' must be a finite number, got '" +
                            std::string(value) + "'"),
               std::string::npos)
@@ -82,13 +74,13 @@ TEST(PipelineOptionsTest, OverridesCheckKeysAndTypesAsTheyArrive) {
     EXPECT_EQ(refused.find("null"), std::string::npos) << refused;
   }
   const std::string in_file = WritePipeline(dir, "  - refine: {gnc_scales: [1e4, .nan]}\n");
-  const std::string list_message = ErrorOf([&] { LoadPipeline(in_file); });
+  const std::string list_message = InputErrorOf([&] { LoadPipeline(in_file); });
   EXPECT_NE(list_message.find(in_file + ":4:"), std::string::npos) << list_message;
   EXPECT_NE(list_message.find("must be a list of finite numbers"), std::string::npos)
       << list_message;
   // Relations wait until every override is in place: prior.path may come after prior.source.
   ApplyOverride(&spec, "prior.source=file");
-  EXPECT_NE(ErrorOf([&] { ValidatePipeline(spec); }).find("prior.path is not set"),
+  EXPECT_NE(InputErrorOf([&] { ValidatePipeline(spec); }).find("prior.path is not set"),
             std::string::npos);
   ApplyOverride(&spec, "prior.path=poses");
   EXPECT_NO_THROW(ValidatePipeline(spec));
@@ -111,7 +103,7 @@ TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
 TEST(PipelineOptionsTest, TextThatIsNotUtf8IsRefusedWhereItIsRead) {
   TempDir dir("options");
   const std::string latin1_option = WritePipeline(dir, "  - prior: {format: colm\xe4p}\n");
-  std::string message = ErrorOf([&] { LoadPipeline(latin1_option); });
+  std::string message = InputErrorOf([&] { LoadPipeline(latin1_option); });
   EXPECT_NE(message.find(latin1_option + ":4:"), std::string::npos) << message;
   EXPECT_NE(message.find("option 'format' must be UTF-8 text (byte 0xE4 at offset 4 is not)"),
             std::string::npos)
@@ -119,13 +111,13 @@ TEST(PipelineOptionsTest, TextThatIsNotUtf8IsRefusedWhereItIsRead) {
 
   const std::string list_element =
       WritePipeline(dir, "  - evaluate: {poses: [prior, \xc0\xaf]}\n");  // an overlong '/'
-  message = ErrorOf([&] { LoadPipeline(list_element); });
+  message = InputErrorOf([&] { LoadPipeline(list_element); });
   EXPECT_NE(message.find("option 'poses' must be UTF-8 text (byte 0xC0 at offset 0"),
             std::string::npos)
       << message;
 
   std::ofstream(latin1_option) << "name: d\xe9mo\ndataset: {format: strecha, root: r}\n";
-  message = ErrorOf([&] { LoadPipeline(latin1_option); });
+  message = InputErrorOf([&] { LoadPipeline(latin1_option); });
   EXPECT_NE(message.find(latin1_option + ":1: 'name' must be UTF-8 text"), std::string::npos)
       << message;
 
@@ -199,8 +191,8 @@ TEST(PipelineOptionsTest, EveryOptionOfEveryStageIsDocumented) {
 // relation is checked once every key is in place, in whatever order they came.
 TEST(PipelineOptionsTest, SharedIntrinsicsNeedSelfCalibration) {
   std::unique_ptr<Stage> refine = CreateStage("refine");
-  const std::string message =
-      ErrorOf([&] { refine->Configure(YAML::Load("{intrinsics_sharing: shared}"), "p.yaml"); });
+  const std::string message = InputErrorOf(
+      [&] { refine->Configure(YAML::Load("{intrinsics_sharing: shared}"), "p.yaml"); });
   EXPECT_NE(message.find("intrinsics_sharing 'shared'"), std::string::npos) << message;
   EXPECT_NE(message.find("refine_focal"), std::string::npos) << message;
   EXPECT_NO_THROW(refine->Configure(
@@ -212,7 +204,7 @@ TEST(PipelineOptionsTest, SharedIntrinsicsNeedSelfCalibration) {
 TEST(PipelineOptionsTest, EnumerationErrorsSuggestTheNearestValue) {
   std::unique_ptr<Stage> matches = CreateStage("matches");
   const std::string message =
-      ErrorOf([&] { matches->Configure(YAML::Load("{pairs: sequentail}"), "p.yaml"); });
+      InputErrorOf([&] { matches->Configure(YAML::Load("{pairs: sequentail}"), "p.yaml"); });
   EXPECT_NE(message.find("one of: exhaustive, sequential"), std::string::npos) << message;
   EXPECT_NE(message.find("did you mean 'sequential'"), std::string::npos) << message;
 }

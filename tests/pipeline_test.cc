@@ -18,6 +18,7 @@
 #include "core/atomic_file.h"
 #include "tests/raytime_command.h"
 #include "tests/shared_data.h"
+#include "tests/temp_dir.h"
 #include "tests/temp_dir_test.h"
 
 namespace fs = std::filesystem;
@@ -28,6 +29,7 @@ namespace {
 using raytime::CommandResult;
 using raytime::RunRaytime;
 using raytime::RunRaytimeStdout;
+using raytime::TemporaryFilesBelow;
 
 json ReadJson(const fs::path& path) {
   std::ifstream in(path);
@@ -525,17 +527,6 @@ dataset: {format: strecha, root: data/sample/fountain-P11}
   const json summary = json::parse(result.output);
   EXPECT_EQ(summary["num_poses"], 11);
   EXPECT_NE(log.find("prior: iid perturbation at 2"), std::string::npos) << log;
-}
-
-// Temporary files (".NAME.tmp.PID.N") below a folder.
-std::vector<std::string> TemporaryFilesBelow(const fs::path& dir) {
-  std::vector<std::string> found;
-  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
-    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
-      found.push_back(entry.path().string());
-    }
-  }
-  return found;
 }
 
 TEST_F(PipelineTest, InterruptedRunSaysSoAndTheRerunCleansUp) {

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/error.h"
+#include "tests/input_error_of.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -23,17 +24,6 @@ const fs::path kFixtures = fs::path(RAYTIME_SOURCE_DIR) / "tests" / "data" / "sp
 void WriteText(const fs::path& path, const std::string& text) {
   fs::create_directories(path.parent_path());
   std::ofstream(path) << text;
-}
-
-// The message of the InputError `call` throws ("" when it throws none).
-template <typename Call>
-std::string InputErrorOf(Call&& call) {
-  try {
-    call();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(SplatMetrics, GsplatTakesTheLastEvalStepByNumber) {

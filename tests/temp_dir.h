@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <string>
 #include <system_error>
+#include <vector>
 
 namespace raytime {
 
@@ -31,5 +32,17 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+// Temporary files of the atomic writers (".NAME.tmp.PID.N") anywhere below `dir`: a write that
+// failed or was interrupted must leave none.
+inline std::vector<std::string> TemporaryFilesBelow(const std::filesystem::path& dir) {
+  std::vector<std::string> found;
+  for (const auto& entry : std::filesystem::recursive_directory_iterator(dir)) {
+    if (entry.path().filename().string().find(".tmp.") != std::string::npos) {
+      found.push_back(entry.path().string());
+    }
+  }
+  return found;
+}
 
 }  // namespace raytime

@@ -116,15 +116,15 @@ bool EvaluateCached(const ObservationCache& cache, int source_index, int target_
 
 }  // namespace
 
-bool CachedCrossProjectionCost::Evaluate(double const* const* parameters, double* residuals,
-                                         double** jacobians) const {
-  return EvaluateCached<false>(*cache_, source_, target_, parameters, residuals, jacobians);
+template <bool kTwoBlocks>
+bool CachedCrossProjectionCostOf<kTwoBlocks>::Evaluate(double const* const* parameters,
+                                                       double* residuals,
+                                                       double** jacobians) const {
+  return EvaluateCached<kTwoBlocks>(*cache_, source_, target_, parameters, residuals, jacobians);
 }
 
-bool CachedTwoCameraCrossProjectionCost::Evaluate(double const* const* parameters,
-                                                  double* residuals, double** jacobians) const {
-  return EvaluateCached<true>(*cache_, source_, target_, parameters, residuals, jacobians);
-}
+template class CachedCrossProjectionCostOf<false>;
+template class CachedCrossProjectionCostOf<true>;
 
 FixedIntrinsicsCrossProjectionCost::FixedIntrinsicsCrossProjectionCost(
     const Eigen::Vector3d& source_ray, const Eigen::Vector2d& target_undistorted,

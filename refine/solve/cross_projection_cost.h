@@ -31,6 +31,7 @@
 #include <ceres/sized_cost_function.h>
 
 #include <Eigen/Core>
+#include <type_traits>
 
 #include "core/camera.h"
 #include "refine/solve/evaluation_cache.h"
@@ -38,15 +39,22 @@
 
 namespace raytime {
 
-// Both observations' images on one intrinsics block.
-class CachedCrossProjectionCost
-    : public ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize> {
+// The cached cost of one observation pair (source, target) in the ObservationCache: both images on
+// one intrinsics block, or (kTwoBlocks) on two.
+template <bool kTwoBlocks>
+using CachedCostBase = std::conditional_t<
+    kTwoBlocks,
+    ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kNumIntrinsics, kPoseBlockSize>,
+    ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kPoseBlockSize>>;
+
+template <bool kTwoBlocks>
+class CachedCrossProjectionCostOf : public CachedCostBase<kTwoBlocks> {
  public:
-  CachedCrossProjectionCost(const ObservationCache* cache, int source, int target)
+  CachedCrossProjectionCostOf(const ObservationCache* cache, int source, int target)
       : cache_(cache), source_(source), target_(target) {}
 
   static ceres::CostFunction* Create(const ObservationCache* cache, int source, int target) {
-    return new CachedCrossProjectionCost(cache, source, target);
+    return new CachedCrossProjectionCostOf(cache, source, target);
   }
 
   // Thread-safe: reads the cache, which Ceres fills before the parallel residual loop.
@@ -59,27 +67,8 @@ class CachedCrossProjectionCost
   int target_;
 };
 
-// The observations' images on two intrinsics blocks.
-class CachedTwoCameraCrossProjectionCost
-    : public ceres::SizedCostFunction<2, kNumIntrinsics, kPoseBlockSize, 1, kNumIntrinsics,
-                                      kPoseBlockSize> {
- public:
-  CachedTwoCameraCrossProjectionCost(const ObservationCache* cache, int source, int target)
-      : cache_(cache), source_(source), target_(target) {}
-
-  static ceres::CostFunction* Create(const ObservationCache* cache, int source, int target) {
-    return new CachedTwoCameraCrossProjectionCost(cache, source, target);
-  }
-
-  // Thread-safe, as the one-block variant.
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override;
-
- private:
-  const ObservationCache* cache_;
-  int source_;
-  int target_;
-};
+using CachedCrossProjectionCost = CachedCrossProjectionCostOf<false>;
+using CachedTwoCameraCrossProjectionCost = CachedCrossProjectionCostOf<true>;
 
 // Every intrinsic held: the source observation's unit ray in its camera frame and the target's
 // undistorted pixel, computed once, are constants of the residual.
