@@ -13,8 +13,11 @@
 #include "core/json_fields.h"
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "refine/solve/arctan_loss.h"
 #include "refine/solve/fixed_chunks.h"
+#include "refine/solve/ray_time_lm_kernel.h"
 #include "refine/solve/ray_time_lm_solver.h"
+#include "refine/solve/similarity_retraction.h"
 
 namespace raytime {
 namespace {
