@@ -13,9 +13,12 @@
 #include <stdexcept>
 
 #include "refine/refine.h"
+#include "refine/solve/arctan_loss.h"
 #include "refine/solve/cross_projection_cost.h"
 #include "refine/solve/pose_prior_cost.h"
 #include "refine/solve/ray_geometry.h"
+#include "refine/solve/ray_time_lm_kernel.h"
+#include "refine/solve/similarity_retraction.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
 #include "tests/numeric_jacobian.h"

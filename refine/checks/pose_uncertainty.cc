@@ -13,8 +13,12 @@
 #include "core/json_fields.h"
 #include "core/statistics.h"
 #include "core/timing.h"
+#include "refine/solve/arctan_loss.h"
 #include "refine/solve/fixed_chunks.h"
+#include "refine/solve/ray_time_lm_kernel.h"
 #include "refine/solve/ray_time_lm_solver.h"
+#include "refine/solve/reduced_camera_system.h"
+#include "refine/solve/similarity_retraction.h"
 
 namespace raytime {
 namespace {
@@ -50,15 +54,19 @@ Eigen::Matrix<double, 3, 2> RayDerivative(const Eigen::Vector3d& d,
   return dd_dm * dm_du;
 }
 
+// The sums of the σ estimate.
+struct SigmaSums {
+  double weighted_squares = 0.0;   // Σ a |r|²
+  double weighted_expected = 0.0;  // Σ a tr(I + D Dᵀ)
+  int num_residuals = 0;
+  int num_ray_times = 0;  // those eliminated (H_tt > 0)
+};
 // The reduced camera matrix S (prior curvature included), the reduced gradient's covariance per
 // unit σ² M = Σ_o N_o N_oᵀ (N_o an observation's noise blocks), and the sums of the σ estimate.
 struct ReducedNoiseSystem {
   Eigen::MatrixXd S;
   Eigen::MatrixXd M;
-  double weighted_squares = 0.0;   // Σ a |r|²
-  double weighted_expected = 0.0;  // Σ a tr(I + D Dᵀ)
-  int num_residuals = 0;
-  int num_ray_times = 0;
+  SigmaSums sums;
 };
 
 // A residual at the solution: its Jacobians, IRLS weight a = ρ'(|r|²) and D = ∂r/∂u_s.
@@ -73,7 +81,7 @@ struct Linearized {
 };
 
 Linearized Linearize(const RayTimeLmProblem& problem, const std::vector<Eigen::Matrix3d>& rotation,
-                     const std::vector<int>& variable, const ScaledArctanLoss& loss,
+                     const ReducedCameraPattern& pattern, const ScaledArctanLoss& loss,
                      const RayTimeLmResidual& res) {
   Linearized lin;
   Eigen::Vector2d residual;
@@ -88,8 +96,8 @@ Linearized Linearize(const RayTimeLmProblem& problem, const std::vector<Eigen::M
   // ∂r/∂X is the source centre's block; X moves with d by t·R_s.
   lin.source_noise = t * lin.source.rightCols<3>() * rotation[res.source_image] *
                      RayDerivative(res.source_ray, problem.pinhole[res.source_image]);
-  lin.source_camera = variable[res.source_image];
-  lin.target_camera = variable[res.target_image];
+  lin.source_camera = pattern.variable(res.source_image);
+  lin.target_camera = pattern.variable(res.target_image);
   return lin;
 }
 
@@ -122,175 +130,206 @@ class BlockSums {
   std::vector<Block> blocks_;
 };
 
-// Two passes, each over fixed chunks (fixed_chunks.h: the same bits on any thread count): over the
-// ray times, S and each ray time's couplings H_tc and curvature H_tt; then over the observations,
-// each one's noise blocks from the residuals it moves (as source and as target; each residual is
-// linearized again there, for its two observations, rather than kept: 45 doubles a residual), and
-// M. Residuals are sorted by ray time (BuildRayTimeLmProblem).
-ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
-                                           const std::vector<int>& variable, int num_variable,
-                                           double scale_px2, int num_threads) {
-  const ScaledArctanLoss loss{scale_px2, problem.match_loss_weight};
-  const auto& residuals = problem.residuals;
-  const int num_residuals = static_cast<int>(residuals.size());
+// What the elimination of the ray times keeps for the noise pass: per ray time its couplings H_tc
+// with its group's cameras (at the pattern's group entries) and its curvature H_tt.
+struct RayTimeElimination {
+  std::vector<Eigen::Matrix<double, 6, 1>> coupling;
+  std::vector<double> h_tt;
+};
+
+// The solve's rotations as matrices, once.
+std::vector<Eigen::Matrix3d> RotationMatrices(const RayTimeLmProblem& problem) {
   std::vector<Eigen::Matrix3d> rotation(problem.world_from_cam.size());
   for (size_t i = 0; i < rotation.size(); ++i) {
     rotation[i] = problem.world_from_cam[i].rotation.toRotationMatrix();
   }
-  // The ray times' groups of residuals and their cameras (first seen first).
-  std::vector<int> group_begin;
-  std::vector<int> group_of_residual(num_residuals);
-  std::vector<int> coupling_begin = {0};
-  std::vector<int> coupling_camera;
-  for (int k = 0; k < num_residuals; ++k) {
-    if (k == 0 || residuals[k].ray_time != residuals[k - 1].ray_time) {
-      if (k > 0) coupling_begin.push_back(static_cast<int>(coupling_camera.size()));
-      group_begin.push_back(k);
+  return rotation;
+}
+
+// One ray time's residuals into S (their camera blocks, then the elimination S -= H_ct H_tc / H_tt)
+// and into the σ estimate's sums.
+void ReduceRayTime(const RayTimeLmProblem& problem, const std::vector<Eigen::Matrix3d>& rotation,
+                   const ReducedCameraPattern& pattern, const ScaledArctanLoss& loss, int t,
+                   RayTimeElimination* elimination, BlockSums* S, SigmaSums* sum) {
+  const int* group = pattern.group_begin(t);
+  const int group_size = static_cast<int>(pattern.group_end(t) - group);
+  Eigen::Matrix<double, 6, 1>* coupling = elimination->coupling.data() + pattern.group_offset(t);
+  auto coupling_of = [&](int camera) -> Eigen::Matrix<double, 6, 1>& {
+    return coupling[std::lower_bound(group, group + group_size, camera) - group];
+  };
+  double& h_tt = elimination->h_tt[t];
+  for (int k = pattern.residual_begin(t); k < pattern.residual_end(t); ++k) {
+    const Linearized lin = Linearize(problem, rotation, pattern, loss, problem.residuals[k]);
+    sum->weighted_squares += lin.a * lin.squared_norm;
+    sum->weighted_expected += lin.a * (2.0 + lin.source_noise.squaredNorm());
+    ++sum->num_residuals;
+    h_tt += lin.a * lin.ray_time.squaredNorm();
+    if (lin.source_camera >= 0) {
+      coupling_of(lin.source_camera) += lin.a * lin.source.transpose() * lin.ray_time;
     }
-    group_of_residual[k] = static_cast<int>(group_begin.size()) - 1;
-    for (const int c : {variable[residuals[k].source_image], variable[residuals[k].target_image]}) {
-      if (c < 0) continue;
-      const auto first = coupling_camera.begin() + coupling_begin.back();
-      if (std::find(first, coupling_camera.end(), c) == coupling_camera.end()) {
-        coupling_camera.push_back(c);
+    if (lin.target_camera >= 0) {
+      coupling_of(lin.target_camera) += lin.a * lin.target.transpose() * lin.ray_time;
+    }
+    // The residual's own camera blocks of S.
+    const std::pair<int, const Matrix26*> blocks[2] = {{lin.source_camera, &lin.source},
+                                                       {lin.target_camera, &lin.target}};
+    for (const auto& [c1, j1] : blocks) {
+      if (c1 < 0) continue;
+      for (const auto& [c2, j2] : blocks) {
+        if (c2 >= 0) (*S)(c1, c2) += lin.a * j1->transpose() * *j2;
       }
     }
   }
-  group_begin.push_back(num_residuals);
-  coupling_begin.push_back(static_cast<int>(coupling_camera.size()));
-  const int num_groups = static_cast<int>(group_begin.size()) - 1;
-  std::vector<Eigen::Matrix<double, 6, 1>> coupling(coupling_camera.size(),
-                                                    Eigen::Matrix<double, 6, 1>::Zero());
-  std::vector<double> h_tt(num_groups, 0.0);
-  auto coupling_of = [&](int g, int camera) -> Eigen::Matrix<double, 6, 1>& {
-    const auto first = coupling_camera.begin() + coupling_begin[g];
-    const auto last = coupling_camera.begin() + coupling_begin[g + 1];
-    return coupling[std::find(first, last, camera) - coupling_camera.begin()];
-  };
+  if (!(h_tt > 0.0)) return;
+  ++sum->num_ray_times;
+  for (int i = 0; i < group_size; ++i) {
+    for (int j = 0; j < group_size; ++j) {
+      (*S)(group[i], group[j]) -= coupling[i] * coupling[j].transpose() / h_tt;
+    }
+  }
+}
 
-  struct Sums {
-    double weighted_squares = 0.0, weighted_expected = 0.0;
-    int num_residuals = 0, num_ray_times = 0;
-  };
-  std::vector<Sums> sums(kNumFixedChunks);
-  std::vector<BlockSums> s_blocks(kNumFixedChunks, BlockSums(num_variable));
-  const std::vector<int> group_chunks = FixedChunkBounds(group_begin);
+// The reduced camera matrix S (without the priors) over the reduced camera system's pattern and
+// its fixed chunks (fixed_chunks.h: the same bits on any thread count), the σ estimate's sums,
+// and what the noise pass needs of the elimination.
+void ReduceCameraMatrix(const RayTimeLmProblem& problem,
+                        const std::vector<Eigen::Matrix3d>& rotation,
+                        const ReducedCameraPattern& pattern, const ScaledArctanLoss& loss,
+                        int num_threads, RayTimeElimination* elimination, ReducedNoiseSystem* out) {
+  elimination->coupling.assign(pattern.num_group_entries(), Eigen::Matrix<double, 6, 1>::Zero());
+  elimination->h_tt.assign(pattern.num_ray_times(), 0.0);
+  std::vector<SigmaSums> sums(kNumFixedChunks);
+  std::vector<BlockSums> s_blocks(kNumFixedChunks, BlockSums(pattern.num_variables()));
   ForEachFixedChunk(num_threads, [&](int chunk) {
-    Sums& sum = sums[chunk];
-    BlockSums& S = s_blocks[chunk];
-    for (int g = group_chunks[chunk]; g < group_chunks[chunk + 1]; ++g) {
-      for (int k = group_begin[g]; k < group_begin[g + 1]; ++k) {
-        const Linearized lin = Linearize(problem, rotation, variable, loss, residuals[k]);
-        sum.weighted_squares += lin.a * lin.squared_norm;
-        sum.weighted_expected += lin.a * (2.0 + lin.source_noise.squaredNorm());
-        ++sum.num_residuals;
-        h_tt[g] += lin.a * lin.ray_time.squaredNorm();
-        if (lin.source_camera >= 0) {
-          coupling_of(g, lin.source_camera) += lin.a * lin.source.transpose() * lin.ray_time;
-        }
-        if (lin.target_camera >= 0) {
-          coupling_of(g, lin.target_camera) += lin.a * lin.target.transpose() * lin.ray_time;
-        }
-        // The residual's own camera blocks of S.
-        const std::pair<int, const Matrix26*> blocks[2] = {{lin.source_camera, &lin.source},
-                                                           {lin.target_camera, &lin.target}};
-        for (const auto& [c1, j1] : blocks) {
-          if (c1 < 0) continue;
-          for (const auto& [c2, j2] : blocks) {
-            if (c2 >= 0) S(c1, c2) += lin.a * j1->transpose() * *j2;
-          }
-        }
-      }
-      if (h_tt[g] > 0.0) {
-        ++sum.num_ray_times;
-        for (int i = coupling_begin[g]; i < coupling_begin[g + 1]; ++i) {
-          for (int j = coupling_begin[g]; j < coupling_begin[g + 1]; ++j) {
-            S(coupling_camera[i], coupling_camera[j]) -=
-                coupling[i] * coupling[j].transpose() / h_tt[g];
-          }
-        }
-      }
+    for (int t = pattern.chunk_begin(chunk); t < pattern.chunk_end(chunk); ++t) {
+      ReduceRayTime(problem, rotation, pattern, loss, t, elimination, &s_blocks[chunk],
+                    &sums[chunk]);
     }
   });
+  const int n = 6 * pattern.num_variables();
+  out->S = Eigen::MatrixXd::Zero(n, n);
+  for (int chunk = 0; chunk < kNumFixedChunks; ++chunk) {
+    s_blocks[chunk].AddTo(&out->S);
+    out->sums.weighted_squares += sums[chunk].weighted_squares;
+    out->sums.weighted_expected += sums[chunk].weighted_expected;
+    out->sums.num_residuals += sums[chunk].num_residuals;
+    out->sums.num_ray_times += sums[chunk].num_ray_times;
+  }
+}
 
-  // Each observation's residuals, in residual order: the ray time's (it is their source) and
-  // those it is the target of.
+// Each observation's residuals, in residual order: the ray time's (it is their source) and those
+// it is the target of; `begin` the observations' n + 1 bounds into `residual`.
+struct ObservationResiduals {
+  std::vector<int> begin;
+  std::vector<int> residual;
+};
+
+ObservationResiduals ResidualsByObservation(const std::vector<RayTimeLmResidual>& residuals) {
   int num_observations = 0;
   for (const RayTimeLmResidual& r : residuals) {
     num_observations =
         std::max({num_observations, r.source_observation + 1, r.target_observation + 1});
   }
-  std::vector<int> observation_begin(num_observations + 1, 0);
+  ObservationResiduals out;
+  out.begin.assign(num_observations + 1, 0);
   for (const RayTimeLmResidual& r : residuals) {
-    ++observation_begin[r.source_observation + 1];
-    ++observation_begin[r.target_observation + 1];
+    ++out.begin[r.source_observation + 1];
+    ++out.begin[r.target_observation + 1];
   }
-  for (int o = 0; o < num_observations; ++o) observation_begin[o + 1] += observation_begin[o];
-  std::vector<int> observation_residual(observation_begin.back());
-  {
-    std::vector<int> next(observation_begin.begin(), observation_begin.end() - 1);
-    for (int k = 0; k < num_residuals; ++k) {
-      observation_residual[next[residuals[k].source_observation]++] = k;
-      observation_residual[next[residuals[k].target_observation]++] = k;
+  for (int o = 0; o < num_observations; ++o) out.begin[o + 1] += out.begin[o];
+  out.residual.resize(out.begin.back());
+  std::vector<int> next(out.begin.begin(), out.begin.end() - 1);
+  for (int k = 0; k < static_cast<int>(residuals.size()); ++k) {
+    out.residual[next[residuals[k].source_observation]++] = k;
+    out.residual[next[residuals[k].target_observation]++] = k;
+  }
+  return out;
+}
+
+// One observation's noise blocks N_o: the reduced gradient's part of each residual it moves,
+// B = a (J − j_t H_tc / H_tt)ᵀ, carried to its keypoint (through the ray as the source, −I as
+// the target). Each residual is linearized again here rather than kept: 45 doubles a residual.
+void ObservationNoise(const RayTimeLmProblem& problem, const std::vector<Eigen::Matrix3d>& rotation,
+                      const ReducedCameraPattern& pattern, const ScaledArctanLoss& loss,
+                      const RayTimeElimination& elimination, const ObservationResiduals& by, int o,
+                      CameraBlocks62* b, CameraBlocks62* noise) {
+  noise->clear();
+  for (int n = by.begin[o]; n < by.begin[o + 1]; ++n) {
+    const int k = by.residual[n];
+    const int t = problem.residuals[k].ray_time;
+    const double h_tt = elimination.h_tt[t];
+    if (!(h_tt > 0.0)) continue;
+    const Linearized lin = Linearize(problem, rotation, pattern, loss, problem.residuals[k]);
+    b->clear();
+    const int* group = pattern.group_begin(t);
+    const Eigen::Matrix<double, 6, 1>* coupling =
+        elimination.coupling.data() + pattern.group_offset(t);
+    for (int i = 0; i < static_cast<int>(pattern.group_end(t) - group); ++i) {
+      AddTo<Matrix62>(b, group[i], -lin.a * coupling[i] * lin.ray_time.transpose() / h_tt);
+    }
+    AddTo<Matrix62>(b, lin.source_camera, lin.a * lin.source.transpose());
+    AddTo<Matrix62>(b, lin.target_camera, lin.a * lin.target.transpose());
+    const bool source = problem.residuals[k].source_observation == o;
+    for (const auto& [c, block] : *b) {
+      AddTo<Matrix62>(noise, c, source ? Matrix62(block * lin.source_noise) : Matrix62(-block));
     }
   }
-  std::vector<BlockSums> m_blocks(kNumFixedChunks, BlockSums(num_variable));
-  const std::vector<int> observation_chunks = FixedChunkBounds(observation_begin);
+}
+
+// M = Σ_o N_o N_oᵀ over the observations' fixed chunks.
+Eigen::MatrixXd NoiseCovariance(const RayTimeLmProblem& problem,
+                                const std::vector<Eigen::Matrix3d>& rotation,
+                                const ReducedCameraPattern& pattern, const ScaledArctanLoss& loss,
+                                const RayTimeElimination& elimination, int num_threads) {
+  const ObservationResiduals by = ResidualsByObservation(problem.residuals);
+  std::vector<BlockSums> m_blocks(kNumFixedChunks, BlockSums(pattern.num_variables()));
+  const std::vector<int> observation_chunks = FixedChunkBounds(by.begin);
   ForEachFixedChunk(num_threads, [&](int chunk) {
     BlockSums& M = m_blocks[chunk];
     CameraBlocks62 b;
     CameraBlocks62 noise;
     for (int o = observation_chunks[chunk]; o < observation_chunks[chunk + 1]; ++o) {
-      noise.clear();
-      for (int n = observation_begin[o]; n < observation_begin[o + 1]; ++n) {
-        const int k = observation_residual[n];
-        const int g = group_of_residual[k];
-        if (!(h_tt[g] > 0.0)) continue;
-        const Linearized lin = Linearize(problem, rotation, variable, loss, residuals[k]);
-        // The reduced gradient's part of the residual, B = a (J − j_t H_tc / H_tt)ᵀ, carried to
-        // the keypoints that move it.
-        b.clear();
-        for (int i = coupling_begin[g]; i < coupling_begin[g + 1]; ++i) {
-          AddTo<Matrix62>(&b, coupling_camera[i],
-                          -lin.a * coupling[i] * lin.ray_time.transpose() / h_tt[g]);
-        }
-        AddTo<Matrix62>(&b, lin.source_camera, lin.a * lin.source.transpose());
-        AddTo<Matrix62>(&b, lin.target_camera, lin.a * lin.target.transpose());
-        const bool source = residuals[k].source_observation == o;
-        for (const auto& [c, block] : b) {
-          AddTo<Matrix62>(&noise, c,
-                          source ? Matrix62(block * lin.source_noise) : Matrix62(-block));
-        }
-      }
+      ObservationNoise(problem, rotation, pattern, loss, elimination, by, o, &b, &noise);
       for (const auto& [c1, b1] : noise) {
         for (const auto& [c2, b2] : noise) M(c1, c2) += b1 * b2.transpose();
       }
     }
   });
+  const int n = 6 * pattern.num_variables();
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(n, n);
+  for (int chunk = 0; chunk < kNumFixedChunks; ++chunk) m_blocks[chunk].AddTo(&out);
+  return out;
+}
 
-  ReducedNoiseSystem out;
-  const int n = 6 * num_variable;
-  out.S = Eigen::MatrixXd::Zero(n, n);
-  out.M = Eigen::MatrixXd::Zero(n, n);
-  for (int chunk = 0; chunk < kNumFixedChunks; ++chunk) {
-    s_blocks[chunk].AddTo(&out.S);
-    m_blocks[chunk].AddTo(&out.M);
-    out.weighted_squares += sums[chunk].weighted_squares;
-    out.weighted_expected += sums[chunk].weighted_expected;
-    out.num_residuals += sums[chunk].num_residuals;
-    out.num_ray_times += sums[chunk].num_ray_times;
-  }
-  // The pose priors' curvature (noise-free: they hold the gauge the solve holds).
+// The pose priors' curvature (noise-free: they hold the gauge the solve holds).
+void AddPriorCurvature(const RayTimeLmProblem& problem, const ReducedCameraPattern& pattern,
+                       Eigen::MatrixXd* S) {
   const double rotation_scale = std::sqrt(2.0 * problem.orientation_weight);
   const double centre_scale = std::sqrt(2.0 * problem.position_weight);
   for (size_t i = 0; i < problem.world_from_cam.size(); ++i) {
-    if (variable[i] < 0) continue;
+    const int c = pattern.variable(static_cast<int>(i));
+    if (c < 0) continue;
     Eigen::Matrix<double, 6, 1> residual;
     Eigen::Matrix<double, 6, 6> jacobian;
     PosePriorJacobian(problem.world_from_cam[i], problem.prior_world_from_cam[i], rotation_scale,
                       centre_scale, &residual, &jacobian);
-    out.S.block<6, 6>(6 * variable[i], 6 * variable[i]) += jacobian.transpose() * jacobian;
+    S->block<6, 6>(6 * c, 6 * c) += jacobian.transpose() * jacobian;
   }
+}
+
+// The reduction of the ray-time LM (reduced_camera_system.h) at the solution, undamped, over its
+// pattern: first over the ray times, S and each ray time's couplings H_tc and curvature H_tt;
+// then over the observations, M. Residuals are sorted by ray time (BuildRayTimeLmProblem).
+ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
+                                           const ReducedCameraPattern& pattern, double scale_px2,
+                                           int num_threads) {
+  const ScaledArctanLoss loss{scale_px2, problem.match_loss_weight};
+  const std::vector<Eigen::Matrix3d> rotation = RotationMatrices(problem);
+  ReducedNoiseSystem out;
+  RayTimeElimination elimination;
+  ReduceCameraMatrix(problem, rotation, pattern, loss, num_threads, &elimination, &out);
+  out.M = NoiseCovariance(problem, rotation, pattern, loss, elimination, num_threads);
+  AddPriorCurvature(problem, pattern, &out.S);
   return out;
 }
 
@@ -302,9 +341,10 @@ struct GaugeFit {
   Eigen::MatrixXd fit;         // F, 7 × 6n
 };
 
-GaugeFit LinearizedGaugePolish(const RayTimeLmProblem& problem, const std::vector<int>& variable,
-                               int num_variable, const PoseUncertaintySettings& settings) {
-  const int n = 6 * num_variable;
+GaugeFit LinearizedGaugePolish(const RayTimeLmProblem& problem, const ReducedCameraPattern& pattern,
+                               const PoseUncertaintySettings& settings) {
+  const std::vector<int>& variable = pattern.variables();
+  const int n = 6 * pattern.num_variables();
   const Eigen::Vector3d pivot = SimilarityPivot(problem.world_from_cam, variable);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, 7);
   Eigen::VectorXd w(n);
@@ -329,11 +369,8 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
   const auto start = std::chrono::steady_clock::now();
   PoseUncertaintySummary summary;
   summary.cameras.resize(problem.world_from_cam.size());
-  std::vector<int> variable(problem.world_from_cam.size(), -1);
-  int num_variable = 0;
-  for (size_t i = 0; i < variable.size(); ++i) {
-    if (!problem.held[i]) variable[i] = num_variable++;
-  }
+  const int num_variable =
+      static_cast<int>(std::count(problem.held.begin(), problem.held.end(), false));
   if (num_variable < 2) {
     summary.reason = "fewer than two cameras reached by residuals";
     return summary;
@@ -349,18 +386,20 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
       return summary;
     }
   }
-  const ReducedNoiseSystem system = BuildReducedNoiseSystem(
-      problem, variable, num_variable, settings.scale_px2, settings.num_threads);
-  const int num_scalar = 2 * system.num_residuals;
-  const int num_parameters = 6 * num_variable + system.num_ray_times;
-  if (num_scalar <= num_parameters || !(system.weighted_expected > 0.0)) {
+  const ReducedCameraPattern pattern(problem);
+  const ReducedNoiseSystem system =
+      BuildReducedNoiseSystem(problem, pattern, settings.scale_px2, settings.num_threads);
+  const SigmaSums& sums = system.sums;
+  const int num_scalar = 2 * sums.num_residuals;
+  const int num_parameters = 6 * num_variable + sums.num_ray_times;
+  if (num_scalar <= num_parameters || !(sums.weighted_expected > 0.0)) {
     summary.reason = "no redundancy: " + std::to_string(num_scalar) + " scalar residuals for " +
                      std::to_string(num_parameters) + " parameters";
     return summary;
   }
-  summary.sigma_px_estimated = std::sqrt(
-      system.weighted_squares /
-      (system.weighted_expected * (1.0 - static_cast<double>(num_parameters) / num_scalar)));
+  summary.sigma_px_estimated =
+      std::sqrt(sums.weighted_squares / (sums.weighted_expected *
+                                         (1.0 - static_cast<double>(num_parameters) / num_scalar)));
   summary.sigma_px = settings.sigma_px > 0.0 ? settings.sigma_px : summary.sigma_px_estimated;
 
   const int n = 6 * num_variable;
@@ -371,7 +410,7 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
   }
   // Cov = σ² A M Aᵀ with A = P S⁻¹ = S⁻¹ − G (F S⁻¹); only its diagonal blocks are needed.
   Eigen::MatrixXd A = llt.solve(Eigen::MatrixXd::Identity(n, n));
-  const GaugeFit gauge = LinearizedGaugePolish(problem, variable, num_variable, settings);
+  const GaugeFit gauge = LinearizedGaugePolish(problem, pattern, settings);
   A -= gauge.generators * (gauge.fit * A);
   // M is block-sparse (cameras that share observations): A·M costs n·nnz(M), not n³ (the
   // 457-frame desk: most of the estimate's time when dense).
@@ -380,8 +419,8 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
   const double variance = summary.sigma_px * summary.sigma_px;
 
   std::vector<double> rotations, centres;
-  for (size_t i = 0; i < variable.size(); ++i) {
-    const int c = variable[i];
+  for (size_t i = 0; i < pattern.variables().size(); ++i) {
+    const int c = pattern.variable(static_cast<int>(i));
     if (c < 0) continue;
     PoseUncertainty& u = summary.cameras[i];
     const Eigen::Matrix<double, 6, 6> covariance =
