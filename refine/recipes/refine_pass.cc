@@ -345,10 +345,9 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.self_calibration =
       settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
   // The back-end, chosen once: the ray-time LM holds every intrinsic.
-  pass.solver =
-      options.solver == "ray_time_lm" || (options.solver == "auto" && !pass.self_calibration)
-          ? "ray_time_lm"
-          : "ceres";
+  const bool on_ray_time_lm = options.solver == RefineSolver::kRayTimeLm ||
+                              (options.solver == RefineSolver::kAuto && !pass.self_calibration);
+  pass.solver = NameOf(on_ray_time_lm ? RefineSolver::kRayTimeLm : RefineSolver::kCeres);
   const auto build_start = std::chrono::steady_clock::now();
   // 1.
   double largest_difference_deg = 0.0;
@@ -359,7 +358,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
       StartFromEarlierRun(input, settings, state, &pass, &largest_difference_deg, &num_too_far);
   // 2.
   state->layout =
-      options.parameterization == "anchored"
+      options.parameterization == RayTimeParameterization::kAnchored
           ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
           : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
   std::vector<double> ray_times =
@@ -368,11 +367,10 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   // 3.
   std::vector<bool> camera_observed;
   std::vector<double> solved_ray_times =
-      pass.solver == "ray_time_lm"
-          ? SolveOnRayTimeLm(input, options, settings, anchor, std::move(ray_times), build_start,
-                             &camera_observed, state, &pass)
-          : SolveOnCeres(input, options, settings, anchor, ray_times, build_start, &camera_observed,
-                         state, &pass);
+      on_ray_time_lm ? SolveOnRayTimeLm(input, options, settings, anchor, std::move(ray_times),
+                                        build_start, &camera_observed, state, &pass)
+                     : SolveOnCeres(input, options, settings, anchor, ray_times, build_start,
+                                    &camera_observed, state, &pass);
   // 4. The gauge (a similarity: the residuals are the solve's), the solved ray times kept for
   // the later passes, the residuals.
   pass.gauge_polish =

@@ -1,7 +1,8 @@
 // One pass of the refiner (issue 31: refine/ by job): layout → ray-time initialization →
 // problem → GNC on the ray-time LM or Ceres (RefineOptions::solver) → gauge polish, with the
 // state a later pass starts from and what the checks read of the last one. The recipes (one pass,
-// the staged room recipe, basin-first) chain passes: refine.cc, basin_first.h.
+// the staged room recipe, basin-first: RefineOptions::recipe) chain passes: connected_solve.cc,
+// basin_first.h.
 #pragma once
 
 #include <cstdint>

@@ -856,7 +856,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
   };
   double cost = timed_cost(state_);
   summary.initial_cost = cost;
-  summary.termination = "NO_CONVERGENCE";
+  summary.termination = GncTermination::kNoConvergence;
   summary.message = "Maximum number of iterations reached.";
   double radius = kInitialRadius;
   double decrease_factor = 2.0;
@@ -872,7 +872,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
     // Ceres' gradient test: the max norm of the full gradient (cameras, and ray times projected
     // onto their bound) at or below kGradientTolerance is a stationary point.
     if (total_.gradient_max_norm <= kGradientTolerance) {
-      summary.termination = "CONVERGENCE";
+      summary.termination = GncTermination::kConvergence;
       summary.message = "Gradient tolerance reached.";
       break;
     }
@@ -918,7 +918,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
       // from the cameras' (it is eliminated exactly), so still cameras mean a still solution.
       if (std::sqrt(step_norm2) <=
           kParameterTolerance * (std::sqrt(x_norm2) + kParameterTolerance)) {
-        summary.termination = "CONVERGENCE";
+        summary.termination = GncTermination::kConvergence;
         summary.message = "Parameter tolerance reached.";
         break;
       }
@@ -932,7 +932,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
           cost = candidate_cost;
           ++summary.successful_steps;
         }
-        summary.termination = "CONVERGENCE";
+        summary.termination = GncTermination::kConvergence;
         summary.message = "Function tolerance reached.";
         break;
       }
@@ -967,7 +967,7 @@ GncStageSummary Solver::SolveStage(double scale_px2, int max_iterations, double 
       radius /= decrease_factor;
       decrease_factor *= 2.0;
       if (radius < kMinRadius) {
-        summary.termination = solved ? "CONVERGENCE" : "FAILURE";
+        summary.termination = solved ? GncTermination::kConvergence : GncTermination::kFailure;
         summary.message = solved ? "Minimum trust region radius reached."
                                  : "The reduced camera system could not be factorized.";
         break;
