@@ -75,12 +75,12 @@ void RunStaged(const RefineInput& input, const RefineOptions& options, const Pas
   pass1.name = "pass1_poses";
   pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
   pass1.orientation_weight = options.stage1_orientation_weight;
-  pass1.scales = options.StageScales();
+  pass1.scales = nominal.scales;
   pass1.intermediate = true;
   summary->passes.push_back(RunPass(input, options, pass1, prior, state));
   PassSettings pass2 = nominal;
   pass2.name = "pass2_self_calibration";
-  pass2.scales = {options.loss_scale_px2};
+  pass2.scales = {nominal.scales.back()};
   const std::vector<Rigid3> pass1_poses = state->world_from_cam;
   summary->passes.push_back(RunPass(input, options, pass2, pass1_poses, state));
 }
@@ -90,17 +90,7 @@ void RunStaged(const RefineInput& input, const RefineOptions& options, const Pas
 void RunRecipe(const RefineInput& input, const RefineOptions& options,
                const std::vector<Rigid3>& prior, PassState* state, RefineSummary* summary,
                std::optional<RefineInput>* pruned) {
-  PassSettings nominal;
-  nominal.name = "solve";
-  nominal.max_matches_per_pair = options.max_matches_per_pair;
-  nominal.orientation_weight = options.orientation_weight;
-  nominal.scales = options.StageScales();
-  nominal.refine_focal = options.refine_focal;
-  nominal.refine_principal_point = options.refine_principal_point;
-  nominal.refine_distortion = options.refine_distortion;
-  // The passes on the nominal settings (and the basin-first finish and anneal copied from them)
-  // may start from an earlier run's solution; the capped passes that decide never do.
-  nominal.warm_startable = true;
+  const PassSettings nominal = NominalPass(options);
   switch (options.recipe) {
     case RefineRecipe::kSingle:
       summary->passes.push_back(RunPass(input, options, nominal, prior, state));

@@ -301,7 +301,8 @@ std::vector<double> SolveOnCeres(const RefineInput& input, const RefineOptions& 
 }
 
 // 4. The residuals at the solution: per image their median (the frame checks), and the pass's
-// median, 90th percentile and mean match term, logged.
+// median, 90th percentile and mean match term at the nominal scale (loss_scale_px2, whatever the
+// pass's own: the basin-first probe compares passes by it), logged.
 void MeasureResiduals(const RefineInput& input, const RefineOptions& options,
                       const std::vector<double>& solved_ray_times, PassState* state,
                       RefinePassSummary* pass) {
@@ -335,6 +336,19 @@ void MeasureResiduals(const RefineInput& input, const RefineOptions& options,
 }
 
 }  // namespace
+
+PassSettings NominalPass(const RefineOptions& options) {
+  PassSettings nominal;
+  nominal.name = "solve";
+  nominal.max_matches_per_pair = options.max_matches_per_pair;
+  nominal.orientation_weight = options.orientation_weight;
+  nominal.scales = options.StageScales();
+  nominal.refine_focal = options.refine_focal;
+  nominal.refine_principal_point = options.refine_principal_point;
+  nominal.refine_distortion = options.refine_distortion;
+  nominal.warm_startable = true;
+  return nominal;
+}
 
 RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
                           const PassSettings& settings, const std::vector<Rigid3>& anchor,
