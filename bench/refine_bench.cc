@@ -116,7 +116,7 @@ int Main(int argc, char** argv) {
   RefineOptions options = base;
   const Run cache_on = Solve(scene, input, options, threads);
   PrintRun("ray-time LM (default)", cache_on);
-  options.solver = "ceres";
+  options.solver = RefineSolver::kCeres;
   const Run ceres_fixed = Solve(scene, input, options, threads);
   PrintRun("Ceres, fixed residual", ceres_fixed);
   options.use_evaluation_cache = false;
@@ -184,7 +184,7 @@ int Main(int argc, char** argv) {
       "error in the prior's frame; the prior is the ground truth)\n");
   RefineInput exact = scene.input;
   for (const char* preset : {"gnc", "basin"}) {
-    for (const char* init : {"auto", "constant"}) {
+    for (const RayTimeInitMode init : {RayTimeInitMode::kAuto, RayTimeInitMode::kConstant}) {
       options = RefineOptions();
       options.trust_region = false;
       if (std::string(preset) == "basin") {
@@ -202,8 +202,9 @@ int Main(int argc, char** argv) {
       std::printf(
           "  %-6s %-9s init depth %6.2f m  drift %.4f deg / %.4f m  iterations %3d  "
           "solve %.2f s\n",
-          preset, init, summary.passes[0].ray_time_init.median_depth, drift.mean_rotation_deg,
-          drift.mean_centre_m, summary.total_iterations, summary.timings.solve_seconds);
+          preset, NameOf(init), summary.passes[0].ray_time_init.median_depth,
+          drift.mean_rotation_deg, drift.mean_centre_m, summary.total_iterations,
+          summary.timings.solve_seconds);
     }
   }
   return 0;

@@ -1,12 +1,16 @@
 #include "core/options.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <mutex>
 #include <numeric>
+#include <set>
 #include <sstream>
 
 namespace raytime {
@@ -189,6 +193,32 @@ std::string OptionDoc::HelpText() const {
 }
 
 namespace options_detail {
+
+std::string AliasedValue(const OptionAlias& alias, bool on, const std::string& current,
+                         const std::string& initial, const std::string& path, int line,
+                         const std::string& what) {
+  const std::string given = "'" + alias.old_key + (on ? ": true'" : ": false'");
+  if (on && current != initial && current != alias.value) {
+    ThrowInput(path, line,
+               what + ": " + given + " (now '" + alias.new_key + ": " + alias.value +
+                   "') conflicts with " + alias.new_key + " '" + current +
+                   "', set before it (by another deprecated key or a preset); choose one");
+  }
+  const std::string advice = on ? "write '" + alias.new_key + ": " + alias.value + "'"
+                                : "leave it out (it only turns " + alias.new_key + " '" +
+                                      alias.value + "' back to '" + initial + "')";
+  // Said once per process: a pipeline's options are read several times (checked, validated,
+  // configured for the cache and the run), and a --set once alone and once in its pipeline.
+  static std::mutex mutex;
+  static std::set<std::string> said;
+  const std::string message = what + ": " + given + " is deprecated; " + advice;
+  {
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (said.insert(message).second) spdlog::warn(Located(path, line, message));
+  }
+  if (on) return alias.value;
+  return current == alias.value ? initial : "";
+}
 
 std::string RuleFailure(const std::string& key, const std::string& description,
                         const OptionRule& rule, const nlohmann::json& got) {

@@ -19,8 +19,13 @@
 // From that list come YAML parsing (unknown keys: file, line and the nearest valid key), JSON
 // provenance, the stage command lines with their --help text, content hashes and validation
 // (ValidateOptions: every rule and relation, one InputError naming the option, its description
-// and what was expected). Supported field types: bool, int, int64_t, double, std::string and
-// std::vector of int, double or std::string. Rules on a list apply to each element.
+// and what was expected). Supported field types: bool, int, int64_t, double, std::string,
+// std::vector of int, double or std::string, and an enumeration with a name table
+// (core/named_enum.h: read and written as its names, "one of: ..." in its help and errors, no
+// OneOf rule needed). Rules on a list apply to each element.
+//
+// A key that was replaced by a value of an enumeration stays accepted for a while: the struct
+// lists it in `static std::vector<OptionAlias> DeprecatedAliases()` (OptionAlias below).
 #pragma once
 
 #include <yaml-cpp/yaml.h>
@@ -35,6 +40,7 @@
 #include <vector>
 
 #include "core/error.h"
+#include "core/named_enum.h"
 #include "core/user_paths.h"
 
 namespace raytime {
@@ -97,9 +103,11 @@ const char* TypeName() {
   return "a value";
 }
 
-// Short type tag for command-line help: BOOL, INT, NUMBER, TEXT (lists: of their elements).
+// Short type tag for command-line help: BOOL, INT, NUMBER, TEXT (lists: of their elements; an
+// enumeration is written as text).
 template <typename T>
 const char* TypeTag() {
+  if constexpr (kIsNamedEnum<T>) return "TEXT";
   if constexpr (std::is_same_v<T, bool>) return "BOOL";
   if constexpr (std::is_same_v<T, int> || std::is_same_v<T, int64_t>) return "INT";
   if constexpr (std::is_same_v<T, double>) return "NUMBER";
@@ -185,11 +193,44 @@ struct OptionDoc {
   std::string HelpText() const;
 };
 
+// A deprecated boolean key that a value of an enumeration option replaced (`staged: true` is now
+// `recipe: staged`). `old_key: true` sets new_key to `value`, and is refused where new_key already
+// holds a value other than its default and `value` (by an earlier alias or a preset: two recipes
+// at once); `old_key: false` puts new_key back to its default where it holds `value`, and changes
+// nothing otherwise (the key it stands for was off). ApplyYaml applies them before the struct's
+// own keys, so a new key given beside its old one wins, and warns once per alias and value.
+struct OptionAlias {
+  std::string old_key;
+  std::string new_key;
+  std::string value;
+};
+
 namespace options_detail {
+
+// The text `old_key: on` gives alias.new_key, which holds `current` (`initial` by default), or ""
+// when it changes nothing; a spdlog warning naming the new key and value (once per process and
+// message: a pipeline's options are read several times). InputError at `path`:`line` on a conflict.
+std::string AliasedValue(const OptionAlias& alias, bool on, const std::string& current,
+                         const std::string& initial, const std::string& path, int line,
+                         const std::string& what);
 
 // "option 'key' must be <expected>, got <value> [(did you mean 'x'?)] (key: description)".
 std::string RuleFailure(const std::string& key, const std::string& description,
                         const OptionRule& rule, const nlohmann::json& got);
+
+// An enumeration's value from its name in `node`; a text that names none is an InputError at
+// `path` and the node's line, the message the OneOf rule gives: "<what>: option 'key' must be one
+// of: a, b, got "x" (did you mean 'y'?) (key: description)".
+template <typename E>
+void ReadYamlEnum(const YAML::Node& node, E& field, const std::string& path,
+                  const std::string& what, const std::string& key, const std::string& description) {
+  const std::string text = node.IsScalar() ? node.Scalar() : node.IsNull() ? "" : YAML::Dump(node);
+  if (EnumFromName(text, &field)) return;
+  RequireUtf8(text, path, YamlLine(node), "option '" + key + "'");
+  ThrowInput(path, YamlLine(node),
+             what + ": " +
+                 RuleFailure(key, description, OneOf(EnumValueNames<E>()), nlohmann::json(text)));
+}
 
 // The first rule `value` breaks, or nullptr.
 template <typename T>
@@ -219,10 +260,16 @@ struct KeyCollector {
 struct YamlReader {
   const YAML::Node& map;
   const std::string& path;
+  const std::string& what;
   template <typename T, typename... Rules>
-  void operator()(const char* key, T& field, const char*, const Rules&...) {
+  void operator()(const char* key, T& field, const char* description, const Rules&...) {
     const YAML::Node child = map[key];
-    if (child) ReadYamlField(child, field, path, key);
+    if (!child) return;
+    if constexpr (kIsNamedEnum<T>) {
+      ReadYamlEnum(child, field, path, what, key, description);
+    } else {
+      ReadYamlField(child, field, path, key);
+    }
   }
 };
 struct JsonWriter {
@@ -260,9 +307,14 @@ struct DocCollector {
     doc.description = description;
     doc.is_list = IsVector<T>::value;
     doc.is_bool = std::is_same_v<T, bool>;
+    std::vector<OptionRule> implied;  // an enumeration's names, as OneOf lists them
+    if constexpr (kIsNamedEnum<T>) implied.push_back(OneOf(EnumValueNames<T>()));
     for (const OptionRule* rule : std::initializer_list<const OptionRule*>{&rules...}) {
-      doc.expected.push_back(rule->expected);
-      doc.values.insert(doc.values.end(), rule->values.begin(), rule->values.end());
+      implied.push_back(*rule);
+    }
+    for (const OptionRule& rule : implied) {
+      doc.expected.push_back(rule.expected);
+      doc.values.insert(doc.values.end(), rule.values.begin(), rule.values.end());
     }
     docs.push_back(std::move(doc));
   }
@@ -284,6 +336,11 @@ struct GivenFieldValidator {
     }
   }
 };
+
+template <typename Options, typename = void>
+struct HasAliases : std::false_type {};
+template <typename Options>
+struct HasAliases<Options, std::void_t<decltype(Options::DeprecatedAliases())>> : std::true_type {};
 
 template <typename Options, typename = void>
 struct HasRelations : std::false_type {};
@@ -309,25 +366,80 @@ std::vector<OptionDoc> OptionDocs(Options& options) {
   return docs;
 }
 
+template <typename Options>
+nlohmann::json OptionsToJson(Options& options) {
+  nlohmann::json out = nlohmann::json::object();
+  options_detail::JsonWriter writer{out};
+  options.VisitFields(writer);
+  return out;
+}
+
+template <typename Options>
+void OptionsFromJson(const nlohmann::json& in, Options& options) {
+  options_detail::JsonReader reader{in};
+  options.VisitFields(reader);
+}
+
+// The struct's deprecated keys (OptionAlias), none where it declares none.
+template <typename Options>
+std::vector<OptionAlias> DeprecatedAliases() {
+  if constexpr (options_detail::HasAliases<Options>::value) {
+    return Options::DeprecatedAliases();
+  } else {
+    return {};
+  }
+}
+
+namespace options_detail {
+
+// The deprecated keys `map` gives, applied onto `options` as their new keys (OptionAlias).
+template <typename Options>
+void ApplyAliases(const YAML::Node& map, Options& options, const std::string& path,
+                  const std::string& what) {
+  for (const OptionAlias& alias : DeprecatedAliases<Options>()) {
+    const YAML::Node given = map[alias.old_key];
+    if (!given) continue;
+    bool on = false;
+    ReadYamlField(given, on, path, alias.old_key);
+    Options initial;
+    const std::string value = AliasedValue(
+        alias, on, OptionsToJson(options).at(alias.new_key).template get<std::string>(),
+        OptionsToJson(initial).at(alias.new_key).template get<std::string>(), path, YamlLine(given),
+        what);
+    if (value.empty()) continue;
+    YAML::Node set(YAML::NodeType::Map);
+    set[alias.new_key] = value;
+    YamlReader reader{set, path, what};
+    options.VisitFields(reader);
+  }
+}
+
+}  // namespace options_detail
+
 // Applies a YAML mapping onto `options`; keys absent from the mapping keep their values. Checks
-// keys and value types only: ValidateOptions checks the values once all of them are in place.
-// `path` names the file for error messages; `what` names the section ("stage 'prior'").
+// keys and value types only (and an enumeration's names): ValidateOptions checks the values once
+// all of them are in place. `path` names the file for error messages; `what` names the section
+// ("stage 'prior'"). Deprecated keys (OptionAlias) are applied first, with a warning.
 template <typename Options>
 void ApplyYaml(const YAML::Node& map, Options& options, const std::string& path,
                const std::string& what) {
   if (!map || map.IsNull()) return;
   if (!map.IsMap()) ThrowInput(path, YamlLine(map), what + " options must be a mapping");
   const std::vector<std::string> keys = OptionKeys(options);
+  const std::vector<OptionAlias> aliases = DeprecatedAliases<Options>();
   for (const auto& entry : map) {
     if (entry.first.IsMap() || entry.first.IsSequence()) {
       ThrowInput(path, YamlLine(entry.first), what + ": an option key must be a name");
     }
     const std::string key = entry.first.as<std::string>();
-    if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
+    const bool deprecated = std::any_of(aliases.begin(), aliases.end(),
+                                        [&](const OptionAlias& a) { return a.old_key == key; });
+    if (!deprecated && std::find(keys.begin(), keys.end(), key) == keys.end()) {
       ThrowInput(path, YamlLine(entry.first), UnknownKeyMessage(what, key, keys));
     }
   }
-  options_detail::YamlReader reader{map, path};
+  options_detail::ApplyAliases(map, options, path, what);
+  options_detail::YamlReader reader{map, path, what};
   options.VisitFields(reader);
 }
 
@@ -359,20 +471,6 @@ void ValidateOptions(const Options& options, const std::string& what) {
   std::string message;
   for (const auto& error : errors) message += (message.empty() ? "" : "; ") + what + ": " + error;
   throw InputError(message);
-}
-
-template <typename Options>
-nlohmann::json OptionsToJson(Options& options) {
-  nlohmann::json out = nlohmann::json::object();
-  options_detail::JsonWriter writer{out};
-  options.VisitFields(writer);
-  return out;
-}
-
-template <typename Options>
-void OptionsFromJson(const nlohmann::json& in, Options& options) {
-  options_detail::JsonReader reader{in};
-  options.VisitFields(reader);
 }
 
 }  // namespace raytime

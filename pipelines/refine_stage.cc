@@ -63,6 +63,7 @@ struct RefineStageOptions {
       "added or removed since; fewer iterations, a result that depends on that history)");
     refine.VisitFields(v);  // flat keys: refine.max_matches_per_pair, ...
   }
+  static std::vector<OptionAlias> DeprecatedAliases() { return RefineOptions::DeprecatedAliases(); }
   void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
 

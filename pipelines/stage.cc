@@ -50,10 +50,22 @@ std::vector<std::string> Stage::OptionKeys() {
 
 void Stage::BindCli(CLI::App* app) {
   cli_docs_ = OptionDocs();
-  for (const OptionDoc& doc : cli_docs_) {
+  const size_t num_options = cli_docs_.size();
+  for (const OptionAlias& alias : DeprecatedAliases()) {
+    OptionDoc doc;
+    doc.key = alias.old_key;
+    doc.type = "BOOL";
+    doc.default_value = "false";
+    doc.description = "Deprecated: --" + alias.new_key + " " + alias.value;
+    doc.is_bool = true;
+    cli_docs_.push_back(doc);
+  }
+  for (size_t i = 0; i < cli_docs_.size(); ++i) {
+    const OptionDoc& doc = cli_docs_[i];
     CLI::Option* option = app->add_option("--" + doc.key, cli_values_[doc.key], doc.HelpText());
     option->default_str(doc.default_value)->type_name(doc.type);
     if (!doc.is_list) option->expected(1);
+    if (i >= num_options) option->group("");  // accepted, not advertised
   }
 }
 

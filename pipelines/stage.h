@@ -83,9 +83,12 @@ class Stage {
   virtual nlohmann::json OptionsJson() = 0;
   // Every option's key, default, description and rules, in declaration order.
   virtual std::vector<OptionDoc> OptionDocs() = 0;
+  // The deprecated keys the options still accept (core/options.h OptionAlias).
+  virtual std::vector<OptionAlias> DeprecatedAliases() = 0;
   std::vector<std::string> OptionKeys();
-  // `raytime STAGE`: one --KEY per option with its description; CliOptions() returns the flags
-  // given on the command line as the YAML mapping for Configure.
+  // `raytime STAGE`: one --KEY per option with its description (and one per deprecated key, left
+  // out of --help); CliOptions() returns the flags given on the command line as the YAML mapping
+  // for Configure.
   void BindCli(CLI::App* app);
   YAML::Node CliOptions() const;
 
@@ -147,6 +150,9 @@ class StageWithOptions : public Stage {
   std::vector<OptionDoc> OptionDocs() override {
     Options defaults;
     return raytime::OptionDocs(defaults);
+  }
+  std::vector<OptionAlias> DeprecatedAliases() override {
+    return raytime::DeprecatedAliases<Options>();
   }
 
   const Options& options() const { return options_; }

@@ -2,19 +2,49 @@
 // headline configuration; every field is listed once in VisitFields (YAML key = field name).
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
+#include "core/named_enum.h"
 #include "core/options.h"
 #include "refine/checks/frame_doubt.h"
 
 namespace raytime {
 
+// The choices among fixed sets of ways, each with its option's names (the YAML values, and the
+// text in provenance and summaries); RefineOptions says what each one does.
+enum class RefineRecipe { kSingle, kStaged, kBasinFirst };
+constexpr std::array<EnumName<RefineRecipe>, 3> EnumNames(RefineRecipe) {
+  return {{{RefineRecipe::kSingle, "single"},
+           {RefineRecipe::kStaged, "staged"},
+           {RefineRecipe::kBasinFirst, "basin_first"}}};
+}
+enum class RefineSolver { kAuto, kCeres, kRayTimeLm };
+constexpr std::array<EnumName<RefineSolver>, 3> EnumNames(RefineSolver) {
+  return {{{RefineSolver::kAuto, "auto"},
+           {RefineSolver::kCeres, "ceres"},
+           {RefineSolver::kRayTimeLm, "ray_time_lm"}}};
+}
+enum class RayTimeParameterization { kPerObservation, kAnchored };
+constexpr std::array<EnumName<RayTimeParameterization>, 2> EnumNames(RayTimeParameterization) {
+  return {{{RayTimeParameterization::kPerObservation, "per_observation"},
+           {RayTimeParameterization::kAnchored, "anchored"}}};
+}
+enum class RayTimeInitMode { kAuto, kConstant };
+constexpr std::array<EnumName<RayTimeInitMode>, 2> EnumNames(RayTimeInitMode) {
+  return {{{RayTimeInitMode::kAuto, "auto"}, {RayTimeInitMode::kConstant, "constant"}}};
+}
+enum class IntrinsicsSharing { kPerCamera, kShared };
+constexpr std::array<EnumName<IntrinsicsSharing>, 2> EnumNames(IntrinsicsSharing) {
+  return {{{IntrinsicsSharing::kPerCamera, "per_camera"}, {IntrinsicsSharing::kShared, "shared"}}};
+}
+
 struct RefineOptions {
   // Structure variables (§3.2, §3.6): "per_observation" = one ray time per matched observation
   // (the method); "anchored" = union-find tracks over the match graph, one ray time per track on
   // its anchor observation's ray (the ablation baseline).
-  std::string parameterization = "per_observation";
+  RayTimeParameterization parameterization = RayTimeParameterization::kPerObservation;
 
   // Arctan loss scale a of the nominal objective, px² (§3.3: rho(s) = a atan(s / a), a = 100).
   double loss_scale_px2 = 100.0;
@@ -48,7 +78,7 @@ struct RefineOptions {
   // image without one); a depth scale only, no structure is committed (no gates, no culling).
   // "constant" = every ray time at ray_time_constant_m (the paper's 1 m for metric object and
   // room captures).
-  std::string ray_time_init = "auto";
+  RayTimeInitMode ray_time_init = RayTimeInitMode::kAuto;
   double ray_time_constant_m = 1.0;  // prior length units (metres for a metric prior)
 
   // At most this many matches per image pair, drawn uniformly at random with a seed derived from
@@ -70,7 +100,7 @@ struct RefineOptions {
   // image (refine/solve/camera_blocks.h). Per-camera sets need enough observations per camera to be
   // determined (a principal point is nearly a rotation of its own camera). With fixed intrinsics
   // the images' cameras are used as given, so "shared" needs a refine_* option.
-  std::string intrinsics_sharing = "per_camera";
+  IntrinsicsSharing intrinsics_sharing = IntrinsicsSharing::kPerCamera;
 
   // Shared evaluation cache (§3.7): undistortion and ray points once per observation per
   // evaluation point, copied into each residual's Jacobian. With every intrinsic held (no
@@ -86,7 +116,7 @@ struct RefineOptions {
   // intrinsic, Ceres for those that self-calibrate. Both minimize the same objective with the same
   // step rule; their paths differ in the last digits. The only switch: no other option changes it
   // (a combination that cannot run is refused, CheckRelations).
-  std::string solver = "auto";
+  RefineSolver solver = RefineSolver::kAuto;
   // Threads for the cache and the ray-time LM solver (and for Ceres when not deterministic);
   // 0 = hardware concurrency.
   int num_threads = 0;
@@ -102,7 +132,8 @@ struct RefineOptions {
   double function_tolerance = 1e-6;
   // The same for a stage whose solution only starts another (beyond the paper, issue 34): the GNC
   // schedule's earlier scales, and every stage of a pass the recipe solves again from (the basin
-  // and its removal rounds, the orientation probe, a finish the anneal follows, staged pass 1).
+  // and its removal rounds, the orientation probe, a finish the anneal follows, the staged recipe's
+  // pass 1).
   // The last stage still stops at function_tolerance, so the solution is the tight one's (measured:
   // docs/refine_options.md).
   double intermediate_function_tolerance = 1e-4;
@@ -153,27 +184,31 @@ struct RefineOptions {
   double inconsistent_pair_median_multiple = 0.0;
   double max_inconsistent_pair_fraction = 0.1;  // of the pairs with used matches, in [0, 1)
 
-  // Staged room recipe (§4.3): pass 1 = poses-only GNC from the prior with a light orientation
-  // anchor and capped matches; pass 2 = one warm solve at the nominal scale with the options
-  // above (self-calibration, weights, cap), its priors re-anchored at the pass-1 poses.
-  bool staged = false;
-  double stage1_orientation_weight = 10.0;  // λR of pass 1, 1/rad²
-  int stage1_max_matches_per_pair = 100;    // cap of pass 1; 0 keeps all
+  // The recipe of passes (one switch; it replaced the booleans `staged` and `basin_first`, still
+  // accepted with a warning: DeprecatedAliases):
+  // - "single": one pass with the options above, the GNC schedule from the prior (§3.5).
+  // - "staged", the room recipe (§4.3): pass 1 = poses-only GNC from the prior with a light
+  //   orientation anchor and capped matches (stage1_* below); pass 2 = one warm solve at the
+  //   nominal scale with the options above (self-calibration, weights, cap), its priors
+  //   re-anchored at the pass-1 poses.
+  // - "basin_first" (the basin-first solve below).
+  RefineRecipe recipe = RefineRecipe::kSingle;
+  double stage1_orientation_weight = 10.0;  // λR of the staged recipe's pass 1, 1/rad²
+  int stage1_max_matches_per_pair = 100;    // cap of the staged recipe's pass 1; 0 keeps all
 
-  // Basin-first solve (issue 12, the `auto` preset; built from §4.8 "Basin of convergence" and
-  // §3.3): pass 1 = the basin solve, poses only, full GNC schedule, no orientation prior and
-  // basin_max_matches_per_pair matches, which recovers priors tens of degrees off; pass 2 = the
-  // orientation-prior probe, one nominal-scale solve of the same matches from pass 1's solution
-  // with λR = orientation_weight against the original prior's rotations; pass 3 = the finish from
-  // the solution the probe keeps, one nominal-scale solve with max_matches_per_pair matches and
-  // the self-calibration options. The probe decides λR of the finish from the data: when pulling
-  // the rotations towards the prior raises the median cross-projection residual (robust to the
-  // outliers, which saturate the arctan loss and dilute its mean) by more than
+  // Basin-first solve (recipe: basin_first; issue 12, the `auto` preset; built from §4.8 "Basin of
+  // convergence" and §3.3): pass 1 = the basin solve, poses only, full GNC schedule, no orientation
+  // prior and basin_max_matches_per_pair matches, which recovers priors tens of degrees off; pass 2
+  // = the orientation-prior probe, one nominal-scale solve of the same matches from pass 1's
+  // solution with λR = orientation_weight against the original prior's rotations; pass 3 = the
+  // finish from the solution the probe keeps, one nominal-scale solve with max_matches_per_pair
+  // matches and the self-calibration options. The probe decides λR of the finish from the data:
+  // when pulling the rotations towards the prior raises the median cross-projection residual
+  // (robust to the outliers, which saturate the arctan loss and dilute its mean) by more than
   // orientation_prior_max_increase, the matches contradict the prior's rotations
   // (a wrong prior, or a phone's rotation drift) and the finish runs with λR = 0 from pass 1;
   // otherwise the prior only fixes what the matches leave undetermined (the slow rotation drift a
   // long sweep's λR = 0 solve picks up at no cost) and the finish keeps it.
-  bool basin_first = false;
   int basin_max_matches_per_pair = 100;          // cap of passes 1 and 2; 0 keeps all
   double orientation_prior_max_increase = 0.05;  // relative rise of the median residual
   // Wrong-pair removal of the basin-first solve (issue 12; beyond the paper, cf. its §4.11
@@ -214,8 +249,7 @@ struct RefineOptions {
   void VisitFields(Visitor&& v) {
     v("parameterization", parameterization,
       "Structure variables: one ray time per observation (the method) or per track (§3.6 "
-      "ablation)",
-      OneOf({"per_observation", "anchored"}));
+      "ablation)");
     v("loss_scale_px2", loss_scale_px2,
       "Arctan loss scale a of the nominal objective, px² (§3.3; between 0.01, below keypoint "
       "noise, and 1e8)",
@@ -239,8 +273,7 @@ struct RefineOptions {
       NonNegative(), AtMost(1e5));
     v("ray_time_init", ray_time_init,
       "Ray-time start: per-image median closest-approach depth under the prior, or the constant "
-      "below (§3.2)",
-      OneOf({"auto", "constant"}));
+      "below (§3.2)");
     v("ray_time_constant_m", ray_time_constant_m,
       "Start of every ray time with ray_time_init 'constant', prior length units (paper: 1 m)",
       Positive(), AtMost(1e9));
@@ -256,15 +289,13 @@ struct RefineOptions {
       "Self-calibrate the distortion k1, k2, p1, p2 (§3.1, §4.3)");
     v("intrinsics_sharing", intrinsics_sharing,
       "Self-calibration of several cameras: one set per camera, or one set for all images started "
-      "at their median (§3.1, §4.6 focal drift)",
-      OneOf({"per_camera", "shared"}));
+      "at their median (§3.1, §4.6 focal drift)");
     v("use_evaluation_cache", use_evaluation_cache,
       "Shared evaluation cache: undistortion and ray points once per observation, once per solve "
       "when no intrinsic is refined (§3.7); false = automatic differentiation of every residual");
     v("solver", solver,
       "Solver per pass: the ray-time LM (closed-form ray-time elimination, intrinsics held), "
-      "Ceres, or auto (the ray-time LM where no intrinsic is refined, else Ceres)",
-      OneOf({"auto", "ceres", "ray_time_lm"}));
+      "Ceres, or auto (the ray-time LM where no intrinsic is refined, else Ceres)");
     v("num_threads", num_threads, "Solver threads; 0 = hardware concurrency", NonNegative(),
       AtMost(1024));
     v("deterministic", deterministic,
@@ -313,16 +344,15 @@ struct RefineOptions {
       NonNegative(), AtMost(1e6));
     v("max_inconsistent_pair_fraction", max_inconsistent_pair_fraction,
       "Fraction of inconsistent pairs above which the test fires", NonNegative(), Below(1));
-    v("staged", staged,
-      "Staged room recipe: poses-only GNC pass, then a warm self-calibration pass (§4.3)");
+    v("recipe", recipe,
+      "Passes: single (one), staged (§4.3 room recipe: a poses-only GNC pass, then a warm "
+      "self-calibration pass) or basin_first (basin solve, orientation-prior probe, finish; §4.8, "
+      "§3.3)");
     v("stage1_orientation_weight", stage1_orientation_weight,
       "λR of the staged recipe's first pass, 1/rad² (§4.3)", NonNegative(), AtMost(1e12));
     v("stage1_max_matches_per_pair", stage1_max_matches_per_pair,
       "Match cap of the staged recipe's first pass; 0 keeps all (§4.3)", NonNegative(),
       AtMost(1e7));
-    v("basin_first", basin_first,
-      "Basin solve (GNC, λR 0, capped), then a probe that keeps the orientation prior only if "
-      "the matches agree, then the finish (§4.8, §3.3)");
     v("basin_max_matches_per_pair", basin_max_matches_per_pair,
       "Match cap of the basin solve and the orientation-prior probe; 0 keeps all (§4.7: 100)",
       NonNegative(), AtMost(1e7));
@@ -349,28 +379,34 @@ struct RefineOptions {
       NonNegative(), AtMost(1000));
   }
 
+  // The keys `recipe` replaced (core/options.h OptionAlias: `staged: true` is `recipe: staged`).
+  static std::vector<OptionAlias> DeprecatedAliases() {
+    return {{"staged", "recipe", "staged"}, {"basin_first", "recipe", "basin_first"}};
+  }
+
   // Fixed intrinsics are each image's own: a shared set exists only to be refined.
   void CheckRelations(const Requirement& require) const {
-    require(intrinsics_sharing != "shared" || SelfCalibrates(),
+    require(intrinsics_sharing != IntrinsicsSharing::kShared || SelfCalibrates(),
             "intrinsics_sharing 'shared' replaces the images' cameras by one set of intrinsics "
             "to self-calibrate, so it needs refine_focal, refine_principal_point or "
             "refine_distortion; with fixed intrinsics every image uses its own camera as given "
             "(intrinsics_sharing: per_camera)");
-    require(!(staged && basin_first),
-            "staged and basin_first are two different multi-pass recipes; choose one");
-    require(finish_noise_multiple == 0 || basin_first,
-            "finish_noise_multiple needs basin_first (the finish anneals from the basin solve)");
-    require(max_pair_removal_rounds == 0 || basin_first,
-            "max_pair_removal_rounds needs basin_first (the pairs are judged at the basin solve)");
-    require(solver != "ray_time_lm" || !SelfCalibrates(),
+    require(finish_noise_multiple == 0 || recipe == RefineRecipe::kBasinFirst,
+            "finish_noise_multiple needs recipe: basin_first (the finish anneals from the basin "
+            "solve)");
+    require(max_pair_removal_rounds == 0 || recipe == RefineRecipe::kBasinFirst,
+            "max_pair_removal_rounds needs recipe: basin_first (the pairs are judged at the basin "
+            "solve)");
+    require(solver != RefineSolver::kRayTimeLm || !SelfCalibrates(),
             "solver 'ray_time_lm' holds every intrinsic; self-calibration (refine_focal, "
             "refine_principal_point, refine_distortion) needs solver 'ceres' or 'auto'");
     // The cache is Ceres' residual evaluation; turning it off used to switch an auto solve to
     // Ceres silently.
-    require(use_evaluation_cache || solver == "ceres" || (solver == "auto" && SelfCalibrates()),
+    require(use_evaluation_cache || solver == RefineSolver::kCeres ||
+                (solver == RefineSolver::kAuto && SelfCalibrates()),
             "use_evaluation_cache: false changes how Ceres evaluates its residuals (automatic "
             "differentiation of each), and solver '" +
-                solver +
+                std::string(NameOf(solver)) +
                 "' runs no Ceres pass here: set solver: ceres to compare the two evaluations");
   }
 

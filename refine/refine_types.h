@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <map>
@@ -16,6 +17,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "core/named_enum.h"
 #include "core/warnings.h"
 #include "refine/checks/frame_doubt.h"
 #include "refine/checks/frame_verdicts.h"
@@ -147,6 +149,17 @@ inline const std::vector<double>& ResidualHistogramEdgesPx() {
 std::vector<int> ResidualHistogram(const std::vector<double>& norms_px);
 
 // One solve of the GNC schedule (§3.5).
+// Why a GNC stage stopped: Ceres' TerminationType, which the ray-time LM reports too; written as
+// Ceres writes it (TerminationTypeToString). FAILURE ends the schedule and returns the prior.
+enum class GncTermination { kConvergence, kNoConvergence, kFailure, kUserSuccess, kUserFailure };
+constexpr std::array<EnumName<GncTermination>, 5> EnumNames(GncTermination) {
+  return {{{GncTermination::kConvergence, "CONVERGENCE"},
+           {GncTermination::kNoConvergence, "NO_CONVERGENCE"},
+           {GncTermination::kFailure, "FAILURE"},
+           {GncTermination::kUserSuccess, "USER_SUCCESS"},
+           {GncTermination::kUserFailure, "USER_FAILURE"}}};
+}
+
 struct GncStageSummary {
   double loss_scale_px2 = 0.0;
   int iterations = 0;  // successful + unsuccessful steps
@@ -161,7 +174,7 @@ struct GncStageSummary {
   int step_doublings = 0;  // ray-time LM: accepted doublings of an accepted step
   // The relative cost-change tolerance the stage stopped on (GncSettings::StageTolerance).
   double function_tolerance = 0.0;
-  std::string termination;  // CONVERGENCE, NO_CONVERGENCE, FAILURE, ...
+  GncTermination termination = GncTermination::kNoConvergence;
   std::string message;
   // The residual norms at the stage's solution binned by ResidualHistogramEdgesPx() (how the
   // annealing pulls residuals in: the run page draws one histogram per stage).
@@ -284,7 +297,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(InconsistentPairsVerdict, enabled, fired, num
                                    median_multiple, fraction_threshold, pairs,
                                    images_mostly_inconsistent)
 
-// The basin-first solve's orientation-prior probe (RefineOptions::basin_first): whether the
+// The basin-first solve's orientation-prior probe (`recipe: basin_first`): whether the
 // matches agree with the prior's rotations, and so whether the finish keeps λR.
 struct OrientationPriorProbe {
   bool enabled = false;

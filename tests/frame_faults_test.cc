@@ -65,7 +65,7 @@ SyntheticSceneOptions EightCameras() {
 // Preset auto's recipe for RefinePoses (configs/presets/refine/auto.yaml).
 RefineOptions AutoOptions() {
   RefineOptions refine;
-  refine.basin_first = true;
+  refine.recipe = RefineRecipe::kBasinFirst;
   refine.trust_region = false;
   refine.max_pair_removal_rounds = 3;
   refine.finish_noise_multiple = 2;

@@ -3,15 +3,20 @@
 // that name the option and list an enumeration's values, and command lines that mean the same as
 // YAML.
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <fstream>
 #include <map>
+#include <sstream>
 
 #include "core/error.h"
 #include "core/options.h"
 #include "pipelines/pipeline_spec.h"
 #include "pipelines/stage.h"
+#include "refine/refine_options.h"
+#include "refine/refine_types.h"
 #include "temp_dir.h"
 #include "tests/input_error_of.h"
 
@@ -207,6 +212,133 @@ TEST(PipelineOptionsTest, EnumerationErrorsSuggestTheNearestValue) {
       InputErrorOf([&] { matches->Configure(YAML::Load("{pairs: sequentail}"), "p.yaml"); });
   EXPECT_NE(message.find("one of: exhaustive, sequential"), std::string::npos) << message;
   EXPECT_NE(message.find("did you mean 'sequential'"), std::string::npos) << message;
+}
+
+// What spdlog logs while `f` runs ("warning: message" per line).
+std::string LogOf(const std::function<void()>& f) {
+  std::ostringstream log;
+  const std::shared_ptr<spdlog::logger> previous = spdlog::default_logger();
+  auto capture = std::make_shared<spdlog::logger>(
+      "pipeline_options_test", std::make_shared<spdlog::sinks::ostream_sink_st>(log));
+  capture->set_pattern("%l: %v");
+  spdlog::set_default_logger(capture);
+  try {
+    f();
+  } catch (...) {
+    spdlog::set_default_logger(previous);
+    throw;
+  }
+  spdlog::set_default_logger(previous);
+  return log.str();
+}
+
+// The refine stage's options after Configure of a pipeline's refine entry with `overrides`.
+nlohmann::json RefineOptionsWith(const std::string& path,
+                                 const std::vector<std::string>& overrides) {
+  PipelineSpec spec = LoadPipeline(path);
+  for (const std::string& assignment : overrides) ApplyOverride(&spec, assignment);
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  refine->Configure(spec.stages.back().options, spec.path);
+  return refine->OptionsJson();
+}
+
+// `staged` and `basin_first` were booleans before `recipe` (refine/refine_options.h): a YAML file,
+// a --set and a command line that give them mean what the recipe says, with a warning naming it.
+TEST(PipelineOptionsTest, DeprecatedRecipeKeysMeanTheRecipeWithAWarning) {
+  RefineOptions old_key, new_key;
+  const std::string log = LogOf(
+      [&] { ApplyYaml(YAML::Load("{staged: true}"), old_key, "alias.yaml", "test 'yaml alias'"); });
+  ApplyYaml(YAML::Load("{recipe: staged}"), new_key, "recipe.yaml", "test 'yaml alias'");
+  EXPECT_EQ(OptionsToJson(old_key), OptionsToJson(new_key));
+  EXPECT_EQ(old_key.recipe, RefineRecipe::kStaged);
+  EXPECT_NE(log.find("warning: alias.yaml:1: test 'yaml alias': 'staged: true' is deprecated; "
+                     "write 'recipe: staged'"),
+            std::string::npos)
+      << log;
+
+  TempDir dir("options");
+  const std::string path = WritePipeline(dir, "  - refine: {}\n");
+  nlohmann::json set_old;
+  const std::string set_log =
+      LogOf([&] { set_old = RefineOptionsWith(path, {"refine.basin_first=true"}); });
+  EXPECT_EQ(set_old, RefineOptionsWith(path, {"refine.recipe=basin_first"}));
+  EXPECT_EQ(set_old["recipe"], "basin_first");
+  EXPECT_FALSE(set_old.contains("basin_first"));
+  EXPECT_NE(set_log.find("'basin_first: true' is deprecated; write 'recipe: basin_first'"),
+            std::string::npos)
+      << set_log;
+
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  CLI::App app;
+  refine->BindCli(&app);
+  app.parse("--staged true", false);
+  refine->Configure(refine->CliOptions(), "command line");
+  EXPECT_EQ(refine->OptionsJson()["recipe"], "staged");
+
+  // false turns off only the recipe it names, as the boolean did.
+  EXPECT_EQ(RefineOptionsWith(path, {"refine.preset=auto", "refine.staged=false"})["recipe"],
+            "basin_first");
+  EXPECT_EQ(RefineOptionsWith(path, {"refine.preset=room-staged", "refine.staged=false"})["recipe"],
+            "single");
+}
+
+TEST(PipelineOptionsTest, TwoRecipesAtOnceAreRefused) {
+  std::unique_ptr<Stage> refine = CreateStage("refine");
+  std::string message = InputErrorOf(
+      [&] { refine->Configure(YAML::Load("{staged: true, basin_first: true}"), "p.yaml"); });
+  EXPECT_NE(message.find("p.yaml:1: stage 'refine': 'basin_first: true'"), std::string::npos)
+      << message;
+  EXPECT_NE(message.find("conflicts with recipe 'staged'"), std::string::npos) << message;
+  // The auto preset's recipe is basin_first: staged on top of it was refused before, and is.
+  message =
+      InputErrorOf([&] { refine->Configure(YAML::Load("{preset: auto, staged: true}"), "p.yaml"); });
+  EXPECT_NE(message.find("conflicts with recipe 'basin_first'"), std::string::npos) << message;
+}
+
+TEST(PipelineOptionsTest, AnUnknownRecipeNamesTheFileLineAndTheValidValues) {
+  TempDir dir("options");
+  const std::string path = WritePipeline(dir, "  - refine: {recipe: basin_frist}\n");
+  const std::string message = InputErrorOf([&] { LoadPipeline(path); });
+  EXPECT_NE(message.find(path + ":4: stage 'refine': option 'recipe' must be one of: single, "
+                                "staged, basin_first, got \"basin_frist\" (did you mean "
+                                "'basin_first'?)"),
+            std::string::npos)
+      << message;
+  PipelineSpec spec = LoadPipeline(WritePipeline(dir, "  - refine: {}\n"));
+  const std::string set = InputErrorOf([&] { ApplyOverride(&spec, "refine.solver=ceress"); });
+  EXPECT_EQ(set.rfind("--set refine.solver: ", 0), 0u) << set;
+  EXPECT_NE(set.find("one of: auto, ceres, ray_time_lm, got \"ceress\" (did you mean 'ceres'?)"),
+            std::string::npos)
+      << set;
+}
+
+// An enumeration is its name in JSON (provenance, content hashes, summaries), as the text options
+// it replaced were, and reads back from it.
+TEST(PipelineOptionsTest, EnumerationsRoundTripThroughJsonAsTheirNames) {
+  RefineOptions options;
+  options.recipe = RefineRecipe::kBasinFirst;
+  options.solver = RefineSolver::kRayTimeLm;
+  options.parameterization = RayTimeParameterization::kAnchored;
+  options.ray_time_init = RayTimeInitMode::kConstant;
+  options.intrinsics_sharing = IntrinsicsSharing::kShared;
+  const nlohmann::json json = OptionsToJson(options);
+  EXPECT_EQ(json["recipe"], "basin_first");
+  EXPECT_EQ(json["solver"], "ray_time_lm");
+  EXPECT_EQ(json["parameterization"], "anchored");
+  EXPECT_EQ(json["ray_time_init"], "constant");
+  EXPECT_EQ(json["intrinsics_sharing"], "shared");
+  RefineOptions read;
+  OptionsFromJson(json, read);
+  EXPECT_EQ(OptionsToJson(read), json);
+  RefineOptions defaults;
+  EXPECT_EQ(OptionsToJson(defaults)["solver"], "auto");
+
+  GncStageSummary stage;
+  stage.termination = GncTermination::kFailure;
+  const nlohmann::json stage_json = stage;
+  EXPECT_EQ(stage_json["termination"], "FAILURE");
+  EXPECT_EQ(stage_json.get<GncStageSummary>().termination, GncTermination::kFailure);
+  EXPECT_THROW(nlohmann::json("CONVERGED").get<GncTermination>(), InputError);
 }
 
 }  // namespace

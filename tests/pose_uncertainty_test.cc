@@ -27,11 +27,11 @@ struct Calibration {
 
 // `num_draws` solves of one scene whose keypoints carry fresh N(0, sigma_px²) noise each time.
 Calibration Calibrate(const SyntheticSceneOptions& scene_options, double sigma_px, int num_draws,
-                      double orientation_weight, const std::string& parameterization) {
+                      double orientation_weight, RayTimeParameterization parameterization) {
   const SyntheticScene scene = MakeSyntheticScene(scene_options);
   const int n = static_cast<int>(scene.ground_truth.size());
   RefineOptions options;
-  options.solver = "ray_time_lm";
+  options.solver = RefineSolver::kRayTimeLm;
   options.orientation_weight = orientation_weight;
   options.parameterization = parameterization;
   options.trust_region = false;
@@ -98,7 +98,7 @@ struct CalibrationCase {
   int num_points;
   double sigma_px;
   double orientation_weight;
-  const char* parameterization;
+  RayTimeParameterization parameterization;
   bool distortion;
 };
 
@@ -107,10 +107,13 @@ struct CalibrationCase {
 // observed σ within about ±11 % (1/sqrt(2·39)) of the true spread.
 TEST(PoseUncertaintyTest, PredictedSigmaMatchesTheSpreadOverNoiseDraws) {
   const CalibrationCase cases[] = {
-      {"8 cameras, 0.5 px, λR 0", 8, 300, 0.5, 0.0, "per_observation", false},
-      {"8 cameras, 0.5 px, λR 1e3", 8, 300, 0.5, 1e3, "per_observation", false},
-      {"12 cameras, 1 px, anchored", 12, 300, 1.0, 0.0, "anchored", false},
-      {"8 cameras, 0.3 px, distorted", 8, 300, 0.3, 0.0, "per_observation", true},
+      {"8 cameras, 0.5 px, λR 0", 8, 300, 0.5, 0.0, RayTimeParameterization::kPerObservation,
+       false},
+      {"8 cameras, 0.5 px, λR 1e3", 8, 300, 0.5, 1e3, RayTimeParameterization::kPerObservation,
+       false},
+      {"12 cameras, 1 px, anchored", 12, 300, 1.0, 0.0, RayTimeParameterization::kAnchored, false},
+      {"8 cameras, 0.3 px, distorted", 8, 300, 0.3, 0.0, RayTimeParameterization::kPerObservation,
+       true},
   };
   for (const CalibrationCase& test : cases) {
     SCOPED_TRACE(test.name);

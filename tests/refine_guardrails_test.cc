@@ -541,8 +541,9 @@ TEST(RefineGuardrailTest, InconsistentPairsStaysQuietOnAHealthySolve) {
   SyntheticSceneOptions scene_options = Scene();
   scene_options.pixel_noise = 0.0;
   const SyntheticScene scene = MakeSyntheticScene(scene_options);
-  for (const char* parameterization : {"per_observation", "anchored"}) {
-    SCOPED_TRACE(parameterization);
+  for (const RayTimeParameterization parameterization :
+       {RayTimeParameterization::kPerObservation, RayTimeParameterization::kAnchored}) {
+    SCOPED_TRACE(NameOf(parameterization));
     RefineOptions options;
     options.parameterization = parameterization;
     options.inconsistent_pair_px = 1e-3;
@@ -635,7 +636,7 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
   const std::set<std::pair<int, int>> corrupted = CorruptEveryThirdPair(&scene);
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 6.0, 0.1, 7);
   RefineOptions options;
-  options.basin_first = true;
+  options.recipe = RefineRecipe::kBasinFirst;
   options.trust_region = false;
   options.max_matches_per_pair = 100;
   options.max_pair_removal_rounds = 3;
@@ -691,7 +692,7 @@ TEST(RefineGuardrailTest, BasinFirstNamesACameraLeftOnOneUncheckedPair) {
   MatchToACopy(&scene, last_pairs[0], Eigen::Vector3d(0.0, -1.5, 0.0));
   MatchToACopy(&scene, last_pairs[1], Eigen::Vector3d(2.0, 0.0, 0.0));
   RefineOptions options;
-  options.basin_first = true;
+  options.recipe = RefineRecipe::kBasinFirst;
   options.trust_region = false;
   options.max_pair_removal_rounds = 3;
   options.num_threads = 2;

@@ -122,10 +122,10 @@ TEST(RefineIntrinsicsTest, PerCameraSelfCalibrationRecoversEachImagesFocal) {
   RefineOptions options = Options();
   options.orientation_weight = RefineOptions().orientation_weight;
   options.refine_focal = true;
-  options.intrinsics_sharing = "per_camera";
+  options.intrinsics_sharing = IntrinsicsSharing::kPerCamera;
   RefineOutput per_camera;
   const RefineSummary summary = RefinePoses(scene.input, options, &per_camera);
-  options.intrinsics_sharing = "shared";
+  options.intrinsics_sharing = IntrinsicsSharing::kShared;
   RefineOutput shared;
   const RefineSummary shared_summary = RefinePoses(scene.input, options, &shared);
 
@@ -180,10 +180,10 @@ TEST(RefineIntrinsicsTest, OneCameraIsUnchangedWhateverTheSharing) {
   // The orientation prior separates a principal-point shift from a common rotation.
   options.orientation_weight = RefineOptions().orientation_weight;
   options.refine_focal = options.refine_principal_point = options.refine_distortion = true;
-  options.intrinsics_sharing = "shared";
+  options.intrinsics_sharing = IntrinsicsSharing::kShared;
   RefineOutput shared, per_camera;
   const RefineSummary shared_summary = RefinePoses(scene.input, options, &shared);
-  options.intrinsics_sharing = "per_camera";
+  options.intrinsics_sharing = IntrinsicsSharing::kPerCamera;
   RefinePoses(scene.input, options, &per_camera);
   EXPECT_EQ(shared_summary.cameras.num_blocks, 1);
   EXPECT_EQ(shared_summary.cameras.max_start_disagreement_px, 0.0);
@@ -220,7 +220,7 @@ TEST(RefineIntrinsicsTest, NonsenseCombinationsAreRefused) {
   scene_options.num_points = 60;
   SyntheticScene scene = MakeSyntheticScene(scene_options);
   RefineOptions options = Options();
-  options.intrinsics_sharing = "shared";
+  options.intrinsics_sharing = IntrinsicsSharing::kShared;
   RefineOutput output;
   try {
     RefinePoses(scene.input, options, &output);
@@ -239,7 +239,7 @@ TEST(RefineIntrinsicsTest, NonsenseCombinationsAreRefused) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("one image size"), std::string::npos) << e.what();
   }
-  options.intrinsics_sharing = "per_camera";
+  options.intrinsics_sharing = IntrinsicsSharing::kPerCamera;
   scene.input.camera_index[2] = 5;
   try {
     RefinePoses(scene.input, options, &output);

@@ -134,7 +134,7 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
     RayTimeInitSummary summary;
     const std::vector<double> init = InitialRayTimes(
         layout, scene.input, JitterPoses(scene.ground_truth, prior_error_deg, 0.0, 5),
-        PerCameraBlocks(scene.input), "auto", 1.0, &summary);
+        PerCameraBlocks(scene.input), RayTimeInitMode::kAuto, 1.0, &summary);
     ASSERT_EQ(init.size(), truth.size());
     EXPECT_GT(summary.num_depth_samples, static_cast<int>(layout.residuals.size() / 2));
     EXPECT_EQ(summary.images_with_fallback, 0);
@@ -147,7 +147,7 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
   RayTimeInitSummary summary;
   const std::vector<double> constant =
       InitialRayTimes(layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input),
-                      "constant", 1.0, &summary);
+                      RayTimeInitMode::kConstant, 1.0, &summary);
   EXPECT_EQ(constant, std::vector<double>(truth.size(), 1.0));
 }
 
@@ -162,8 +162,9 @@ TEST(RefineLayoutTest, ClosestApproachStartPutsEachFlaggedRayTimeAtItsTrueDepth)
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
   const std::vector<double> truth = TrueRayTimes(scene, layout);
   RayTimeInitSummary summary;
-  const std::vector<double> per_image = InitialRayTimes(
-      layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input), "auto", 1.0, &summary);
+  const std::vector<double> per_image =
+      InitialRayTimes(layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input),
+                      RayTimeInitMode::kAuto, 1.0, &summary);
   std::vector<bool> needs_start(per_image.size());
   for (size_t t = 0; t < needs_start.size(); ++t) needs_start[t] = t % 2 == 0;
   std::vector<double> started = per_image;
@@ -202,13 +203,14 @@ TEST(RefineLayoutTest, AutoRayTimesUnprojectEachImageWithItsOwnCamera) {
     depths[layout.observations[residual.source].image].push_back(truth[residual.source]);
   }
   RayTimeInitSummary summary;
-  const std::vector<double> init = InitialRayTimes(
-      layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input), "auto", 1.0, &summary);
+  const std::vector<double> init =
+      InitialRayTimes(layout, scene.input, scene.ground_truth, PerCameraBlocks(scene.input),
+                      RayTimeInitMode::kAuto, 1.0, &summary);
   EXPECT_EQ(summary.images_with_fallback, 0);
   CameraBlocks one_camera = PerCameraBlocks(scene.input);
   one_camera.camera_of_image.assign(scene.input.camera_index.size(), 0);
-  const std::vector<double> forced =
-      InitialRayTimes(layout, scene.input, scene.ground_truth, one_camera, "auto", 1.0, &summary);
+  const std::vector<double> forced = InitialRayTimes(
+      layout, scene.input, scene.ground_truth, one_camera, RayTimeInitMode::kAuto, 1.0, &summary);
   double worst_forced = 0.0;
   for (size_t t = 0; t < init.size(); ++t) {
     const double expected =

@@ -238,7 +238,8 @@ double AngleBetween(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
 TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
   SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 3.0, 0.3, 11);
-  for (const std::string parameterization : {"per_observation", "anchored"}) {
+  for (const RayTimeParameterization parameterization :
+       {RayTimeParameterization::kPerObservation, RayTimeParameterization::kAnchored}) {
     for (const double orientation_weight : {0.0, 1e3}) {
       RefineOptions options;
       options.parameterization = parameterization;
@@ -250,9 +251,10 @@ TEST(RayTimeLmSolverTest, ReachesCeresMinimumOfTheSameObjective) {
       options.num_threads = 1;
       RefineOutput lm_output, ceres_output;
       const RefineSummary lm = RefinePoses(scene.input, options, &lm_output);
-      options.solver = "ceres";
+      options.solver = RefineSolver::kCeres;
       const RefineSummary ceres = RefinePoses(scene.input, options, &ceres_output);
-      const std::string label = parameterization + ", λR " + std::to_string(orientation_weight);
+      const std::string label =
+          std::string(NameOf(parameterization)) + ", λR " + std::to_string(orientation_weight);
       ASSERT_EQ(lm.passes[0].solver, "ray_time_lm") << label;
       ASSERT_EQ(ceres.passes[0].solver, "ceres") << label;
       ASSERT_EQ(lm.passes[0].stages.size(), ceres.passes[0].stages.size());
@@ -302,11 +304,12 @@ TEST(RayTimeLmSolverTest, SolverIsTheOnlySwitch) {
   options.num_threads = 1;
   options.max_iterations = 3;
   RefineOutput output;
-  for (const std::string solver : {"auto", "ray_time_lm"}) {
+  for (const RefineSolver solver : {RefineSolver::kAuto, RefineSolver::kRayTimeLm}) {
     options.solver = solver;
-    EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ray_time_lm") << solver;
+    EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ray_time_lm")
+        << NameOf(solver);
   }
-  options.solver = "ceres";
+  options.solver = RefineSolver::kCeres;
   options.use_evaluation_cache = false;
   EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ceres");
   const auto refusal = [&](const RefineOptions& refused) {
@@ -317,15 +320,16 @@ TEST(RayTimeLmSolverTest, SolverIsTheOnlySwitch) {
     }
     return std::string();
   };
-  for (const std::string solver : {"auto", "ray_time_lm"}) {
+  for (const RefineSolver solver : {RefineSolver::kAuto, RefineSolver::kRayTimeLm}) {
     options.solver = solver;
-    EXPECT_NE(refusal(options).find("use_evaluation_cache: false"), std::string::npos) << solver;
+    EXPECT_NE(refusal(options).find("use_evaluation_cache: false"), std::string::npos)
+        << NameOf(solver);
   }
   options.use_evaluation_cache = true;
-  options.solver = "ray_time_lm";
+  options.solver = RefineSolver::kRayTimeLm;
   options.refine_focal = true;
   EXPECT_NE(refusal(options).find("solver 'ray_time_lm' holds every intrinsic"), std::string::npos);
-  options.solver = "auto";
+  options.solver = RefineSolver::kAuto;
   EXPECT_EQ(RefinePoses(scene.input, options, &output).passes[0].solver, "ceres")
       << "self-calibration runs on Ceres";
 }

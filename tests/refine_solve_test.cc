@@ -57,7 +57,7 @@ TEST(RefineSolveTest, ExactPriorStaysWithAutoInitAndConstantIsMeasured) {
   SyntheticScene scene = MakeSyntheticScene(NoisyScene());
   scene.input.prior_world_from_cam = scene.ground_truth;
   for (const bool gnc : {true, false}) {
-    for (const std::string init : {"auto", "constant"}) {
+    for (const RayTimeInitMode init : {RayTimeInitMode::kAuto, RayTimeInitMode::kConstant}) {
       RefineOptions options;
       options.ray_time_init = init;
       options.trust_region = false;
@@ -70,10 +70,10 @@ TEST(RefineSolveTest, ExactPriorStaysWithAutoInitAndConstantIsMeasured) {
       std::printf(
           "exact prior, %s, ray_time_init %-8s (median init depth %5.2f m): drift %.5f deg "
           "/ %.5f m (absolute frame), %.5f deg after Sim(3), %d iterations\n",
-          gnc ? "GNC  " : "plain", init.c_str(), summary.passes[0].ray_time_init.median_depth,
+          gnc ? "GNC  " : "plain", NameOf(init), summary.passes[0].ray_time_init.median_depth,
           absolute.mean_rotation_deg, absolute.mean_centre_m, sim3.mean_rotation_deg,
           summary.total_iterations);
-      if (init == "auto") {
+      if (init == RayTimeInitMode::kAuto) {
         EXPECT_GT(summary.passes[0].ray_time_init.median_depth, 8.0);
         EXPECT_LT(absolute.mean_rotation_deg, 0.02);
         EXPECT_LT(absolute.mean_centre_m, 0.01);
@@ -161,7 +161,7 @@ TEST_P(RefineRecoveryTest, GncRecoversAnEightDegreePrior) {
   const PoseErrorSummary before =
       Errors(scene.input.prior_world_from_cam, scene.ground_truth, "sim3");
   RefineOptions options = BasinOptions();
-  options.parameterization = GetParam();
+  ASSERT_TRUE(EnumFromName(GetParam(), &options.parameterization));
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   const PoseErrorSummary after = Errors(output.world_from_cam, scene.ground_truth, "sim3");
@@ -253,7 +253,7 @@ TEST(RefineSolveTest, CacheOffGivesTheSameSolve) {
   SyntheticScene scene = MakeSyntheticScene(tiny);
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 4.0, 2);
   RefineOptions options = BasinOptions();
-  options.solver = "ceres";
+  options.solver = RefineSolver::kCeres;
   options.num_threads = 1;
   options.max_iterations = 3;
   RefineOutput cached, uncached;
@@ -338,7 +338,7 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
   scene.input.cameras[0].params = {1414.0, 1410.0, 770.5, 509.0, 0.0, 0.0, 0.0, 0.0};
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 8.0, 7);
   RefineOptions options;
-  options.staged = true;
+  options.recipe = RefineRecipe::kStaged;
   options.trust_region = false;
   options.refine_focal = options.refine_principal_point = options.refine_distortion = true;
   options.num_threads = 2;
@@ -361,7 +361,7 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
 // The basin-first solve without a trust region, its cap lowered to the small scene's pairs.
 RefineOptions BasinFirstOptions() {
   RefineOptions options;
-  options.basin_first = true;
+  options.recipe = RefineRecipe::kBasinFirst;
   options.trust_region = false;
   options.basin_max_matches_per_pair = 60;
   options.num_threads = 2;
@@ -571,8 +571,9 @@ TEST(RefineSolveTest, SolvedObservationsPutEachRayPointOnItsScenePoint) {
   scene_options.distortion = true;
   SyntheticScene scene = MakeSyntheticScene(scene_options);
   scene.input.prior_world_from_cam = scene.ground_truth;
-  for (const std::string parameterization : {"per_observation", "anchored"}) {
-    SCOPED_TRACE(parameterization);
+  for (const RayTimeParameterization parameterization :
+       {RayTimeParameterization::kPerObservation, RayTimeParameterization::kAnchored}) {
+    SCOPED_TRACE(NameOf(parameterization));
     RefineOptions options;
     options.parameterization = parameterization;
     options.num_threads = 2;
@@ -854,7 +855,7 @@ TEST(RefineSolveTest, ResidualHistogramsBinEveryResidualOfEveryStage) {
   scene_options.num_cameras = 4;
   scene_options.num_points = 60;
   const SyntheticScene scene = MakeSyntheticScene(scene_options);
-  for (const char* solver : {"ray_time_lm", "ceres"}) {
+  for (const RefineSolver solver : {RefineSolver::kRayTimeLm, RefineSolver::kCeres}) {
     RefineOptions options;
     options.solver = solver;
     options.num_threads = 1;
@@ -863,10 +864,10 @@ TEST(RefineSolveTest, ResidualHistogramsBinEveryResidualOfEveryStage) {
     for (const RefinePassSummary& pass : summary.passes) {
       ASSERT_FALSE(pass.stages.empty());
       for (const GncStageSummary& stage : pass.stages) {
-        ASSERT_EQ(stage.residual_histogram.size(), edges.size() + 1) << solver;
+        ASSERT_EQ(stage.residual_histogram.size(), edges.size() + 1) << NameOf(solver);
         int total = 0;
         for (const int count : stage.residual_histogram) total += count;
-        EXPECT_EQ(total, pass.num_residuals) << solver << " " << pass.name;
+        EXPECT_EQ(total, pass.num_residuals) << NameOf(solver) << " " << pass.name;
       }
       // The annealing pulls residuals in: no more of them above 1 px after the last stage than
       // after the first (the scene's noise is well below a pixel).
@@ -877,7 +878,7 @@ TEST(RefineSolveTest, ResidualHistogramsBinEveryResidualOfEveryStage) {
         return n;
       };
       EXPECT_LE(above_one_px(pass.stages.back()), above_one_px(pass.stages.front()))
-          << solver << " " << pass.name;
+          << NameOf(solver) << " " << pass.name;
     }
     // Per image, the median residual landing in it: finite for every image of this scene.
     ASSERT_EQ(output.diagnostics.image_residual_median_px.size(), size_t{4});
@@ -885,7 +886,8 @@ TEST(RefineSolveTest, ResidualHistogramsBinEveryResidualOfEveryStage) {
       EXPECT_TRUE(std::isfinite(median));
       EXPECT_LT(median, 5.0);
     }
-    EXPECT_EQ(output.diagnostics.pairs.size(), 6u) << solver;  // 4 cameras, every pair matched
+    EXPECT_EQ(output.diagnostics.pairs.size(), 6u)
+        << NameOf(solver);  // 4 cameras, every pair matched
   }
 }
 

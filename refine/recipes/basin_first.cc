@@ -221,34 +221,35 @@ const RefineInput* RemoveWrongPairs(const RefineInput& input, const RefineOption
   return active;
 }
 
-// The orientation-prior probe: a pass with λR from the basin solution; the finish keeps λR only
-// when the matches' median residual rises by at most orientation_prior_max_increase under it, and
-// otherwise starts from the basin solution again. Not run for a prior estimated from these
-// matches.
+// The orientation-prior probe: a pass with the nominal λR from the basin solution; the finish
+// keeps λR only when the matches' median residual rises by at most orientation_prior_max_increase
+// under it, and otherwise starts from the basin solution again. Not run for a prior estimated from
+// these matches.
 void ProbeOrientationPrior(const RefineInput& active, const RefineOptions& options,
-                           const PassSettings& basin, const std::vector<Rigid3>& prior,
-                           size_t basin_pass, PassState* state, RefineSummary* summary) {
+                           const PassSettings& nominal, const PassSettings& basin,
+                           const std::vector<Rigid3>& prior, size_t basin_pass, PassState* state,
+                           RefineSummary* summary) {
   const PassState basin_state = *state;
   const RefinePassSummary basin_solution = summary->passes.at(basin_pass);
 
   OrientationPriorProbe& probe = summary->orientation_prior;
   probe.enabled = true;
-  probe.weight = options.orientation_weight;
+  probe.weight = nominal.orientation_weight;
   probe.max_increase = options.orientation_prior_max_increase;
   probe.free_residual_median_px = basin_solution.residual_median_px;
   probe.free_match_cost_px2 = basin_solution.match_cost_px2;
-  probe.prior_from_matches = active.prior_rotations_from_matches && options.orientation_weight > 0;
+  probe.prior_from_matches = active.prior_rotations_from_matches && probe.weight > 0;
   if (probe.prior_from_matches) {
     spdlog::info(fmt::format(
         "refine: orientation prior (λR = {:g}) not used: the prior's rotations were estimated "
         "from these matches (the bootstrap or a repair from it), so they add nothing but their "
         "own errors; the finish runs with λR = 0",
         probe.weight));
-  } else if (options.orientation_weight > 0) {
+  } else if (probe.weight > 0) {
     PassSettings probe_pass = basin;
     probe_pass.name = "orientation_probe";
-    probe_pass.orientation_weight = options.orientation_weight;
-    probe_pass.scales = {options.loss_scale_px2};
+    probe_pass.orientation_weight = probe.weight;
+    probe_pass.scales = {nominal.scales.back()};
     summary->passes.push_back(RunPass(active, options, probe_pass, prior, state));
     probe.prior_residual_median_px = summary->passes.back().residual_median_px;
     probe.prior_match_cost_px2 = summary->passes.back().match_cost_px2;
@@ -290,7 +291,7 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   basin.name = "basin";
   basin.max_matches_per_pair = options.basin_max_matches_per_pair;
   basin.orientation_weight = 0.0;
-  basin.scales = options.StageScales();
+  basin.scales = nominal.scales;
   basin.intermediate = true;  // and so its removal rounds and the probe, copied from it
   const PassState start = *state;
   summary->passes.push_back(RunPass(input, options, basin, prior, state));
@@ -298,13 +299,13 @@ void RunBasinFirst(const RefineInput& input, const RefineOptions& options,
   size_t basin_pass = 0;  // the pass whose solution the removal returns
   const RefineInput* active =
       RemoveWrongPairs(input, options, basin, prior, start, state, summary, pruned, &basin_pass);
-  ProbeOrientationPrior(*active, options, basin, prior, basin_pass, state, summary);
+  ProbeOrientationPrior(*active, options, nominal, basin, prior, basin_pass, state, summary);
   const OrientationPriorProbe& probe = summary->orientation_prior;
 
   PassSettings finish = nominal;
   finish.name = "finish";
-  finish.scales = {options.loss_scale_px2};
-  finish.orientation_weight = probe.kept ? options.orientation_weight : 0.0;
+  finish.scales = {nominal.scales.back()};
+  finish.orientation_weight = probe.kept ? nominal.orientation_weight : 0.0;
   finish.start_unsolved_at_closest_approach = true;
   const double anneal_scale = FinishAnnealScale(options, probe.free_residual_median_px);
   finish.intermediate = anneal_scale > 0;

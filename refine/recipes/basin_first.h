@@ -1,8 +1,8 @@
-// The basin-first recipe (RefineOptions::basin_first; issues 12 and 30, beyond the paper's single
-// pass, cf. its §4.8 and §4.11): a basin pass at the full GNC schedule without an orientation
-// prior, the wrong-pair removal rounds (pairs the basin solution leaves unexplained are removed
-// and the basin solved again from the prior), the orientation-prior probe, the finish on all
-// matches and the finish anneal. And the loose-parts verdict on what the removal left
+// The basin-first recipe (`recipe: basin_first`; issues 12 and 30, beyond the paper's single pass,
+// cf. its §4.8 and §4.11): a basin pass at the full GNC schedule without an orientation prior, the
+// wrong-pair removal rounds (pairs the basin solution leaves unexplained are removed and the basin
+// solved again from the prior), the orientation-prior probe, the finish on all matches and the
+// finish anneal. And the loose-parts verdict on what the removal left
 // (refine/checks/loose_parts.h).
 #pragma once
 

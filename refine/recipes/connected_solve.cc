@@ -44,12 +44,12 @@ bool IsFinite(const Rigid3& pose) {
 // one, else the images' own cameras. Every pass of the run uses the same blocks.
 void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& options, PassState* state,
                            CameraBlocksSummary* cameras) {
-  cameras->sharing = options.intrinsics_sharing;
+  cameras->sharing = NameOf(options.intrinsics_sharing);
   std::vector<bool> camera_in_use(input.cameras.size(), false);
   for (const int camera : input.camera_index) camera_in_use[camera] = true;
   cameras->num_cameras =
       static_cast<int>(std::count(camera_in_use.begin(), camera_in_use.end(), true));
-  if (options.intrinsics_sharing != "shared") {
+  if (options.intrinsics_sharing != IntrinsicsSharing::kShared) {
     state->cameras = PerCameraBlocks(input);
     return;
   }
@@ -65,41 +65,42 @@ void SetUpIntrinsicsBlocks(const RefineInput& input, const RefineOptions& option
   }
 }
 
-// The recipe's passes: the staged room recipe (§4.3), basin-first (basin_first.h) or one pass.
-// `pruned` receives the input less the pairs a basin-first solve removed.
+// The staged room recipe (§4.3): pass 1 poses only, light orientation anchor, capped matches,
+// full GNC schedule; pass 2 the nominal pass as one warm solve at the nominal scale, its priors
+// re-anchored at the pass-1 poses. Pass 1 decides where pass 2 starts, so it never starts from an
+// earlier run's solution.
+void RunStaged(const RefineInput& input, const RefineOptions& options, const PassSettings& nominal,
+               const std::vector<Rigid3>& prior, PassState* state, RefineSummary* summary) {
+  PassSettings pass1;
+  pass1.name = "pass1_poses";
+  pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
+  pass1.orientation_weight = options.stage1_orientation_weight;
+  pass1.scales = nominal.scales;
+  pass1.intermediate = true;
+  summary->passes.push_back(RunPass(input, options, pass1, prior, state));
+  PassSettings pass2 = nominal;
+  pass2.name = "pass2_self_calibration";
+  pass2.scales = {nominal.scales.back()};
+  const std::vector<Rigid3> pass1_poses = state->world_from_cam;
+  summary->passes.push_back(RunPass(input, options, pass2, pass1_poses, state));
+}
+
+// The recipe's passes (RefineOptions::recipe). `pruned` receives the input less the pairs a
+// basin-first solve removed.
 void RunRecipe(const RefineInput& input, const RefineOptions& options,
                const std::vector<Rigid3>& prior, PassState* state, RefineSummary* summary,
                std::optional<RefineInput>* pruned) {
-  PassSettings nominal;
-  nominal.name = "solve";
-  nominal.max_matches_per_pair = options.max_matches_per_pair;
-  nominal.orientation_weight = options.orientation_weight;
-  nominal.scales = options.StageScales();
-  nominal.refine_focal = options.refine_focal;
-  nominal.refine_principal_point = options.refine_principal_point;
-  nominal.refine_distortion = options.refine_distortion;
-  // The passes on the nominal settings (and the basin-first finish and anneal copied from them)
-  // may start from an earlier run's solution; the capped passes that decide never do.
-  nominal.warm_startable = true;
-  if (options.staged) {
-    // §4.3: pass 1 poses only, light orientation anchor, capped matches, full GNC schedule ...
-    PassSettings pass1;
-    pass1.name = "pass1_poses";
-    pass1.max_matches_per_pair = options.stage1_max_matches_per_pair;
-    pass1.orientation_weight = options.stage1_orientation_weight;
-    pass1.scales = options.StageScales();
-    pass1.intermediate = true;
-    summary->passes.push_back(RunPass(input, options, pass1, prior, state));
-    // ... pass 2 one warm solve at the nominal scale, priors re-anchored at the pass-1 poses.
-    PassSettings pass2 = nominal;
-    pass2.name = "pass2_self_calibration";
-    pass2.scales = {options.loss_scale_px2};
-    const std::vector<Rigid3> pass1_poses = state->world_from_cam;
-    summary->passes.push_back(RunPass(input, options, pass2, pass1_poses, state));
-  } else if (options.basin_first) {
-    RunBasinFirst(input, options, nominal, prior, state, summary, pruned);
-  } else {
-    summary->passes.push_back(RunPass(input, options, nominal, prior, state));
+  const PassSettings nominal = NominalPass(options);
+  switch (options.recipe) {
+    case RefineRecipe::kSingle:
+      summary->passes.push_back(RunPass(input, options, nominal, prior, state));
+      return;
+    case RefineRecipe::kStaged:
+      RunStaged(input, options, nominal, prior, state, summary);
+      return;
+    case RefineRecipe::kBasinFirst:
+      RunBasinFirst(input, options, nominal, prior, state, summary, pruned);
+      return;
   }
 }
 
@@ -112,7 +113,7 @@ void AddUpPasses(RefineSummary* summary) {
       summary->total_iterations += stage.iterations;
       summary->timings.jacobian_seconds += stage.jacobian_seconds;
       summary->guardrails.solver_failed =
-          summary->guardrails.solver_failed || stage.termination == "FAILURE";
+          summary->guardrails.solver_failed || stage.termination == GncTermination::kFailure;
     }
   }
   summary->initial_cost = summary->passes.front().stages.front().initial_cost;
@@ -421,7 +422,7 @@ RefineSummary SolveConnected(const RefineInput& input, const RefineOptions& give
       "refine: {} camera(s), {} intrinsics block(s) ({}{}), fewest observations on one: {}",
       summary.cameras.num_cameras, summary.cameras.num_blocks,
       options.SelfCalibrates() ? "self-calibrated, " : "fixed",
-      options.SelfCalibrates() ? options.intrinsics_sharing : "",
+      options.SelfCalibrates() ? NameOf(options.intrinsics_sharing) : "",
       summary.cameras.min_block_observations));
   summary.uncertainty = PoseUncertaintyOf(input, options, state, summary.passes.back(), prior);
   if (summary.uncertainty.computed) {

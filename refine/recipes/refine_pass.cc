@@ -301,7 +301,8 @@ std::vector<double> SolveOnCeres(const RefineInput& input, const RefineOptions& 
 }
 
 // 4. The residuals at the solution: per image their median (the frame checks), and the pass's
-// median, 90th percentile and mean match term, logged.
+// median, 90th percentile and mean match term at the nominal scale (loss_scale_px2, whatever the
+// pass's own: the basin-first probe compares passes by it), logged.
 void MeasureResiduals(const RefineInput& input, const RefineOptions& options,
                       const std::vector<double>& solved_ray_times, PassState* state,
                       RefinePassSummary* pass) {
@@ -336,6 +337,19 @@ void MeasureResiduals(const RefineInput& input, const RefineOptions& options,
 
 }  // namespace
 
+PassSettings NominalPass(const RefineOptions& options) {
+  PassSettings nominal;
+  nominal.name = "solve";
+  nominal.max_matches_per_pair = options.max_matches_per_pair;
+  nominal.orientation_weight = options.orientation_weight;
+  nominal.scales = options.StageScales();
+  nominal.refine_focal = options.refine_focal;
+  nominal.refine_principal_point = options.refine_principal_point;
+  nominal.refine_distortion = options.refine_distortion;
+  nominal.warm_startable = true;
+  return nominal;
+}
+
 RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options,
                           const PassSettings& settings, const std::vector<Rigid3>& anchor,
                           PassState* state) {
@@ -345,10 +359,9 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   pass.self_calibration =
       settings.refine_focal || settings.refine_principal_point || settings.refine_distortion;
   // The back-end, chosen once: the ray-time LM holds every intrinsic.
-  pass.solver =
-      options.solver == "ray_time_lm" || (options.solver == "auto" && !pass.self_calibration)
-          ? "ray_time_lm"
-          : "ceres";
+  const bool on_ray_time_lm = options.solver == RefineSolver::kRayTimeLm ||
+                              (options.solver == RefineSolver::kAuto && !pass.self_calibration);
+  pass.solver = NameOf(on_ray_time_lm ? RefineSolver::kRayTimeLm : RefineSolver::kCeres);
   const auto build_start = std::chrono::steady_clock::now();
   // 1.
   double largest_difference_deg = 0.0;
@@ -359,7 +372,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
       StartFromEarlierRun(input, settings, state, &pass, &largest_difference_deg, &num_too_far);
   // 2.
   state->layout =
-      options.parameterization == "anchored"
+      options.parameterization == RayTimeParameterization::kAnchored
           ? BuildAnchoredLayout(input, settings.max_matches_per_pair, options.match_cap_seed)
           : BuildPerObservationLayout(input, settings.max_matches_per_pair, options.match_cap_seed);
   std::vector<double> ray_times =
@@ -368,11 +381,10 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   // 3.
   std::vector<bool> camera_observed;
   std::vector<double> solved_ray_times =
-      pass.solver == "ray_time_lm"
-          ? SolveOnRayTimeLm(input, options, settings, anchor, std::move(ray_times), build_start,
-                             &camera_observed, state, &pass)
-          : SolveOnCeres(input, options, settings, anchor, ray_times, build_start, &camera_observed,
-                         state, &pass);
+      on_ray_time_lm ? SolveOnRayTimeLm(input, options, settings, anchor, std::move(ray_times),
+                                        build_start, &camera_observed, state, &pass)
+                     : SolveOnCeres(input, options, settings, anchor, ray_times, build_start,
+                                    &camera_observed, state, &pass);
   // 4. The gauge (a similarity: the residuals are the solve's), the solved ray times kept for
   // the later passes, the residuals.
   pass.gauge_polish =

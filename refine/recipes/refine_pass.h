@@ -1,7 +1,8 @@
 // One pass of the refiner (issue 31: refine/ by job): layout → ray-time initialization →
 // problem → GNC on the ray-time LM or Ceres (RefineOptions::solver) → gauge polish, with the
 // state a later pass starts from and what the checks read of the last one. The recipes (one pass,
-// the staged room recipe, basin-first) chain passes: refine.cc, basin_first.h.
+// the staged room recipe, basin-first: RefineOptions::recipe) chain passes: connected_solve.cc,
+// basin_first.h.
 #pragma once
 
 #include <cstdint>
@@ -18,7 +19,9 @@
 
 namespace raytime {
 
-// What differs between the passes of one run.
+// What differs between the passes of one run: the one source of a pass's cap, λR, GNC schedule and
+// self-calibration. RunPass reads them here only (RefineOptions holds the nominal values, which
+// NominalPass copies, and the run-wide ones: solver, tolerances, weights of the position prior).
 struct PassSettings {
   std::string name;
   int max_matches_per_pair = 0;
@@ -48,6 +51,10 @@ struct PassState {
   ProblemLayout layout;
   std::map<std::string, std::vector<Rigid3>> pass_world_from_cam;  // RefineOutput's
 };
+
+// The nominal pass: the options' cap, λR, GNC schedule and self-calibration, warm-startable (the
+// passes on all matches after the recipe's decisions may start from an earlier run's solution).
+PassSettings NominalPass(const RefineOptions& options);
 
 // Solves one pass from *state (poses, intrinsics blocks, solved ray times) with the poses' prior
 // terms towards `anchor`, and leaves its solution and layout in *state.

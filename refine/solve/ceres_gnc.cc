@@ -25,6 +25,23 @@ class CeresProgressCallback : public ceres::IterationCallback {
   double accepted_cost_ = 0.0;
 };
 
+// Ceres' reason to stop, as the driver's (the same names: TerminationTypeToString's).
+GncTermination CeresStageTermination(ceres::TerminationType type) {
+  switch (type) {
+    case ceres::CONVERGENCE:
+      return GncTermination::kConvergence;
+    case ceres::NO_CONVERGENCE:
+      return GncTermination::kNoConvergence;
+    case ceres::FAILURE:
+      return GncTermination::kFailure;
+    case ceres::USER_SUCCESS:
+      return GncTermination::kUserSuccess;
+    case ceres::USER_FAILURE:
+      return GncTermination::kUserFailure;
+  }
+  return GncTermination::kFailure;
+}
+
 class CeresStageBackend : public GncBackend {
  public:
   explicit CeresStageBackend(RayTimeProblem* problem) : problem_(problem) {}
@@ -63,7 +80,7 @@ class CeresStageBackend : public GncBackend {
     stage.residual_seconds = summary.residual_evaluation_time_in_seconds;
     stage.linear_solver_seconds = summary.linear_solver_time_in_seconds;
     stage.jacobian_evaluations = summary.num_jacobian_evaluations;
-    stage.termination = ceres::TerminationTypeToString(summary.termination_type);
+    stage.termination = CeresStageTermination(summary.termination_type);
     stage.message = summary.message;
     if (elimination_group_size_ < 0) {
       elimination_group_size_ = summary.linear_solver_ordering_used.empty()

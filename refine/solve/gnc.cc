@@ -68,9 +68,9 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
         fmt::format("refine: GNC stage {}/{} a = {:g} px²: {} iterations, cost {:.6g} -> {:.6g}, "
                     "{:.2f} s ({}, {})",
                     s + 1, num_stages, scale, stage.iterations, stage.initial_cost,
-                    stage.final_cost, stage.seconds, stage.termination, backend->Name()));
+                    stage.final_cost, stage.seconds, NameOf(stage.termination), backend->Name()));
     stages.push_back(stage);
-    if (stage.termination == "FAILURE") break;
+    if (stage.termination == GncTermination::kFailure) break;
   }
   return stages;
 }

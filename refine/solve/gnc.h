@@ -60,7 +60,7 @@ class GncBackend {
  public:
   virtual ~GncBackend() = default;
   // Solves one stage at arctan scale `scale_px2` from the current parameters, stopping at relative
-  // cost change `function_tolerance`, and leaves them at its solution; termination "FAILURE" ends
+  // cost change `function_tolerance`, and leaves them at its solution; termination kFailure ends
   // the schedule.
   virtual GncStageSummary SolveStage(double scale_px2, double function_tolerance,
                                      const GncSettings& settings, GncProgress* progress) = 0;

@@ -54,11 +54,11 @@ double ClosestApproachDepth(const ProblemLayout& layout, const CrossProjection& 
 
 std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
                                     const std::vector<Rigid3>& world_from_cam,
-                                    const CameraBlocks& cameras, const std::string& mode,
+                                    const CameraBlocks& cameras, RayTimeInitMode mode,
                                     double constant, RayTimeInitSummary* summary) {
-  summary->mode = mode;
+  summary->mode = NameOf(mode);
   const size_t num_ray_times = layout.ray_time_observation.size();
-  if (mode == "constant" || num_ray_times == 0) {
+  if (mode == RayTimeInitMode::kConstant || num_ray_times == 0) {
     summary->min_depth = summary->median_depth = summary->max_depth = constant;
     return std::vector<double>(num_ray_times, constant);
   }
@@ -130,7 +130,7 @@ double PriorDepthScale(const RefineInput& input, const std::vector<Rigid3>& worl
                        const CameraBlocks& cameras, int max_matches_per_pair, int seed) {
   const ProblemLayout layout = BuildPerObservationLayout(input, max_matches_per_pair, seed);
   RayTimeInitSummary summary;
-  InitialRayTimes(layout, input, world_from_cam, cameras, "auto", 1.0, &summary);
+  InitialRayTimes(layout, input, world_from_cam, cameras, RayTimeInitMode::kAuto, 1.0, &summary);
   return summary.num_depth_samples > 0 && summary.median_depth > 0
              ? summary.median_depth
              : std::numeric_limits<double>::quiet_NaN();

@@ -15,16 +15,17 @@
 #include <string>
 #include <vector>
 
+#include "refine/refine_options.h"
 #include "refine/solve/camera_blocks.h"
 #include "refine/solve/problem_layout.h"
 
 namespace raytime {
 
-// Initial value of every ray time of `layout`; `mode` is "auto" or "constant". Each observation's
+// Initial value of every ray time of `layout` (RefineOptions::ray_time_init). Each observation's
 // ray is unprojected with its image's intrinsics in `cameras`.
 std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInput& input,
                                     const std::vector<Rigid3>& world_from_cam,
-                                    const CameraBlocks& cameras, const std::string& mode,
+                                    const CameraBlocks& cameras, RayTimeInitMode mode,
                                     double constant, RayTimeInitSummary* summary);
 
 // The prior's depth scale: the median over the images of their "auto" start (above) at
@@ -33,7 +34,7 @@ std::vector<double> InitialRayTimes(const ProblemLayout& layout, const RefineInp
 double PriorDepthScale(const RefineInput& input, const std::vector<Rigid3>& world_from_cam,
                        const CameraBlocks& cameras, int max_matches_per_pair, int seed);
 
-// The finish of the basin-first solve (RefineOptions::basin_first) starts from poses an earlier
+// The finish of the basin-first solve (`recipe: basin_first`) starts from poses an earlier
 // pass solved on capped matches, and adds the observations the cap left out. Started at their
 // image's depth scale, many of them would begin hundreds of pixels off, where the nominal arctan
 // loss has no gradient, and stay there. Each ray time t with needs_start[t] starts instead at the

@@ -58,7 +58,7 @@ struct LmStage {
   TrustRegion region;
   GncStageSummary summary;
 
-  void Stop(const char* termination, const char* message) {
+  void Stop(GncTermination termination, const char* message) {
     summary.termination = termination;
     summary.message = message;
   }
@@ -113,7 +113,7 @@ GncStageSummary RayTimeLmBackend::SolveStage(double scale_px2, double function_t
   summary.loss_scale_px2 = scale_px2;
   stage.cost = TimedCost(point_, &stage);
   summary.initial_cost = stage.cost;
-  stage.Stop("NO_CONVERGENCE", "Maximum number of iterations reached.");
+  stage.Stop(GncTermination::kNoConvergence, "Maximum number of iterations reached.");
   while (summary.iterations < settings.max_iterations) {
     auto t0 = Clock::now();
     LinearizeRayTimeLm(*problem_, point_, stage.loss, stage.region.radius, num_threads_, &system_);
@@ -122,7 +122,7 @@ GncStageSummary RayTimeLmBackend::SolveStage(double scale_px2, double function_t
     // Ceres' gradient test: the max norm of the full gradient (cameras, and ray times projected
     // onto their bound) at or below kGradientTolerance is a stationary point.
     if (system_.gradient_max_norm() <= kGradientTolerance) {
-      stage.Stop("CONVERGENCE", "Gradient tolerance reached.");
+      stage.Stop(GncTermination::kConvergence, "Gradient tolerance reached.");
       break;
     }
     t0 = Clock::now();
@@ -136,9 +136,9 @@ GncStageSummary RayTimeLmBackend::SolveStage(double scale_px2, double function_t
     if (outcome == StepOutcome::kConverged) break;
     if (outcome == StepOutcome::kRejected && !stage.region.Reject()) {
       if (solved) {
-        stage.Stop("CONVERGENCE", "Minimum trust region radius reached.");
+        stage.Stop(GncTermination::kConvergence, "Minimum trust region radius reached.");
       } else {
-        stage.Stop("FAILURE", "The reduced camera system could not be factorized.");
+        stage.Stop(GncTermination::kFailure, "The reduced camera system could not be factorized.");
       }
       break;
     }
@@ -165,7 +165,7 @@ RayTimeLmBackend::StepOutcome RayTimeLmBackend::TryStep(LmStage* stage) {
       SimilarityPart(point_.world_from_cam, variables, step_.cameras);
   RetractPoint(point_, variables, step_, similarity, 1.0, &candidate_);
   if (ParameterToleranceReached()) {
-    stage->Stop("CONVERGENCE", "Parameter tolerance reached.");
+    stage->Stop(GncTermination::kConvergence, "Parameter tolerance reached.");
     return StepOutcome::kConverged;
   }
   const double candidate_cost = TimedCost(candidate_, stage);
@@ -180,7 +180,7 @@ RayTimeLmBackend::StepOutcome RayTimeLmBackend::TryStep(LmStage* stage) {
     ++stage->summary.successful_steps;
   }
   if (converged) {
-    stage->Stop("CONVERGENCE", "Function tolerance reached.");
+    stage->Stop(GncTermination::kConvergence, "Function tolerance reached.");
     return StepOutcome::kConverged;
   }
   if (!accepted) return StepOutcome::kRejected;
