@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/graph.h"
+#include "core/named_enum.h"
 
 namespace raytime {
 
@@ -15,7 +16,13 @@ namespace raytime {
 // edges; translation averaging only kValid ones, because a (near-)pure rotation leaves the
 // translation direction undetermined (any t satisfies the epipolar constraint).
 enum class PairStatus { kValid, kPureRotation, kTooFewInliers, kFailed };
-const char* PairStatusName(PairStatus status);
+constexpr std::array<EnumName<PairStatus>, 4> EnumNames(PairStatus) {
+  return {{{PairStatus::kValid, "valid"},
+           {PairStatus::kPureRotation, "pure_rotation"},
+           {PairStatus::kTooFewInliers, "too_few_inliers"},
+           {PairStatus::kFailed, "failed"}}};
+}
+inline const char* PairStatusName(PairStatus status) { return NameOf(status); }
 
 struct ViewGraphEdge {
   int image1 = 0;  // index into the image list; image1 < image2

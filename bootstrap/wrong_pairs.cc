@@ -53,18 +53,6 @@ void CountCycles(int num_nodes, const std::vector<ViewGraphEdge>& edges, double 
 
 }  // namespace
 
-const char* PairVerdictName(PairVerdict verdict) {
-  switch (verdict) {
-    case PairVerdict::kKept:
-      return "kept";
-    case PairVerdict::kWrong:
-      return "wrong";
-    case PairVerdict::kUnusable:
-      return "unusable";
-  }
-  return "unknown";
-}
-
 std::vector<RelativeRotation> RotationEdges(const std::vector<ViewGraphEdge>& edges,
                                             const std::vector<int>& edge_indices) {
   std::vector<RelativeRotation> out;

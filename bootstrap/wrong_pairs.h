@@ -8,6 +8,7 @@
 #pragma once
 
 #include <vector>
+#include "core/named_enum.h"
 #include "core/options.h"
 
 #include "bootstrap/rotation_averaging.h"
@@ -46,7 +47,12 @@ struct WrongPairOptions {
 };
 
 enum class PairVerdict { kKept, kWrong, kUnusable };
-const char* PairVerdictName(PairVerdict verdict);
+constexpr std::array<EnumName<PairVerdict>, 3> EnumNames(PairVerdict) {
+  return {{{PairVerdict::kKept, "kept"},
+           {PairVerdict::kWrong, "wrong"},
+           {PairVerdict::kUnusable, "unusable"}}};
+}
+inline const char* PairVerdictName(PairVerdict verdict) { return NameOf(verdict); }
 
 struct PairScore {
   PairVerdict verdict = PairVerdict::kUnusable;

@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "core/named_enum.h"
+
 namespace raytime {
 
 struct Rigid3 {
@@ -72,6 +74,11 @@ double RotationAngle(const Eigen::Quaterniond& rotation);
 double RotationDistance(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b);
 
 enum class AlignmentKind { kSim3, kSE3, kNone };
+constexpr std::array<EnumName<AlignmentKind>, 3> EnumNames(AlignmentKind) {
+  return {{{AlignmentKind::kSim3, "sim3"},
+           {AlignmentKind::kSE3, "se3"},
+           {AlignmentKind::kNone, "none"}}};
+}
 
 // Least-squares transform mapping `source` points onto `target` (Umeyama 1991). kSE3 fixes the
 // scale at 1, kNone returns the identity. Requires >= 3 non-collinear points for kSim3/kSE3;

@@ -16,22 +16,9 @@ int ImageSet::Find(const std::string& name) const {
   return -1;
 }
 
-const char* PoseRoleName(PoseRole role) {
-  switch (role) {
-    case PoseRole::kGroundTruth:
-      return "ground_truth";
-    case PoseRole::kPrior:
-      return "prior";
-    case PoseRole::kRefined:
-      return "refined";
-  }
-  return "unknown";
-}
-
 PoseRole PoseRoleFromName(const std::string& name) {
-  if (name == "ground_truth") return PoseRole::kGroundTruth;
-  if (name == "prior") return PoseRole::kPrior;
-  if (name == "refined") return PoseRole::kRefined;
+  PoseRole role = PoseRole::kPrior;
+  if (EnumFromName(name, &role)) return role;
   throw InputError("unknown pose role '" + name + "' (expected ground_truth, prior or refined)");
 }
 

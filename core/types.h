@@ -9,6 +9,7 @@
 
 #include "core/camera.h"
 #include "core/geometry.h"
+#include "core/named_enum.h"
 
 namespace raytime {
 
@@ -31,7 +32,12 @@ struct ImageSet {
 
 // Role of a pose set, written into provenance attributes.
 enum class PoseRole { kGroundTruth, kPrior, kRefined };
-const char* PoseRoleName(PoseRole role);
+constexpr std::array<EnumName<PoseRole>, 3> EnumNames(PoseRole) {
+  return {{{PoseRole::kGroundTruth, "ground_truth"},
+           {PoseRole::kPrior, "prior"},
+           {PoseRole::kRefined, "refined"}}};
+}
+inline const char* PoseRoleName(PoseRole role) { return NameOf(role); }
 PoseRole PoseRoleFromName(const std::string& name);  // throws InputError on an unknown name
 
 // One pose per named image. Missing poses are absent from the map: a pose set may cover a

@@ -15,18 +15,6 @@ namespace raytime {
 
 namespace {
 
-const char* AlignmentName(AlignmentKind kind) {
-  switch (kind) {
-    case AlignmentKind::kSim3:
-      return "sim3";
-    case AlignmentKind::kSE3:
-      return "se3";
-    case AlignmentKind::kNone:
-      return "none";
-  }
-  return "unknown";
-}
-
 double Mean(const std::vector<double>& values) {
   if (values.empty()) return 0.0;
   return std::accumulate(values.begin(), values.end(), 0.0) / static_cast<double>(values.size());
@@ -97,10 +85,8 @@ double AlignmentRotationSigma(const std::vector<Eigen::Vector3d>& target_centres
 }
 
 AlignmentKind AlignmentKindFromName(const std::string& name) {
-  for (const AlignmentKind kind :
-       {AlignmentKind::kSim3, AlignmentKind::kSE3, AlignmentKind::kNone}) {
-    if (name == AlignmentName(kind)) return kind;
-  }
+  AlignmentKind kind = AlignmentKind::kSim3;
+  if (EnumFromName(name, &kind)) return kind;
   throw InputError("unknown alignment '" + name + "' (valid alignments: sim3, se3, none)");
 }
 
@@ -110,7 +96,7 @@ PoseErrorSummary ComputePoseErrors(const PoseSet& estimate, const PoseSet& groun
   const NameJoin join = JoinNames(Names(estimate), Names(ground_truth));
 
   PoseErrorSummary summary;
-  summary.alignment = AlignmentName(kind);
+  summary.alignment = NameOf(kind);
   summary.only_in_estimate = join.only_left;
   summary.only_in_ground_truth = join.only_right;
   summary.num_frames = static_cast<int>(join.both.size());

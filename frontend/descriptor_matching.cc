@@ -491,25 +491,9 @@ bool Passes(float best, float second, double max_ratio, double max_distance) {
 }  // namespace
 
 MatchKernel ParseMatchKernel(const std::string& name, const std::string& what) {
-  if (name == "auto") return MatchKernel::kAuto;
-  if (name == "vnni") return MatchKernel::kVnni;
-  if (name == "avx2") return MatchKernel::kAvx2;
-  if (name == "gemm") return MatchKernel::kGemm;
-  throw InputError(UnknownKeyMessage(what, name, {"auto", "vnni", "avx2", "gemm"}, "kernel"));
-}
-
-const char* MatchKernelName(MatchKernel kernel) {
-  switch (kernel) {
-    case MatchKernel::kAuto:
-      return "auto";
-    case MatchKernel::kVnni:
-      return "vnni";
-    case MatchKernel::kAvx2:
-      return "avx2";
-    case MatchKernel::kGemm:
-      return "gemm";
-  }
-  return "?";
+  MatchKernel kernel = MatchKernel::kAuto;
+  if (EnumFromName(name, &kernel)) return kernel;
+  throw InputError(UnknownKeyMessage(what, name, EnumValueNames<MatchKernel>(), "kernel"));
 }
 
 bool CpuHasAvx2Fma() { return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"); }

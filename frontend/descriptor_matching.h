@@ -26,6 +26,8 @@
 #include <string>
 #include <vector>
 
+#include "core/named_enum.h"
+
 namespace raytime {
 
 // Row-major, one descriptor per row.
@@ -40,10 +42,16 @@ enum class MatchKernel {
   kAvx2,  // hand-blocked AVX2/FMA product, 6 x 16 register tiles, fused top-2 scan
   kGemm,  // cv::gemm on blocks of rows, then a scalar top-2 scan (portable)
 };
+constexpr std::array<EnumName<MatchKernel>, 4> EnumNames(MatchKernel) {
+  return {{{MatchKernel::kAuto, "auto"},
+           {MatchKernel::kVnni, "vnni"},
+           {MatchKernel::kAvx2, "avx2"},
+           {MatchKernel::kGemm, "gemm"}}};
+}
 
 // "auto", "vnni", "avx2", "gemm"; InputError naming `what` otherwise.
 MatchKernel ParseMatchKernel(const std::string& name, const std::string& what);
-const char* MatchKernelName(MatchKernel kernel);
+inline const char* MatchKernelName(MatchKernel kernel) { return NameOf(kernel); }
 bool CpuHasAvx2Fma();
 bool CpuHasVnni();  // AVX2 and either AVX-VNNI or AVX512-VNNI with AVX512-VL
 // kAuto resolved for this CPU; kVnni or kAvx2 on a CPU without it is a std::runtime_error.
