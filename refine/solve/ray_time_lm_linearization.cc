@@ -35,7 +35,7 @@ inline void AddScaledLowerOuter(double* __restrict block, const double* __restri
 // with Q = w·MᵀM (3x3) and q = w·Mᵀr every product the reduced system needs is B·Q·Bᵀ, B·q or
 // B·Q·d, fewer operations than forming the 2x6 Jacobians and their products, and all of a ray
 // time's residuals share its source lever B_s, so the source's terms are summed as Q and applied
-// once per ray time (fountain-P11, 181k residuals: 28 -> 21 ms per linearization on one thread).
+// once per ray time (measured: docs/scaling.md, "The LM's linearization kernel").
 
 // p = [x]×·Q for a symmetric 3x3 Q (row-major).
 inline void SkewTimes(const double* x, const double* q, double* p) {
@@ -360,9 +360,8 @@ struct RayTimeTerms {
 // One chunk of ray times' share of the system. Cloned for AVX2 (dispatched at load time): the
 // compiler's own vectorization of the loops runs 4 doubles wide there instead of 2. No FMA in the
 // clone, so nothing is contracted and the results are the default clone's to the bit. The
-// helpers above are inlined into it (always_inline) so that they are compiled in both clones.
-// Fountain-P11 8°, 1 thread: linearization 1.22-1.25 -> 1.11-1.14 s, the same final costs (three
-// runs each).
+// helpers above are inlined into it (always_inline) so that they are compiled in both clones
+// (measured: docs/scaling.md, "The LM's linearization kernel").
 __attribute__((target_clones("avx2", "default"))) void LinearizeChunk(const LinearizationInputs& in,
                                                                       int chunk,
                                                                       ReducedCameraSystem* system) {
