@@ -67,6 +67,18 @@ CameraIntrinsics SyntheticIntrinsics(bool distortion) {
   return intrinsics;
 }
 
+SyntheticSceneOptions ArcScene(int cameras, int points, double noise_px, double outliers,
+                               uint64_t seed) {
+  SyntheticSceneOptions options;
+  options.num_cameras = cameras;
+  options.num_points = points;
+  options.pixel_noise = noise_px;
+  options.outlier_fraction = outliers;
+  options.max_pair_gap = 3;
+  options.seed = seed;
+  return options;
+}
+
 SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options) {
   Random random(options.seed);
   SyntheticScene scene;

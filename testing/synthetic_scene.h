@@ -49,6 +49,12 @@ struct SyntheticScene {
 // Shared intrinsics of the scenes: 1536 x 1024 px (the shared Strecha images), f ~ 1400 px.
 CameraIntrinsics SyntheticIntrinsics(bool distortion);
 
+// The scene most refine tests solve: `cameras` on the arc, each matched with the next three, about
+// `points` points, keypoints `noise_px` noisy (standard deviation) and an `outliers` fraction of
+// each pair's matches wrong, drawn from `seed`; the other options at their defaults.
+SyntheticSceneOptions ArcScene(int cameras, int points, double noise_px, double outliers,
+                               uint64_t seed);
+
 SyntheticScene MakeSyntheticScene(const SyntheticSceneOptions& options);
 
 // A pair's matches from (keypoint in image1, keypoint in image2) rows.

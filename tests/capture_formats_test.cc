@@ -15,6 +15,7 @@
 #include "formats/npz.h"
 #include "tests/capture_fixtures.h"
 #include "tests/expect_pose.h"
+#include "tests/input_error_of.h"
 #include "tests/shared_data.h"
 #include "tests/temp_dir.h"
 
@@ -119,11 +120,8 @@ TEST(CaptureFormats, Record3dMetadataOfAnotherAspectIsAnError) {
   nlohmann::json metadata = nlohmann::json::parse(text);
   std::swap(metadata["w"], metadata["h"]);
   std::ofstream(dir / "metadata.json") << metadata.dump();
-  try {
-    Load("record3d", dir.path().string());
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  {
+    const std::string message = InputErrorOf([&] { Load("record3d", dir.path().string()); });
     EXPECT_NE(message.find("metadata.json"), std::string::npos) << message;
     EXPECT_NE(message.find("another aspect ratio"), std::string::npos) << message;
   }
@@ -314,11 +312,8 @@ TEST(PaperDatasets, LamarFixtureReadsRigPosesAndTheAlignment) {
 // ---- Malformed files: the error names the file and what was expected. ----
 
 void ExpectInputError(const std::function<void()>& load, const std::vector<std::string>& parts) {
-  try {
-    load();
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  {
+    const std::string message = InputErrorOf([&] { load(); });
     for (const std::string& part : parts) {
       EXPECT_NE(message.find(part), std::string::npos) << "'" << part << "' not in: " << message;
     }

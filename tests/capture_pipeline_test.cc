@@ -19,6 +19,8 @@
 #include "pipelines/stage.h"
 #include "tests/capture_fixtures.h"
 #include "tests/expect_pose.h"
+#include "tests/input_error_of.h"
+#include "tests/run_stage.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -129,31 +131,34 @@ TEST(CaptureVideo, StrayIntrinsicsAtTheCaptureResolutionAreRescaled) {
   EXPECT_EQ(run.dataset.warnings[0].details["estimated"], true);
 }
 
-TEST(CaptureVideo, OdometryErrorsNameTheLine) {
-  TempDir dir("stray_bad");
+// A Stray Scanner folder in dir/stray: `camera_matrix` as camera_matrix.csv, `odometry` as
+// odometry.csv and a placeholder video; the dataset options that read it.
+DatasetOptions StrayFolder(const TempDir& dir, const std::string& camera_matrix,
+                           const std::string& odometry) {
   fs::create_directories(dir / "stray");
   std::ofstream(dir / "stray/rgb.mp4") << "not a video";
-  std::ofstream(dir / "stray/camera_matrix.csv") << "1, 0, 2\n0, 1, 2\n0, 0, 1\n";
-  std::ofstream(dir / "stray/odometry.csv")
-      << "timestamp, frame, x, y, z, qx, qy, qz, qw\n0.0, 0, 0, 0, 0, 0, 0, 0, 1\n"
-         "0.1, 1, 0, 0, zero, 0, 0, 0, 1\n";
+  std::ofstream(dir / "stray/camera_matrix.csv") << camera_matrix;
+  std::ofstream(dir / "stray/odometry.csv") << odometry;
   DatasetOptions options;
   options.format = "stray";
   options.root = dir / "stray";
-  try {
-    LoadDataset(options);
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  return options;
+}
+
+TEST(CaptureVideo, OdometryErrorsNameTheLine) {
+  TempDir dir("stray_bad");
+  const DatasetOptions options = StrayFolder(dir, "1, 0, 2\n0, 1, 2\n0, 0, 1\n",
+                                             "timestamp, frame, x, y, z, qx, qy, qz, qw\n"
+                                             "0.0, 0, 0, 0, 0, 0, 0, 0, 1\n"
+                                             "0.1, 1, 0, 0, zero, 0, 0, 0, 1\n");
+  {
+    const std::string message = InputErrorOf([&] { LoadDataset(options); });
     EXPECT_NE(message.find("odometry.csv:3"), std::string::npos) << message;
     EXPECT_NE(message.find("column 'z'"), std::string::npos) << message;
   }
   std::ofstream(dir / "stray/odometry.csv") << "x, y, z, qx, qy, qz, qw\n0, 0, 0, 0, 0, 0, 1\n";
-  try {
-    LoadDataset(options);
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  {
+    const std::string message = InputErrorOf([&] { LoadDataset(options); });
     EXPECT_NE(message.find("odometry.csv:1"), std::string::npos) << message;
     EXPECT_NE(message.find("timestamp, frame, x, y, z, qx, qy, qz, qw"), std::string::npos)
         << message;
@@ -184,16 +189,11 @@ void AttachFrames(int count, int width, int height, int capture_width, Dataset* 
 // and made the scale infinite. Both gave non-finite intrinsics without an error (capture_stray).
 TEST(CaptureVideo, StrayRescaleStaysFiniteOrNamesTheFile) {
   TempDir dir("stray_rescale");
-  fs::create_directories(dir / "stray");
-  std::ofstream(dir / "stray/rgb.mp4") << "not a video";
-  std::ofstream(dir / "stray/odometry.csv")
-      << "timestamp, frame, x, y, z, qx, qy, qz, qw\n0.0, 0, 0, 0, 0, 0, 0, 0, 1\n"
-         "0.1, 1, 0, 0, 1, 0, 0, 0, 1\n0.2, 2, 0, 0, 2, 0, 0, 0, 1\n";
-  DatasetOptions options;
-  options.format = "stray";
-  options.root = dir / "stray";
   // capture_width 1 for 640x1 frames: the capture's height, 1 / 640 px, rounded to 0.
-  std::ofstream(dir / "stray/camera_matrix.csv") << "2, 0, 0.5\n0, 2, 0.25\n0, 0, 1\n";
+  const DatasetOptions options =
+      StrayFolder(dir, "2, 0, 0.5\n0, 2, 0.25\n0, 0, 1\n",
+                  "timestamp, frame, x, y, z, qx, qy, qz, qw\n0.0, 0, 0, 0, 0, 0, 0, 0, 1\n"
+                  "0.1, 1, 0, 0, 1, 0, 0, 0, 1\n0.2, 2, 0, 0, 2, 0, 0, 0, 1\n");
   Dataset dataset = LoadDataset(options);
   AttachFrames(3, 640, 1, 1, &dataset);
   ASSERT_EQ(dataset.images.cameras.size(), 1u);
@@ -207,11 +207,8 @@ TEST(CaptureVideo, StrayRescaleStaysFiniteOrNamesTheFile) {
 
   std::ofstream(dir / "stray/camera_matrix.csv") << "689.87, 0, 0\n0, 691.04, 0\n0, 0, 1\n";
   dataset = LoadDataset(options);
-  try {
-    AttachFrames(3, 768, 512, 0, &dataset);
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  {
+    const std::string message = InputErrorOf([&] { AttachFrames(3, 768, 512, 0, &dataset); });
     EXPECT_NE(message.find("camera_matrix.csv"), std::string::npos) << message;
     EXPECT_NE(message.find("is not near the centre"), std::string::npos) << message;
   }
@@ -221,14 +218,7 @@ TEST(CaptureVideo, StrayRescaleStaysFiniteOrNamesTheFile) {
 
 nlohmann::json RunStage(const std::string& type, const std::string& options, const TempDir& dir,
                         const std::map<std::string, std::string>& artifacts) {
-  std::unique_ptr<Stage> stage = CreateStage(type);
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = type;
-  context.workdir = dir.path().string();
-  context.output_path = dir / (type + ".h5");
-  context.artifacts = artifacts;
-  return stage->Run(context);
+  return RunStageInProcess(type, options, dir.path().string(), artifacts);
 }
 
 TEST(CaptureStages, DatasetStageWritesTheCapturePosesAndSaysWhatItHas) {

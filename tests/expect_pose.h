@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <vector>
 
 #include "core/geometry.h"
 
@@ -14,6 +15,17 @@ inline void ExpectPoseNear(const Rigid3& actual, const Rigid3& expected, double 
                            const std::string& what = "") {
   EXPECT_LE(RotationDistance(actual.rotation, expected.rotation), tolerance) << what;
   EXPECT_LE((actual.translation - expected.translation).norm(), tolerance) << what;
+}
+
+// Every pose of `actual` bit-equal to `expected`'s (determinism, equivalent configurations).
+inline void ExpectSamePoses(const std::vector<Rigid3>& actual, const std::vector<Rigid3>& expected,
+                            const std::string& what = "") {
+  ASSERT_EQ(actual.size(), expected.size()) << what;
+  for (size_t i = 0; i < actual.size(); ++i) {
+    EXPECT_EQ(actual[i].rotation.coeffs(), expected[i].rotation.coeffs())
+        << what << ", image " << i;
+    EXPECT_EQ(actual[i].translation, expected[i].translation) << what << ", image " << i;
+  }
 }
 
 }  // namespace raytime

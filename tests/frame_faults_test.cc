@@ -29,13 +29,8 @@ namespace {
 // matches, so frames 7-13 hang on the rest by one pair. The prior is a phone's: the truth off by
 // 0.3° and 5 cm per frame.
 SyntheticScene WeakLinkScene() {
-  SyntheticSceneOptions options;
-  options.num_cameras = 14;
-  options.num_points = 800;
+  SyntheticSceneOptions options = ArcScene(14, 800, 0.5, 0.0, 3);
   options.arc_span_deg = 140.0;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
-  options.seed = 3;
   SyntheticScene scene = MakeSyntheticScene(options);
   std::vector<PairMatchIndices> kept;
   for (PairMatchIndices pair : scene.input.pairs) {
@@ -53,24 +48,13 @@ SyntheticScene WeakLinkScene() {
 const char* kAuto = "{preset: auto, num_threads: 2}";
 
 // Eight cameras on the arc, each matched with the next three, keypoints 0.5 px noisy.
-SyntheticSceneOptions EightCameras() {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 300;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
-  return options;
-}
+SyntheticSceneOptions EightCameras() { return ArcScene(8, 300, 0.5, 0.0, 1); }
 
 // Preset auto's recipe for RefinePoses (configs/presets/refine/auto.yaml).
 RefineOptions AutoOptions() {
-  RefineOptions refine;
-  refine.recipe = RefineRecipe::kBasinFirst;
-  refine.trust_region = false;
-  refine.max_pair_removal_rounds = 3;
+  RefineOptions refine = BasinFirstConfiguration(3);
   refine.finish_noise_multiple = 2;
   refine.finish_anneal_hold_ratio = 0.01;
-  refine.num_threads = 2;
   return refine;
 }
 
@@ -136,11 +120,7 @@ TEST(FrameFaultsTest, APartOnAWeakLinkThatTheTrustedPriorContradictsIsDoubted) {
 // rays fit best, far off; it is now doubted for its intrinsics (with the factor that explains its
 // matches) and left out, and every frame warning lists its images.
 TEST(FrameFaultsTest, AFrameWithAWrongFocalLengthIsNamedAndNotExported) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 400;
-  options.max_pair_gap = 3;
-  options.pixel_noise = 0.5;
+  SyntheticSceneOptions options = ArcScene(8, 400, 0.5, 0.0, 1);
   options.focal_drift = 1e-9;  // a camera per image
   SyntheticScene scene = MakeSyntheticScene(options);
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 2.0, 1);

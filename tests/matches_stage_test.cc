@@ -14,6 +14,8 @@
 #include "pipelines/stage.h"
 #include "temp_dir.h"
 #include "testing/random_draws.h"
+#include "tests/input_error_of.h"
+#include "tests/run_stage.h"
 
 namespace raytime {
 namespace {
@@ -92,28 +94,21 @@ nlohmann::json RunMatches(const RingScene& scene, const TempDir& dir, const std:
     }
     writer.Commit();
   }
-  std::unique_ptr<Stage> stage = CreateStage("matches");
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = "matches";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "matches.h5";
-  context.artifacts["images"] = dir / "inputs.h5";
-  context.artifacts["features"] = dir / "inputs.h5";
-  if (with_prior) context.artifacts["poses/prior"] = dir / "inputs.h5";
-  const nlohmann::json summary = stage->Run(context);
-  if (pairs) *pairs = Hdf5Reader(context.output_path).ReadMatches();
+  std::map<std::string, std::string> artifacts = {{"images", dir / "inputs.h5"},
+                                                  {"features", dir / "inputs.h5"}};
+  if (with_prior) artifacts["poses/prior"] = dir / "inputs.h5";
+  const nlohmann::json summary =
+      RunStageInProcess("matches", options, dir.path().string(), artifacts);
+  if (pairs) *pairs = Hdf5Reader(dir / "matches.h5").ReadMatches();
   return summary;
 }
 
 TEST(MatchesStage, PriorPairsBeforeThePriorStageIsAClearError) {
   TempDir dir("matches_stage");
   const RingScene scene = MakeRingScene(6);
-  try {
-    RunMatches(scene, dir, "{pairs: prior}", /*with_prior=*/false);
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    const std::string message = e.what();
+  {
+    const std::string message =
+        InputErrorOf([&] { RunMatches(scene, dir, "{pairs: prior}", /*with_prior=*/false); });
     EXPECT_NE(message.find("pairs 'prior'"), std::string::npos) << message;
     EXPECT_NE(message.find("pose set 'prior'"), std::string::npos) << message;
     EXPECT_NE(message.find("put the prior stage before matches"), std::string::npos) << message;

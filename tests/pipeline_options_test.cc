@@ -290,8 +290,8 @@ TEST(PipelineOptionsTest, TwoRecipesAtOnceAreRefused) {
       << message;
   EXPECT_NE(message.find("conflicts with recipe 'staged'"), std::string::npos) << message;
   // The auto preset's recipe is basin_first: staged on top of it was refused before, and is.
-  message =
-      InputErrorOf([&] { refine->Configure(YAML::Load("{preset: auto, staged: true}"), "p.yaml"); });
+  message = InputErrorOf(
+      [&] { refine->Configure(YAML::Load("{preset: auto, staged: true}"), "p.yaml"); });
   EXPECT_NE(message.find("conflicts with recipe 'basin_first'"), std::string::npos) << message;
 }
 

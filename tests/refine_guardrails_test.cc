@@ -33,14 +33,22 @@ double MeanRotationErrorDeg(const std::vector<Rigid3>& estimate, const std::vect
   return ComputePoseErrors(ToPoseSet(estimate), ToPoseSet(truth), options).mean_rotation_deg;
 }
 
-SyntheticSceneOptions Scene() {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 200;
-  options.pixel_noise = 0.3;
-  options.max_pair_gap = 3;
-  options.seed = 9;
-  return options;
+SyntheticSceneOptions Scene() { return ArcScene(8, 200, 0.3, 0.0, 9); }
+
+// `summary`'s guardrails fired `check` alone and returned the prior.
+void ExpectOnlyFiredReturningPrior(const RefineSummary& summary, const std::string& check) {
+  EXPECT_TRUE(summary.guardrails.returned_prior);
+  ASSERT_EQ(summary.guardrails.fired.size(), 1u);
+  EXPECT_EQ(summary.guardrails.fired[0], check);
+}
+
+// Scene()'s solve with `options` from its truth jittered by `deg` and `m` per frame (seed): a
+// healthy solve, on which no guardrail may fire.
+RefineSummary SolveJitteredScene(const RefineOptions& options, double deg, double m, int seed) {
+  SyntheticScene scene = MakeSyntheticScene(Scene());
+  scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, deg, m, seed);
+  RefineOutput output;
+  return RefinePoses(scene.input, options, &output);
 }
 
 TEST(RefineGuardrailTest, TrustRegionMeasuresInThePriorFrame) {
@@ -72,10 +80,7 @@ TEST(RefineGuardrailTest, TrustRegionFiresOnMatchesThatPullAwayAndNotOnAHealthyS
   options.length_unit_m = 30.0;  // building scale: 3.5° / 0.66 m
   options.num_threads = 2;
 
-  SyntheticScene healthy = MakeSyntheticScene(Scene());
-  healthy.input.prior_world_from_cam = JitterPoses(healthy.ground_truth, 0.5, 0.05, 3);
-  RefineOutput output;
-  const RefineSummary quiet = RefinePoses(healthy.input, options, &output);
+  const RefineSummary quiet = SolveJitteredScene(options, 0.5, 0.05, 3);
   EXPECT_TRUE(quiet.guardrails.trust_region.enabled);
   EXPECT_FALSE(quiet.guardrails.trust_region.fired);
   EXPECT_FALSE(quiet.guardrails.returned_prior);
@@ -90,12 +95,11 @@ TEST(RefineGuardrailTest, TrustRegionFiresOnMatchesThatPullAwayAndNotOnAHealthyS
       Eigen::Quaterniond(Eigen::AngleAxisd(6.0 * M_PI / 180.0, Eigen::Vector3d::UnitY())) *
       wrong.rotation;
   ReprojectCamera(&corrupted, 3, wrong);
+  RefineOutput output;
   const RefineSummary fired = RefinePoses(corrupted.input, options, &output);
   EXPECT_TRUE(fired.guardrails.trust_region.fired);
   EXPECT_GT(fired.guardrails.trust_region.max_rotation_deg, 3.5);
-  EXPECT_TRUE(fired.guardrails.returned_prior);
-  ASSERT_EQ(fired.guardrails.fired.size(), 1u);
-  EXPECT_EQ(fired.guardrails.fired[0], "trust_region");
+  ExpectOnlyFiredReturningPrior(fired, "trust_region");
   for (size_t i = 0; i < output.world_from_cam.size(); ++i) {
     EXPECT_EQ(output.world_from_cam[i].translation, corrupted.ground_truth[i].translation);
   }
@@ -115,10 +119,7 @@ TEST(RefineGuardrailTest, WanderTestFiresOnAWarpedSolveAndNotOnAHealthySolve) {
   options.wander_expected_m = 0.05;
   options.num_threads = 2;
 
-  SyntheticScene healthy = MakeSyntheticScene(Scene());
-  healthy.input.prior_world_from_cam = JitterPoses(healthy.ground_truth, 0.0, 0.02, 4);
-  RefineOutput output;
-  const RefineSummary quiet = RefinePoses(healthy.input, options, &output);
+  const RefineSummary quiet = SolveJitteredScene(options, 0.0, 0.02, 4);
   EXPECT_TRUE(quiet.guardrails.wander.enabled);
   EXPECT_FALSE(quiet.guardrails.wander.fired);
   EXPECT_FALSE(quiet.guardrails.trust_region.enabled);
@@ -130,12 +131,11 @@ TEST(RefineGuardrailTest, WanderTestFiresOnAWarpedSolveAndNotOnAHealthySolve) {
   for (int i = 0; i < static_cast<int>(displaced.size()); ++i) {
     ReprojectCamera(&warped, i, displaced[i]);
   }
+  RefineOutput output;
   const RefineSummary fired = RefinePoses(warped.input, options, &output);
   EXPECT_TRUE(fired.guardrails.wander.fired);
   EXPECT_GT(fired.guardrails.wander.median_displacement, 0.1);
-  EXPECT_TRUE(fired.guardrails.returned_prior);
-  ASSERT_EQ(fired.guardrails.fired.size(), 1u);
-  EXPECT_EQ(fired.guardrails.fired[0], "wander");
+  ExpectOnlyFiredReturningPrior(fired, "wander");
   EXPECT_EQ(output.world_from_cam[0].translation, warped.ground_truth[0].translation);
 }
 
@@ -583,11 +583,7 @@ TEST(RefineGuardrailTest, InconsistentPairsFlagsWrongPairsAndReturnsTheSolution)
   ASSERT_EQ(num_pairs, 18);
   for (const PairMatchIndices& pair : scene.input.pairs) ASSERT_GT(pair.matches.rows(), 20);
 
-  RefineOptions options;
-  options.trust_region = false;
-  options.orientation_weight = 0.0;
-  options.max_matches_per_pair = 100;
-  options.num_threads = 2;
+  RefineOptions options = BasinConfiguration(100);
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   const InconsistentPairsVerdict& verdict = summary.guardrails.inconsistent_pairs;
@@ -635,12 +631,8 @@ TEST(RefineGuardrailTest, BasinFirstRemovesWrongPairsAndSolvesAgain) {
   SyntheticScene scene = MakeSyntheticScene(Scene());
   const std::set<std::pair<int, int>> corrupted = CorruptEveryThirdPair(&scene);
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 6.0, 0.1, 7);
-  RefineOptions options;
-  options.recipe = RefineRecipe::kBasinFirst;
-  options.trust_region = false;
+  RefineOptions options = BasinFirstConfiguration(3);
   options.max_matches_per_pair = 100;
-  options.max_pair_removal_rounds = 3;
-  options.num_threads = 2;
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   const PairRemovalSummary& removal = summary.pair_removal;
@@ -691,11 +683,7 @@ TEST(RefineGuardrailTest, BasinFirstNamesACameraLeftOnOneUncheckedPair) {
   ASSERT_EQ(last_pairs.size(), 2u);
   MatchToACopy(&scene, last_pairs[0], Eigen::Vector3d(0.0, -1.5, 0.0));
   MatchToACopy(&scene, last_pairs[1], Eigen::Vector3d(2.0, 0.0, 0.0));
-  RefineOptions options;
-  options.recipe = RefineRecipe::kBasinFirst;
-  options.trust_region = false;
-  options.max_pair_removal_rounds = 3;
-  options.num_threads = 2;
+  const RefineOptions options = BasinFirstConfiguration(3);
   RefineOutput output;
   const RefineSummary summary = RefinePoses(scene.input, options, &output);
   ASSERT_EQ(summary.pair_removal.removed.size(), 1u);

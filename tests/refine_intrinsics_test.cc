@@ -16,6 +16,7 @@
 #include "refine/refine.h"
 #include "refine/solve/camera_blocks.h"
 #include "testing/synthetic_scene.h"
+#include "tests/expect_pose.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {
@@ -24,13 +25,7 @@ namespace {
 // Keypoint noise and a few wrong matches, as from a front end; with `drift`, per-image cameras
 // 3 % apart in focal length and 8 px in principal point.
 SyntheticSceneOptions Scene(bool drift) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 300;
-  options.pixel_noise = 0.5;
-  options.outlier_fraction = 0.05;
-  options.max_pair_gap = 3;
-  options.seed = 17;
+  SyntheticSceneOptions options = ArcScene(8, 300, 0.5, 0.05, 17);
   if (drift) {
     options.focal_drift = 0.03;
     options.principal_point_drift_px = 8.0;
@@ -41,13 +36,7 @@ SyntheticSceneOptions Scene(bool drift) {
 // GNC without the object-scale trust region (these scenes are 16 m deep) and, as the basin
 // configuration of §4.8, without the orientation prior (λR = 0), which would hold the solve
 // towards the perturbed prior's rotations.
-RefineOptions Options() {
-  RefineOptions options;
-  options.trust_region = false;
-  options.orientation_weight = 0.0;
-  options.num_threads = 2;
-  return options;
-}
+RefineOptions Options() { return BasinConfiguration(0); }
 
 // The input with every image on one camera: the per-image cameras' median (what a refiner with
 // one shared set of intrinsics would be given).
@@ -190,11 +179,7 @@ TEST(RefineIntrinsicsTest, OneCameraIsUnchangedWhateverTheSharing) {
   EXPECT_FALSE(shared_summary.cameras.cameras_differ);
   ASSERT_EQ(shared.cameras.size(), 1u);
   EXPECT_EQ(shared.cameras, per_camera.cameras);
-  for (size_t i = 0; i < shared.world_from_cam.size(); ++i) {
-    EXPECT_EQ(shared.world_from_cam[i].rotation.coeffs(),
-              per_camera.world_from_cam[i].rotation.coeffs());
-    EXPECT_EQ(shared.world_from_cam[i].translation, per_camera.world_from_cam[i].translation);
-  }
+  ExpectSamePoses(shared.world_from_cam, per_camera.world_from_cam, "shared vs per camera");
   EXPECT_NEAR(shared.cameras[0].params[kFx] / 1400.0, 1.0, 0.005);
 
   scene.input.prior_world_from_cam = PerturbedPrior(scene, 2.0, 3);
@@ -205,12 +190,7 @@ TEST(RefineIntrinsicsTest, OneCameraIsUnchangedWhateverTheSharing) {
   for (size_t i = 1; i < split.camera_index.size(); i += 2) split.camera_index[i] = 1;
   const RefineSummary split_summary = RefinePoses(split, Options(), &two);
   EXPECT_EQ(split_summary.cameras.num_blocks, 2);
-  for (size_t i = 0; i < one.world_from_cam.size(); ++i) {
-    EXPECT_EQ(one.world_from_cam[i].rotation.coeffs(), two.world_from_cam[i].rotation.coeffs())
-        << "image " << i;
-    EXPECT_EQ(one.world_from_cam[i].translation, two.world_from_cam[i].translation)
-        << "image " << i;
-  }
+  ExpectSamePoses(two.world_from_cam, one.world_from_cam, "one block vs two");
 }
 
 // A shared set exists only to be refined; one set cannot describe images of different sizes.

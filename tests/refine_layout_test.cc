@@ -120,13 +120,18 @@ TEST(RefineLayoutTest, CapAppliesPerPairInTheLayout) {
   EXPECT_LT(capped.num_matches_used, full.num_matches_used);
 }
 
-// "auto" starts each image's ray times near the depth of what it sees (8–25 m here), from the
-// prior alone; "constant" at the constant.
-TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
+// Six cameras on the arc, 200 points, exact keypoints: the ray-time starts' scene.
+SyntheticSceneOptions SixCameras() {
   SyntheticSceneOptions options;
   options.num_cameras = 6;
   options.num_points = 200;
-  const SyntheticScene scene = MakeSyntheticScene(options);
+  return options;
+}
+
+// "auto" starts each image's ray times near the depth of what it sees (8–25 m here), from the
+// prior alone; "constant" at the constant.
+TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
+  const SyntheticScene scene = MakeSyntheticScene(SixCameras());
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
   const std::vector<double> truth = TrueRayTimes(scene, layout);
   for (const double prior_error_deg : {0.0, 4.0}) {
@@ -155,10 +160,7 @@ TEST(RefineLayoutTest, AutoRayTimesFollowTheSceneDepth) {
 // keypoints every flagged ray time starts at its own true depth, where the per-image start misses
 // most by metres; unflagged ones keep their values.
 TEST(RefineLayoutTest, ClosestApproachStartPutsEachFlaggedRayTimeAtItsTrueDepth) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 6;
-  options.num_points = 200;
-  const SyntheticScene scene = MakeSyntheticScene(options);
+  const SyntheticScene scene = MakeSyntheticScene(SixCameras());
   const ProblemLayout layout = BuildPerObservationLayout(scene.input, 0, 0);
   const std::vector<double> truth = TrueRayTimes(scene, layout);
   RayTimeInitSummary summary;
@@ -189,9 +191,7 @@ TEST(RefineLayoutTest, ClosestApproachStartPutsEachFlaggedRayTimeAtItsTrueDepth)
 // meet, every closest-approach depth is the true depth, and each image's start is the upper
 // median of its residuals' true source depths. One camera for all (camera 0's) misses them.
 TEST(RefineLayoutTest, AutoRayTimesUnprojectEachImageWithItsOwnCamera) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 6;
-  options.num_points = 200;
+  SyntheticSceneOptions options = SixCameras();
   options.focal_drift = 0.03;
   options.principal_point_drift_px = 8.0;
   const SyntheticScene scene = MakeSyntheticScene(options);

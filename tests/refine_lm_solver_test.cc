@@ -21,6 +21,7 @@
 #include "refine/solve/similarity_retraction.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
+#include "tests/expect_pose.h"
 #include "tests/numeric_jacobian.h"
 #include "tests/refine_test_util.h"
 
@@ -218,12 +219,7 @@ TEST(RayTimeLmSolverTest, PosePriorJacobianMatchesTheCeresTermAndNumericDifferen
 }
 
 SyntheticSceneOptions DistortedNoisyScene() {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 250;
-  options.pixel_noise = 0.5;
-  options.outlier_fraction = 0.05;
-  options.max_pair_gap = 3;
+  SyntheticSceneOptions options = ArcScene(8, 250, 0.5, 0.05, 1);
   options.distortion = true;
   return options;
 }
@@ -646,9 +642,7 @@ TEST(RayTimeLmSolverTest, DoubledStepsReachTheSameSolutionSooner) {
 TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
   SyntheticScene scene = MakeSyntheticScene(DistortedNoisyScene());
   scene.input.prior_world_from_cam = JitterPoses(scene.ground_truth, 4.0, 0.4, 3);
-  RefineOptions options;
-  options.trust_region = false;
-  options.orientation_weight = 0.0;
+  RefineOptions options = BasinConfiguration(0);
   options.num_threads = 1;
   RefineOutput first;
   const RefineSummary reference = RefinePoses(scene.input, options, &first);
@@ -659,13 +653,8 @@ TEST(RayTimeLmSolverTest, SameBitsOnAnyThreadCount) {
     const RefineSummary summary = RefinePoses(scene.input, options, &again);
     EXPECT_EQ(summary.final_cost, reference.final_cost) << threads << " threads";
     EXPECT_EQ(summary.total_iterations, reference.total_iterations) << threads << " threads";
-    for (size_t i = 0; i < first.world_from_cam.size(); ++i) {
-      EXPECT_EQ(first.world_from_cam[i].rotation.coeffs(),
-                again.world_from_cam[i].rotation.coeffs())
-          << threads << " threads, image " << i;
-      EXPECT_EQ(first.world_from_cam[i].translation, again.world_from_cam[i].translation)
-          << threads << " threads, image " << i;
-    }
+    ExpectSamePoses(again.world_from_cam, first.world_from_cam,
+                    std::to_string(threads) + " threads");
     ASSERT_EQ(first.solved_observations.ray_times.size(),
               again.solved_observations.ray_times.size());
     for (Eigen::Index o = 0; o < first.solved_observations.ray_times.size(); ++o) {

@@ -14,22 +14,14 @@
 #include "refine/refine.h"
 #include "refine/solve/gauge_polish.h"
 #include "testing/synthetic_scene.h"
+#include "tests/expect_pose.h"
 #include "tests/refine_test_util.h"
 
 namespace raytime {
 namespace {
 
 // Realistic but small: keypoint noise and a few wrong matches, as from a front end.
-SyntheticSceneOptions NoisyScene() {
-  SyntheticSceneOptions options;
-  options.num_cameras = 8;
-  options.num_points = 250;
-  options.pixel_noise = 0.5;
-  options.outlier_fraction = 0.05;
-  options.max_pair_gap = 3;
-  options.seed = 5;
-  return options;
-}
+SyntheticSceneOptions NoisyScene() { return ArcScene(8, 250, 0.5, 0.05, 5); }
 
 // For the tests that compare two solves with each other: smaller, so the uncached (automatic
 // differentiation) and single-threaded runs stay quick in the sanitizer build.
@@ -41,14 +33,7 @@ SyntheticSceneOptions SmallNoisyScene() {
 }
 
 // The `basin` configuration of the paper's ladders (§4.8): trust region off, λR = 0, cap 100.
-RefineOptions BasinOptions() {
-  RefineOptions options;
-  options.trust_region = false;
-  options.orientation_weight = 0.0;
-  options.max_matches_per_pair = 100;
-  options.num_threads = 2;
-  return options;
-}
+RefineOptions BasinOptions() { return BasinConfiguration(100); }
 
 // SPEC §3 "Ray point": from an exact prior, "auto" does not drift; the paper's constant 1 m start
 // is measured (it may drift on scenes this deep), with GNC and with a plain solve, where every
@@ -287,13 +272,8 @@ TEST(RefineSolveTest, DeterministicWhateverTheThreadCount) {
     options.num_threads = threads;
     RefineOutput again;
     RefinePoses(scene.input, options, &again);
-    for (size_t i = 0; i < first.world_from_cam.size(); ++i) {
-      EXPECT_EQ(first.world_from_cam[i].rotation.coeffs(),
-                again.world_from_cam[i].rotation.coeffs())
-          << threads << " threads, image " << i;
-      EXPECT_EQ(first.world_from_cam[i].translation, again.world_from_cam[i].translation)
-          << threads << " threads, image " << i;
-    }
+    ExpectSamePoses(again.world_from_cam, first.world_from_cam,
+                    std::to_string(threads) + " threads");
   }
 }
 
@@ -360,11 +340,8 @@ TEST(RefineSolveTest, StagedRecipeRunsTwoPassesAndRecovers) {
 
 // The basin-first solve without a trust region, its cap lowered to the small scene's pairs.
 RefineOptions BasinFirstOptions() {
-  RefineOptions options;
-  options.recipe = RefineRecipe::kBasinFirst;
-  options.trust_region = false;
+  RefineOptions options = BasinFirstConfiguration(0);
   options.basin_max_matches_per_pair = 60;
-  options.num_threads = 2;
   return options;
 }
 

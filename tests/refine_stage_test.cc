@@ -21,6 +21,7 @@
 #include "refine_test_util.h"
 #include "temp_dir.h"
 #include "testing/synthetic_scene.h"
+#include "tests/run_stage.h"
 
 namespace raytime {
 namespace {
@@ -80,10 +81,7 @@ SceneInputs MakeTwoScenes(bool with_lonely_image, bool exact_prior_for_b = false
 // One synthetic scene whose 6 images each have their own camera (focal 3 %, principal point 8 px
 // apart), the prior 1° off; `cameras` receives the true cameras (the inputs' may be changed).
 SceneInputs MakePerImageScene(std::vector<CameraIntrinsics>* cameras) {
-  SyntheticSceneOptions options;
-  options.num_cameras = 6;
-  options.num_points = 300;
-  options.max_pair_gap = 3;
+  SyntheticSceneOptions options = ArcScene(6, 300, 0.0, 0.0, 1);
   options.focal_drift = 0.03;
   options.principal_point_drift_px = 8.0;
   SyntheticScene scene = MakeSyntheticScene(options);
@@ -527,16 +525,11 @@ TEST(RefineStageTest, TrainerExportsShareImagesAcrossPoseSetsAndLeaveOutUnrefine
   PoseSet refined;
   RunRefine(scene, dir, &refined, kTinyTrustRegion, Provenance{"test", {}, "", ""}, nullptr,
             kStatedAccuracy);
-  std::unique_ptr<Stage> stage = CreateStage("export");
-  stage->Configure(YAML::Load("{poses: [prior, refined], formats: [3dgs]}"), "test");
-  StageContext context;
-  context.stage_id = "export";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "export.h5";
-  context.artifacts["images"] = dir / "inputs.h5";
-  context.artifacts["poses/prior"] = dir / "inputs.h5";
-  context.artifacts["poses/refined"] = dir / "refine.h5";
-  const nlohmann::json summary = stage->Run(context);
+  const nlohmann::json summary =
+      RunStageInProcess("export", "{poses: [prior, refined], formats: [3dgs]}", dir.path().string(),
+                        {{"images", dir / "inputs.h5"},
+                         {"poses/prior", dir / "inputs.h5"},
+                         {"poses/refined", dir / "refine.h5"}});
   const nlohmann::json* unrefined = FindWarning(summary, "unrefined_not_exported");
   const nlohmann::json* left_out = FindWarning(summary, "not_in_every_pose_set");
   ASSERT_NE(unrefined, nullptr) << summary.dump();

@@ -14,6 +14,7 @@
 #include "pipelines/stage.h"
 #include "temp_dir.h"
 #include "testing/synthetic_scene.h"
+#include "tests/run_stage.h"
 
 namespace raytime {
 
@@ -79,17 +80,13 @@ inline nlohmann::json RunRefine(
     writer.WriteMatches(scene.matches, Provenance{"test", {}, "", ""});
     writer.Commit();
   }
-  std::unique_ptr<Stage> stage = CreateStage("refine");
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = "refine";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "refine.h5";
+  std::map<std::string, std::string> artifacts;
   for (const char* artifact : {"images", "features", "matches", "poses/prior"}) {
-    context.artifacts[artifact] = dir / "inputs.h5";
+    artifacts[artifact] = dir / "inputs.h5";
   }
-  const nlohmann::json summary = stage->Run(context);
-  *refined = Hdf5Reader(context.output_path).ReadPoseSet("refined");
+  const nlohmann::json summary =
+      RunStageInProcess("refine", options, dir.path().string(), artifacts);
+  *refined = Hdf5Reader(dir / "refine.h5").ReadPoseSet("refined");
   return summary;
 }
 
@@ -104,16 +101,10 @@ inline const nlohmann::json* FindWarning(const nlohmann::json& summary, const st
 inline nlohmann::json RunExport(
     const TempDir& dir,
     const std::string& options = "{poses: [refined], formats: [colmap_text, transforms_json]}") {
-  std::unique_ptr<Stage> stage = CreateStage("export");
-  stage->Configure(YAML::Load(options), "test");
-  StageContext context;
-  context.stage_id = "export";
-  context.workdir = dir.path().string();
-  context.output_path = dir / "export.h5";
   const bool refined_images = Hdf5Reader(dir / "refine.h5").HasImages();
-  context.artifacts["images"] = refined_images ? dir / "refine.h5" : dir / "inputs.h5";
-  context.artifacts["poses/refined"] = dir / "refine.h5";
-  return stage->Run(context);
+  return RunStageInProcess("export", options, dir.path().string(),
+                           {{"images", refined_images ? dir / "refine.h5" : dir / "inputs.h5"},
+                            {"poses/refined", dir / "refine.h5"}});
 }
 
 inline nlohmann::json ReadTestJson(const std::string& path) {

@@ -15,6 +15,7 @@
 #include "core/camera.h"
 #include "evaluate/perturbation.h"
 #include "evaluate/pose_errors.h"
+#include "refine/refine_options.h"
 #include "refine/solve/problem_layout.h"
 #include "testing/random_draws.h"
 #include "testing/synthetic_scene.h"
@@ -115,6 +116,29 @@ inline void MatchToACopy(SyntheticScene* scene, size_t p, const Eigen::Vector3d&
     pair.matches(static_cast<Eigen::Index>(m), 0) = rows[m].first;
     pair.matches(static_cast<Eigen::Index>(m), 1) = rows[m].second;
   }
+}
+
+// The basin configuration of the paper's ladders (§4.8) on two threads: no trust region (a
+// perturbation exceeds its envelope by construction), no orientation prior (λR = 0, which would
+// hold the solve towards the perturbed prior's rotations), at most `cap` matches per pair (0: all).
+inline RefineOptions BasinConfiguration(int cap) {
+  RefineOptions options;
+  options.trust_region = false;
+  options.orientation_weight = 0.0;
+  options.max_matches_per_pair = cap;
+  options.num_threads = 2;
+  return options;
+}
+
+// The basin-first recipe (the `auto` preset's) without a trust region on two threads, with up to
+// `removal_rounds` rounds of wrong-pair removal.
+inline RefineOptions BasinFirstConfiguration(int removal_rounds) {
+  RefineOptions options;
+  options.recipe = RefineRecipe::kBasinFirst;
+  options.trust_region = false;
+  options.max_pair_removal_rounds = removal_rounds;
+  options.num_threads = 2;
+  return options;
 }
 
 }  // namespace raytime

@@ -2,7 +2,8 @@
 // each format written by the test-only writers (tests/capture_fixtures.h) and packed into the
 // targets' input form ("@@FILE <path>@@" before each file's bytes).
 //
-//   ninja -C build-dev capture_fuzz_seeds && build-dev/tests/fuzz/capture_fuzz_seeds tests/fuzz/corpus
+//   ninja -C build-dev capture_fuzz_seeds && build-dev/tests/fuzz/capture_fuzz_seeds
+//   tests/fuzz/corpus
 //
 // The frames are the first three of fixtures::SampleCapture() (the sample scene's ground truth,
 // perturbed; per-frame intrinsics and times), with each image replaced by a JPEG header of the
@@ -99,8 +100,9 @@ int main(int argc, char** argv) {
   WriteBytes(work / "images/header.jpg", JpegHeader(capture.width, capture.height));
   for (fixtures::Frame& frame : capture.frames) frame.image = (work / "images/header.jpg").string();
 
-  const Rigid3 arkit_from_world(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ())),
-                                Eigen::Vector3d(0.5, -0.25, 1.0));
+  const Rigid3 arkit_from_world(
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ())),
+      Eigen::Vector3d(0.5, -0.25, 1.0));
   const Rigid3 rig_from_cam(Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitY())),
                             Eigen::Vector3d(0.01, 0.02, 0.0));
   const auto seed = [&](const std::string& target, const std::string& name,
@@ -110,9 +112,8 @@ int main(int argc, char** argv) {
     WriteBytes(corpus / target / name, Pack(root));
   };
 
-  seed("capture_record3d", "fixture", [&](const fs::path& root) {
-    fixtures::WriteRecord3d(capture, root.string());
-  });
+  seed("capture_record3d", "fixture",
+       [&](const fs::path& root) { fixtures::WriteRecord3d(capture, root.string()); });
   // Metadata for images twice the size (intrinsics_rescaled); frame 1 a PNG, frame 2 a JPEG with
   // an EXIF orientation (3: turned half round, same size).
   seed("capture_record3d", "rescaled-png-exif", [&](const fs::path& root) {
@@ -121,9 +122,8 @@ int main(int argc, char** argv) {
     WriteBytes(root / "rgb/1.png", PngHeader(capture.width, capture.height));
     WriteBytes(root / "rgb/2.jpg", JpegHeader(capture.width, capture.height, 3));
   });
-  seed("capture_polycam", "fixture", [&](const fs::path& root) {
-    fixtures::WritePolycam(capture, root.string());
-  });
+  seed("capture_polycam", "fixture",
+       [&](const fs::path& root) { fixtures::WritePolycam(capture, root.string()); });
   // Only the raw ARKit cameras (no corrected_*), one without its image.
   seed("capture_polycam", "raw-only", [&](const fs::path& root) {
     fixtures::WritePolycam(capture, root.string());
@@ -131,12 +131,10 @@ int main(int argc, char** argv) {
     fs::remove_all(root / "keyframes/corrected_cameras");
     fs::remove(fs::directory_iterator(root / "keyframes/images")->path());
   });
-  seed("capture_scanner3d", "fixture", [&](const fs::path& root) {
-    fixtures::WriteScanner3d(capture, root.string());
-  });
-  seed("capture_nerfcapture", "fixture", [&](const fs::path& root) {
-    fixtures::WriteNerfCapture(capture, root.string());
-  });
+  seed("capture_scanner3d", "fixture",
+       [&](const fs::path& root) { fixtures::WriteScanner3d(capture, root.string()); });
+  seed("capture_nerfcapture", "fixture",
+       [&](const fs::path& root) { fixtures::WriteNerfCapture(capture, root.string()); });
   // The app's own layout: images/<n>.png named "images/<n>" in transforms.json.
   seed("capture_nerfcapture", "png", [&](const fs::path& root) {
     fixtures::WriteNerfCapture(capture, root.string());
@@ -146,9 +144,8 @@ int main(int argc, char** argv) {
                  PngHeader(capture.width, capture.height));
     }
   });
-  seed("capture_mobilebrick", "fixture", [&](const fs::path& root) {
-    fixtures::WriteMobileBrick(capture, root.string());
-  });
+  seed("capture_mobilebrick", "fixture",
+       [&](const fs::path& root) { fixtures::WriteMobileBrick(capture, root.string()); });
   seed("capture_mobilebrick", "arkit-npz", [&](const fs::path& root) {
     fixtures::WriteMobileBrick(capture, root.string(), &arkit_from_world);
     WriteBytes(corpus / "npz" / "cameras_arkit.npz", ReadBytes(root / "cameras_arkit.npz"));

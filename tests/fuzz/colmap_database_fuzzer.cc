@@ -11,11 +11,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace raytime;
   // A database whose header asks for WAL mode makes SQLite look for -wal and -shm siblings.
   fuzz::ClearScratch();
-  const std::string path = fuzz::ScratchPath("database.db");
-  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
-  try {
-    ReadColmapDatabase(path);
-  } catch (const InputError&) {
-  }
-  return 0;
+  return fuzz::ReadAsFile(data, size, "database.db",
+                          [](const std::string& path) { ReadColmapDatabase(path); });
 }

@@ -16,6 +16,8 @@
 #include <system_error>
 #include <vector>
 
+#include "core/error.h"
+
 namespace raytime::fuzz {
 
 // A directory owned by this process, removed at exit. Under $TMPDIR when set (scripts/fuzz.sh
@@ -129,5 +131,19 @@ class ByteReader {
   size_t size_;
   size_t pos_ = 0;
 };
+
+// The target of a parser that takes a path: writes the input as `name` in ScratchDir() and calls
+// `read(path)`. An InputError is the parser's answer to bad bytes; anything else escapes for the
+// fuzzer to report.
+template <typename Read>
+int ReadAsFile(const uint8_t* data, size_t size, const std::string& name, Read&& read) {
+  const std::string path = ScratchPath(name);
+  WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
+  try {
+    read(path);
+  } catch (const InputError&) {
+  }
+  return 0;
+}
 
 }  // namespace raytime::fuzz

@@ -9,11 +9,6 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace raytime;
-  const std::string path = fuzz::ScratchPath("0000.jpg.camera");
-  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
-  try {
-    ReadStrechaCamera(path);
-  } catch (const InputError&) {
-  }
-  return 0;
+  return fuzz::ReadAsFile(data, size, "0000.jpg.camera",
+                          [](const std::string& path) { ReadStrechaCamera(path); });
 }

@@ -10,14 +10,10 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace raytime;
-  const std::string path = fuzz::ScratchPath("sweep.json");
-  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
-  try {
+  return fuzz::ReadAsFile(data, size, "sweep.json", [](const std::string& path) {
     const CampaignReport report = AggregateCampaign(ReadSweepRows(path));
     CampaignReportMarkdown(report, path);
     CampaignCellsCsv(report);
     CampaignSplatCsv(report);
-  } catch (const InputError&) {
-  }
-  return 0;
+  });
 }

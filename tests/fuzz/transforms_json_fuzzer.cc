@@ -9,13 +9,9 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace raytime;
-  const std::string path = fuzz::ScratchPath("transforms.json");
-  fuzz::WriteFile(path, std::string_view(reinterpret_cast<const char*>(data), size));
-  ImageSet images;
-  PoseSet poses;
-  try {
+  return fuzz::ReadAsFile(data, size, "transforms.json", [](const std::string& path) {
+    ImageSet images;
+    PoseSet poses;
     ReadTransformsJson(path, &images, &poses);
-  } catch (const InputError&) {
-  }
-  return 0;
+  });
 }
