@@ -136,6 +136,20 @@ struct RunCommand {
     for (const auto& assignment : overrides) ApplyOverride(&spec, assignment);
     return spec;
   }
+  // The pipeline read again by the supervising parent, which needs it only to finish a crashed
+  // run's record: what the file deserves (a deprecated key's warning, say) the run has said.
+  PipelineSpec SpecWithoutWarnings() const {
+    const spdlog::level::level_enum level = spdlog::get_level();
+    spdlog::set_level(spdlog::level::err);
+    try {
+      PipelineSpec spec = Spec();
+      spdlog::set_level(level);
+      return spec;
+    } catch (...) {
+      spdlog::set_level(level);
+      throw;
+    }
+  }
   std::string EffectiveWorkdir(const PipelineSpec& spec) const {
     return workdir.empty() ? spec.workdir : workdir;
   }
@@ -159,7 +173,7 @@ struct RunCommand {
     if (cause.empty()) cause = "crash";
     if (command->parsed()) {
       try {
-        const PipelineSpec spec = Spec();
+        const PipelineSpec spec = SpecWithoutWarnings();
         const std::string effective = EffectiveWorkdir(spec);
         if (spec.sweep.empty() && RecordCrashedRun(spec, effective, end.child, run_start, message,
                                                    cause, end.status.signal)) {

@@ -159,6 +159,28 @@ TEST_F(PipelineTest, DemoRunsThenSkipsEveryStage) {
                                       "skipped"}));
 }
 
+// A replaced key still runs, as the key that replaced it, and the run says so once: the supervising
+// parent reads the pipeline again after the run and must not repeat the run's warnings.
+TEST_F(PipelineTest, ADeprecatedKeyRunsAsItsReplacementWithOneWarning) {
+  const std::string run_dir = (workdir_ / "deprecated").string();
+  CommandResult result = RunRaytime("run configs/demo.yaml --workdir " + run_dir +
+                                    " --set refine.preset=basin --set refine.basin_first=true");
+  ASSERT_EQ(result.exit_code, 0) << result.output;
+  const std::string warning = "'basin_first: true' is deprecated; write 'recipe: basin_first'";
+  const size_t first = result.output.find(warning);
+  ASSERT_NE(first, std::string::npos) << result.output;
+  EXPECT_EQ(result.output.find(warning, first + 1), std::string::npos) << result.output;
+  const json summary = ReadJson(fs::path(run_dir) / "summary.json");
+  bool found = false;
+  for (const json& stage : summary["stages"]) {
+    if (stage["id"] != "refine") continue;
+    found = true;
+    EXPECT_EQ(stage["options"]["recipe"], "basin_first") << stage.dump();
+    EXPECT_FALSE(stage["options"].contains("basin_first")) << stage.dump();
+  }
+  EXPECT_TRUE(found) << summary.dump();
+}
+
 TEST_F(PipelineTest, RunsOnASharedStrechaScene) {
   const fs::path scene = fs::path(RAYTIME_SHARED_DATA_DIR) / "strecha" / "entry-P10";
   REQUIRE_SHARED_DATA(scene);

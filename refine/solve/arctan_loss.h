@@ -15,9 +15,10 @@ struct ScaledArctanLoss {
 
 // Σ atan(s_k / a) over s[0..n) (s_k ≥ 0, a > 0): the arctan loss's sum without its factor w·a
 // (ScaledArctanLoss). Where the CPU has AVX2, four at a time with glibc's vector atan (libmvec,
-// within a few ulp of atan): the scalar atan2 took 16 ns a call, 13 % of castle-P19 8°'s whole
-// refine (perf), the vector one 1.6 ns. Deterministic on a machine, whatever the thread count;
-// a CPU without AVX2 takes the scalar atan and may differ in the last bits.
+// within a few ulp of atan): the scalar atan2 was a sizeable share of a whole refine, the vector
+// one a tenth of its cost (measured: docs/scaling.md, "Measurements behind the LM's choices").
+// Deterministic on a machine, whatever the thread count; a CPU without AVX2 takes the scalar atan
+// and may differ in the last bits.
 double SumOfArctans(const double* s, int n, double scale);
 
 }  // namespace raytime

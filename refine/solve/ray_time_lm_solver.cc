@@ -185,17 +185,18 @@ RayTimeLmBackend::StepOutcome RayTimeLmBackend::TryStep(LmStage* stage) {
   }
   if (!accepted) return StepOutcome::kRejected;
   // The step fell by much more than the model said: the arctan's IRLS weights overstate the
-  // curvature along it (matches in the loss's bend being let go, the anneal's slow creep:
-  // castle-P19 8°, 20 steps in one direction with 2x the predicted decrease each).
+  // curvature along it (matches in the loss's bend being let go, the anneal's slow creep of many
+  // steps in one direction, each falling by twice the prediction; docs/scaling.md).
   if (relative_decrease > kStepDoublingMinRelativeDecrease) DoubleStep(similarity, stage);
   stage->region.Accept(relative_decrease);
   return StepOutcome::kAccepted;
 }
 
 // The parameter tolerance looks at the poses only: the points of far matches run out along their
-// rays (ray times of 1e7 where the scene is 40 deep, on fountain-P11), and with them in |x| the
-// test stopped the anneal after 4 of its ~30 steps. A ray time's step follows from the cameras'
-// (it is eliminated exactly), so still cameras mean a still solution.
+// rays (ray times far beyond the scene's depth), and with them in |x| the test stopped the anneal
+// after a few of its steps (measured: docs/scaling.md, "Measurements behind the LM's choices"). A
+// ray time's step follows from the cameras' (it is eliminated exactly), so still cameras mean a
+// still solution.
 bool RayTimeLmBackend::ParameterToleranceReached() const {
   double step_norm2 = 0.0;
   double x_norm2 = 0.0;

@@ -35,8 +35,8 @@ Eigen::Matrix<double, 7, 1> SimilarityPart(const std::vector<Rigid3>& poses,
 // directions no match sees it is exact. Why: the match term is invariant under a global
 // similarity (the ray times scaled with it), so along it only the weak prior terms curve the
 // cost, and a linear step along it bends the shape by its second order, which the matches pull
-// back: the solve crept along the similarity (Herz-Jesus-P8 8°: the anneal took 40 steps, each
-// 99.8 % similarity, at a tenth of the model's length).
+// back: the solve crept along the similarity in many short steps, nearly all similarity
+// (measured: docs/scaling.md, "Measurements behind the LM's choices").
 void RetractPoses(const std::vector<int>& variable, const Eigen::VectorXd& step,
                   const Eigen::Matrix<double, 7, 1>& similarity, std::vector<Rigid3>* poses);
 
@@ -44,10 +44,9 @@ void RetractPoses(const std::vector<int>& variable, const Eigen::VectorXd& step,
 // inverse depth (1/t ← 1/t - δ/t², the same first-order move), at most kMaxRayTimeGrowth times
 // further per step and never below kRayTimeLowerBound. Why: a point's projection is nearly linear
 // in its inverse depth and far from linear in its depth once the point is far, so t + δ
-// overshoots far points (castle-P19 at 8°: the whole refine rejected 38 steps, 17 of them in the
-// all-match finish, where a far point's step of millions dominated; with this retraction 3 and 0,
-// and the finish takes 36 iterations instead of 53). A step toward the camera shrinks t by a
-// factor and cannot cross it.
+// overshoots far points, whose steps of millions then dominate and get steps rejected
+// (measured: docs/scaling.md, "Measurements behind the LM's choices"). A step toward the camera
+// shrinks t by a factor and cannot cross it.
 double RetractRayTime(double ray_time, double step);
 inline constexpr double kMaxRayTimeGrowth = 10.0;
 
