@@ -32,34 +32,76 @@ class FrameContext {
     }
     ThrowInput(path_, 0, frame + ": " + message);
   }
-  // Per-frame values override the shared ones at the top level.
+  // A frame's own value (transform_matrix, file_path), else the top level's.
   const json* Find(const char* key) const {
     if (frame_.contains(key)) return &frame_[key];
     if (top_.contains(key)) return &top_[key];
     return nullptr;
   }
+  // An intrinsic as nerfstudio's dataparser reads it: the top level's value when it has one
+  // (then every frame shares it and a frame's own is ignored), else the frame's. Distortion is one
+  // group: when the top level names any of it (k1, k2, k3, k4, p1, p2 or distortion_params) all of
+  // it comes from there, missing terms 0.
+  const json* FindIntrinsic(const char* key) const {
+    const bool distortion = IsDistortionKey(key);
+    const json& source = (distortion ? NamesDistortion(top_) : top_.contains(key)) ? top_ : frame_;
+    if (distortion && source.contains("distortion_params")) return DistortionTerm(source, key);
+    return source.contains(key) ? &source[key] : nullptr;
+  }
   double Number(const char* key, double fallback) const {
-    const json* value = Find(key);
-    if (!value) return fallback;
-    if (!value->is_number()) Fail(std::string(key) + " must be a number, got " + value->dump());
-    const double number = value->get<double>();
-    if (!std::isfinite(number)) Fail(std::string(key) + " must be finite");
-    return number;
+    return NumberOf(key, FindIntrinsic(key), fallback);
   }
   double RequiredNumber(const char* key) const {
-    if (!Find(key)) Fail(std::string("missing ") + key + " (neither in the frame nor shared)");
+    if (!FindIntrinsic(key)) {
+      Fail(std::string("missing ") + key + " (neither in the frame nor shared)");
+    }
     return Number(key, 0.0);
   }
   int Size(const char* key) const {
     const double value = RequiredNumber(key);
     if (value < 1 || value != std::floor(value) || value > 1e9) {
       Fail(std::string(key) + " must be a positive whole number of pixels, got " +
-           Find(key)->dump());
+           FindIntrinsic(key)->dump());
     }
     return static_cast<int>(value);
   }
 
  private:
+  // nerfstudio's distortion_params order (camera_utils.get_distortion_params).
+  static constexpr const char* kDistortionOrder[6] = {"k1", "k2", "k3", "k4", "p1", "p2"};
+
+  static bool IsDistortionKey(const char* key) {
+    for (const char* name : kDistortionOrder) {
+      if (std::string(key) == name) return true;
+    }
+    return false;
+  }
+  static bool NamesDistortion(const json& object) {
+    if (object.contains("distortion_params")) return true;
+    for (const char* name : kDistortionOrder) {
+      if (object.contains(name)) return true;
+    }
+    return false;
+  }
+  // The term `key` of `source`'s distortion_params: [k1, k2, k3, k4, p1, p2].
+  const json* DistortionTerm(const json& source, const char* key) const {
+    const json& params = source["distortion_params"];
+    if (!params.is_array() || params.size() != 6) {
+      Fail("distortion_params must be [k1, k2, k3, k4, p1, p2], got " + params.dump());
+    }
+    for (size_t i = 0; i < 6; ++i) {
+      if (std::string(key) == kDistortionOrder[i]) return &params[i];
+    }
+    return nullptr;
+  }
+  double NumberOf(const char* key, const json* value, double fallback) const {
+    if (!value) return fallback;
+    if (!value->is_number()) Fail(std::string(key) + " must be a number, got " + value->dump());
+    const double number = value->get<double>();
+    if (!std::isfinite(number)) Fail(std::string(key) + " must be finite");
+    return number;
+  }
+
   const std::string& path_;
   const json& top_;
   const json& frame_;

@@ -462,6 +462,51 @@ TEST(FormatsBadInput, TransformsJson3x3Matrix) {
   EXPECT_NE(no_focal.find("fl_x"), std::string::npos) << no_focal;
 }
 
+// Intrinsics as nerfstudio's dataparser reads them (nerfstudio_dataparser.py): a top-level value is
+// every frame's and a frame's own is ignored; distortion is one group (any top-level term, or
+// distortion_params [k1, k2, k3, k4, p1, p2], makes all of it the top level's); a frame's value
+// counts only where the top level has none.
+TEST(Formats, TransformsJsonIntrinsicsFollowNerfstudiosPrecedence) {
+  TempDir tmp("formats");
+  const std::string path = tmp / "transforms.json";
+  WriteFile(path, R"({"fl_x": 500, "w": 640, "h": 480,
+    "distortion_params": [0.1, 0.01, 0, 0, 0.001, 0.002],
+    "frames": [
+      {"file_path": "a.jpg", "fl_x": 900, "fl_y": 510, "cx": 321, "cy": 241, "k1": 0.5,
+       "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]},
+      {"file_path": "b.jpg", "fl_y": 520, "cx": 322, "cy": 242,
+       "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,1],[0,0,0,1]]}]})");
+  ImageSet images;
+  PoseSet poses;
+  ReadTransformsJson(path, &images, &poses);
+  ASSERT_EQ(images.images.size(), 2u);
+  for (int i = 0; i < 2; ++i) {
+    const CameraIntrinsics& camera = images.cameras[images.images[i].camera_index];
+    SCOPED_TRACE(i);
+    EXPECT_EQ(camera.params[kFx], 500.0);  // the top level's, not frame 0's 900
+    EXPECT_EQ(camera.params[kFy], 510.0 + 10 * i);
+    EXPECT_EQ(camera.params[kCx], 320.5 + i);  // nerfstudio's 321 + i, less half a pixel
+    EXPECT_EQ(camera.params[kK1], 0.1);        // distortion_params, not frame 0's k1
+    EXPECT_EQ(camera.params[kK2], 0.01);
+    EXPECT_EQ(camera.params[kP1], 0.001);
+    EXPECT_EQ(camera.params[kP2], 0.002);
+  }
+
+  WriteFile(path, R"({"fl_x": 500, "fl_y": 500, "w": 640, "h": 480,
+    "distortion_params": [0.1, 0.01, 0.2, 0, 0, 0],
+    "frames": [{"file_path": "a.jpg",
+      "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})");
+  const std::string k3 = InputErrorOf([&] { ReadTransformsJson(path, nullptr, nullptr); });
+  EXPECT_NE(k3.find("k3 is not supported"), std::string::npos) << k3;
+  WriteFile(path, R"({"fl_x": 500, "fl_y": 500, "w": 640, "h": 480, "distortion_params": [0.1],
+    "frames": [{"file_path": "a.jpg",
+      "transform_matrix": [[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]}]})");
+  const std::string short_list = InputErrorOf([&] { ReadTransformsJson(path, nullptr, nullptr); });
+  EXPECT_NE(short_list.find("distortion_params must be [k1, k2, k3, k4, p1, p2]"),
+            std::string::npos)
+      << short_list;
+}
+
 TEST(FormatsBadInput, ColmapMalformedTextLine) {
   const DatasetScene scene = MakeDatasetScene(3, 1, 6);
   TempDir tmp("formats");
