@@ -1,5 +1,7 @@
 // nerfstudio / instant-ngp `transforms.json`: per-frame camera-to-world 4x4 matrices in OpenGL
-// camera axes (x right, y up, z backwards), intrinsics shared at the top level or per frame.
+// camera axes (x right, y up, z backwards), intrinsics shared at the top level or per frame, read
+// as nerfstudio's dataparser reads them: a top-level value is every frame's (a frame's own is
+// ignored), distortion (k1..p2 or distortion_params [k1, k2, k3, k4, p1, p2]) one group.
 //
 // Conversions: R_opencv = R_opengl * diag(1, -1, -1). nerfstudio's cx, cy follow COLMAP's pixel
 // convention (pixel centres at +0.5), so 0.5 is subtracted on reading and added on writing.
