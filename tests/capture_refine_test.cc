@@ -30,6 +30,7 @@
 #include "formats/colmap_model.h"
 #include "pipelines/stage.h"
 #include "tests/capture_fixtures.h"
+#include "tests/run_stage.h"
 #include "tests/temp_dir.h"
 
 namespace fs = std::filesystem;
@@ -38,20 +39,6 @@ namespace raytime {
 namespace {
 
 const std::string kSample = std::string(RAYTIME_SOURCE_DIR) + "/data/sample/fountain-P11";
-
-// Runs one stage in-process in `workdir`, writing `output` (a file name in workdir).
-nlohmann::json RunStage(const std::string& type, const std::string& options,
-                        const std::string& workdir, const std::string& output,
-                        const std::map<std::string, std::string>& artifacts) {
-  std::unique_ptr<Stage> stage = CreateStage(type);
-  stage->Configure(YAML::Load(options), "capture_refine_test");
-  StageContext context;
-  context.stage_id = type;
-  context.workdir = workdir;
-  context.output_path = (fs::path(workdir) / output).string();
-  context.artifacts = artifacts;
-  return stage->Run(context);
-}
 
 // The refine arm of the test: the basin preset (GNC 1e4 -> 1e3 -> 1e2, no trust region: the
 // fixtures' 5 cm exceeds the object-scale trust region) with a lower match cap, so fourteen solves
@@ -68,15 +55,16 @@ struct SampleFrontEnd {
 };
 
 SampleFrontEnd ComputeSampleFrontEnd(const std::string& workdir) {
-  RunStage("dataset", "{format: strecha, root: " + kSample + "}", workdir, "dataset.h5", {});
+  RunStageInProcess("dataset", "{format: strecha, root: " + kSample + "}", workdir, {},
+                    "dataset.h5");
   const std::string dataset = (fs::path(workdir) / "dataset.h5").string();
   // A small front end (2048 keypoints per image, no upsampling): the test is about the prior's
   // route, not accuracy.
-  RunStage("features", "{max_features: 2048, first_octave: 0}", workdir, "features.h5",
-           {{kArtifactImages, dataset}});
+  RunStageInProcess("features", "{max_features: 2048, first_octave: 0}", workdir,
+                    {{kArtifactImages, dataset}}, "features.h5");
   const std::string features = (fs::path(workdir) / "features.h5").string();
-  RunStage("matches", "{pairs: exhaustive}", workdir, "matches.h5",
-           {{kArtifactImages, dataset}, {"features", features}});
+  RunStageInProcess("matches", "{pairs: exhaustive}", workdir,
+                    {{kArtifactImages, dataset}, {"features", features}}, "matches.h5");
   SampleFrontEnd out;
   const Hdf5Reader reader(dataset);
   out.images = reader.ReadImages();
@@ -287,8 +275,8 @@ TEST(CaptureRefine, EveryCaptureFormatRefinesAsTheSamePriorGivenAsAColmapModel) 
     format.write(capture, root);
 
     // dataset: the fixture's images, per-frame intrinsics and capture poses.
-    const nlohmann::json dataset_summary = RunStage(
-        "dataset", "{format: " + format.format + ", root: " + root + "}", work, "dataset.h5", {});
+    const nlohmann::json dataset_summary = RunStageInProcess(
+        "dataset", "{format: " + format.format + ", root: " + root + "}", work, {}, "dataset.h5");
     ASSERT_EQ(dataset_summary["num_images"], 11) << dataset_summary.dump();
     ASSERT_EQ(dataset_summary["has_capture_poses"], true);
     const std::string dataset = work + "/dataset.h5";
@@ -316,9 +304,10 @@ TEST(CaptureRefine, EveryCaptureFormatRefinesAsTheSamePriorGivenAsAColmapModel) 
 
     const std::map<std::string, std::string> prior_inputs = {{kArtifactImages, dataset},
                                                              {PoseArtifact("capture"), dataset}};
-    RunStage("prior", "{source: capture, strict: true}", work, "prior_capture.h5", prior_inputs);
-    RunStage("prior", "{source: file, format: colmap, strict: true, path: " + model + "}", work,
-             "prior_colmap.h5", prior_inputs);
+    RunStageInProcess("prior", "{source: capture, strict: true}", work, prior_inputs,
+                      "prior_capture.h5");
+    RunStageInProcess("prior", "{source: file, format: colmap, strict: true, path: " + model + "}",
+                      work, prior_inputs, "prior_colmap.h5");
     const PoseSet from_capture = Hdf5Reader(work + "/prior_capture.h5").ReadPoseSet("prior");
     const PoseSet from_colmap = Hdf5Reader(work + "/prior_colmap.h5").ReadPoseSet("prior");
     ASSERT_EQ(Names(from_capture), Names(expected));
@@ -341,8 +330,8 @@ TEST(CaptureRefine, EveryCaptureFormatRefinesAsTheSamePriorGivenAsAColmapModel) 
     for (int arm = 0; arm < 2; ++arm) {
       refine_inputs[PoseArtifact("prior")] = work + "/prior_" + arms[arm] + ".h5";
       const nlohmann::json summary =
-          RunStage("refine", kRefineOptions, work, "refine_" + std::string(arms[arm]) + ".h5",
-                   refine_inputs);
+          RunStageInProcess("refine", kRefineOptions, work, refine_inputs,
+                            "refine_" + std::string(arms[arm]) + ".h5");
       EXPECT_EQ(summary["num_refined"], 11) << arms[arm];
       EXPECT_EQ(summary["guardrails"]["returned_prior"], false) << arms[arm];
       refined[arm] = Hdf5Reader(work + "/refine_" + arms[arm] + ".h5").ReadPoseSet("refined");
