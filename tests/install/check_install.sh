@@ -20,15 +20,20 @@ for path in bin/raytime include/raytime/refine/scene.h include/raytime/refine/so
 done
 "$prefix/bin/raytime" --version
 # The installed demo names the installed sample (packaging/install_demo.cmake).
-grep -q "root: $prefix/share/raytime/data/sample/fountain-P11" "$prefix/share/raytime/configs/demo.yaml"
+grep -q "root: $prefix/share/raytime/data/sample/fountain-P11" \
+  "$prefix/share/raytime/configs/demo.yaml"
 # A preset found by the installed binary without the source tree: RAYTIME_PRESET_DIR unset, the
 # lookup's first candidate is share/raytime beside bin/. A bad preset name lists the folder it read.
-if "$prefix/bin/raytime" refine --preset no_such_preset --out "$tmp/refine.h5" >"$tmp/preset.log" 2>&1; then
+if "$prefix/bin/raytime" refine --preset no_such_preset --out "$tmp/refine.h5" \
+  >"$tmp/preset.log" 2>&1; then
   echo "a missing preset was accepted" >&2
   exit 1
 fi
-grep -q "$prefix/share/raytime/configs/presets/refine" "$tmp/preset.log" ||
-  { cat "$tmp/preset.log" >&2; echo "the installed binary did not read its installed presets" >&2; exit 1; }
+if ! grep -q "$prefix/share/raytime/configs/presets/refine" "$tmp/preset.log"; then
+  cat "$tmp/preset.log" >&2
+  echo "the installed binary did not read its installed presets" >&2
+  exit 1
+fi
 
 # The C++ example against the installed package only (CMAKE_PREFIX_PATH), as a user builds it.
 cmake -S "$source/examples/cpp" -B "$tmp/example" -G Ninja -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
