@@ -40,6 +40,13 @@ cmake -S "$source/examples/cpp" -B "$tmp/example" -G Ninja -DCMAKE_PREFIX_PATH="
 cmake --build "$tmp/example" >/dev/null
 "$tmp/example/refine_synthetic"
 
+# The Python module, where this build has one (python/): its array example on the installed
+# package (Debian's python3 and python3-numpy, as the .deb declares).
+python_dir="$prefix/lib/python3/dist-packages"
+if [[ -d "$python_dir/raytime" && -f "$source/examples/python/refine_arrays.py" ]]; then
+  PYTHONPATH="$python_dir" /usr/bin/python3 "$source/examples/python/refine_arrays.py"
+fi
+
 # The .deb files and their declared dependencies (cpack -G DEB, as packaging/CMakeLists.txt sets).
 if ! command -v dpkg-deb >/dev/null || ! command -v dpkg-shlibdeps >/dev/null; then
   echo "no dpkg-deb / dpkg-shlibdeps here: .deb check skipped"
