@@ -46,6 +46,9 @@ std::vector<std::string> ArtifactsIn(const std::string& path) {
   for (const auto& name : reader.PoseSetNames()) artifacts.push_back(PoseArtifact(name));
   if (reader.HasFeatures()) artifacts.push_back("features");
   if (reader.HasMatches()) artifacts.push_back("matches");
+  if (reader.HasJson(kArtifactNerfstudioTransforms)) {
+    artifacts.push_back(kArtifactNerfstudioTransforms);
+  }
   return artifacts;
 }
 
