@@ -20,12 +20,12 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::ordered_json;
 
-void WriteFile(const fs::path& path, const std::string& text) {
+void WriteFixtureFile(const fs::path& path, const std::string& text) {
   fs::create_directories(path.parent_path());
   std::ofstream(path) << text;
 }
 
-ordered_json Matrix(double x) {
+ordered_json InputMatrix(double x) {
   return {{1.0, 0.0, 0.0, x}, {0.0, 1.0, 0.0, 0.0}, {0.0, 0.0, 1.0, 0.0}, {0.0, 0.0, 0.0, 1.0}};
 }
 
@@ -37,25 +37,25 @@ ordered_json GlMatrix(double x) {
 
 // A folder as ns-process-data writes one: shared intrinsics, three frames with depth and mask
 // paths, a split, a point cloud, a downscaled image folder and keys of the user's own.
-struct Folder {
+struct NerfstudioFixture {
   TempDir dir{"nerfstudio_folder"};
   fs::path input = dir.path() / "capture";
   fs::path output = dir.path() / "work";
   std::string text;
 
-  Folder() {
+  NerfstudioFixture() {
     ordered_json frames = ordered_json::array();
     for (int i = 0; i < 3; ++i) {
       const std::string n = std::to_string(i);
       frames.push_back({{"file_path", "images/f" + n + ".jpg"},
-                        {"transform_matrix", Matrix(i)},
+                        {"transform_matrix", InputMatrix(i)},
                         {"colmap_im_id", i + 1},
                         {"depth_file_path", "depths/f" + n + ".png"},
                         {"mask_path", "./masks/f" + n + ".png"},
                         {"mine", {{"nested", i}}}});
       for (const char* folder : {"images", "images_2", "depths", "masks"}) {
         const std::string extension = std::string(folder).rfind("images", 0) == 0 ? ".jpg" : ".png";
-        WriteFile(input / folder / ("f" + n + extension), folder + n);
+        WriteFixtureFile(input / folder / ("f" + n + extension), folder + n);
       }
     }
     const ordered_json document = {{"w", 640},
@@ -72,8 +72,8 @@ struct Folder {
                                    {"test_filenames", {"images/f2.jpg"}},
                                    {"zz_user_key", "kept"}};
     text = document.dump(2);
-    WriteFile(input / "transforms.json", text);
-    WriteFile(input / "sparse_pc.ply", "ply");
+    WriteFixtureFile(input / "transforms.json", text);
+    WriteFixtureFile(input / "sparse_pc.ply", "ply");
   }
 
   // Frames 0 and 2 refined, moved along x by 10; frame 1 left out.
@@ -94,14 +94,14 @@ struct Folder {
   }
 };
 
-std::vector<std::string> Keys(const ordered_json& object) {
+std::vector<std::string> KeysOf(const ordered_json& object) {
   std::vector<std::string> keys;
   for (const auto& item : object.items()) keys.push_back(item.key());
   return keys;
 }
 
 TEST(NerfstudioFolder, KeepsEveryKeyAndChangesOnlyThePoses) {
-  const Folder folder;
+  const NerfstudioFixture folder;
   const NerfstudioWriteSummary summary = folder.Write(folder.Update());
   EXPECT_EQ(summary.frames_updated, 2);
   EXPECT_EQ(summary.left_out, std::vector<std::string>{"f1.jpg"});
@@ -109,9 +109,9 @@ TEST(NerfstudioFolder, KeepsEveryKeyAndChangesOnlyThePoses) {
   const ordered_json before = ordered_json::parse(folder.text);
   const ordered_json after = ordered_json::parse(ReadTextFile(summary.path));
 
-  std::vector<std::string> keys = Keys(before);
+  std::vector<std::string> keys = KeysOf(before);
   keys.push_back("raytime_left_out_frames");
-  EXPECT_EQ(Keys(after), keys);  // the input's order, ours appended
+  EXPECT_EQ(KeysOf(after), keys);  // the input's order, ours appended
   for (const auto& [key, value] : before.items()) {
     if (key == "frames" || key == "train_filenames") continue;
     EXPECT_EQ(after[key], value) << key;
@@ -139,7 +139,7 @@ TEST(NerfstudioFolder, KeepsEveryKeyAndChangesOnlyThePoses) {
 }
 
 TEST(NerfstudioFolder, EveryPathResolvesFromTheWorkDirectoryToTheSameFile) {
-  const Folder folder;
+  const NerfstudioFixture folder;
   const NerfstudioWriteSummary summary = folder.Write(folder.Update());
   EXPECT_EQ(summary.links,
             (std::vector<std::string>{"depths", "images", "images_2", "masks", "sparse_pc.ply"}));
@@ -165,7 +165,7 @@ TEST(NerfstudioFolder, EveryPathResolvesFromTheWorkDirectoryToTheSameFile) {
 }
 
 TEST(NerfstudioFolder, APathTheWorkDirectoryCannotLinkIsWrittenAbsolute) {
-  const Folder folder;
+  const NerfstudioFixture folder;
   fs::create_directories(folder.output / "masks");  // something else of that name is there
   const NerfstudioWriteSummary summary = folder.Write(folder.Update());
   EXPECT_EQ(summary.absolute, std::vector<std::string>{"masks"});
@@ -177,7 +177,7 @@ TEST(NerfstudioFolder, APathTheWorkDirectoryCannotLinkIsWrittenAbsolute) {
 }
 
 TEST(NerfstudioFolder, SelfCalibratedIntrinsicsGoWhereNerfstudioReadsThem) {
-  const Folder folder;
+  const NerfstudioFixture folder;
   NerfstudioUpdate update = folder.Update();
   const TransformsFrames read = ReadTransformsFrames(
       "t", ParseTransformsJson("t", ReadTextFile((folder.input / "transforms.json").string())));
@@ -209,7 +209,7 @@ TEST(NerfstudioFolder, SelfCalibratedIntrinsicsGoWhereNerfstudioReadsThem) {
 }
 
 TEST(NerfstudioFolder, NeverWritesOverTheInput) {
-  const Folder folder;
+  const NerfstudioFixture folder;
   const std::string message = InputErrorOf([&] {
     WriteNerfstudioFolder((folder.input / "transforms.json").string(), folder.text,
                           folder.input.string(), folder.Update(), {});

@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 using nlohmann::ordered_json;
 
 // Every file below `root` with its contents, to see that nothing there changed.
-std::map<std::string, std::string> Contents(const fs::path& root) {
+std::map<std::string, std::string> FilesWithContents(const fs::path& root) {
   std::map<std::string, std::string> files;
   for (const auto& entry : fs::recursive_directory_iterator(root)) {
     if (entry.is_regular_file()) files[entry.path().string()] = ReadTextFile(entry.path().string());
@@ -46,14 +46,14 @@ TEST(NerfstudioInPlace, AFolderIsRefinedWithOnlyItsPosesChanged) {
                        Eigen::Vector3d(0.25, 0, -1));
   const fixtures::Capture capture = fixtures::SampleCapture();
   fixtures::WriteNerfstudio(capture, folder.string(), applied);
-  const std::map<std::string, std::string> before_files = Contents(folder);
+  const std::map<std::string, std::string> before_files = FilesWithContents(folder);
 
   const CommandResult run =
       RunRaytime("run configs/nerfstudio.yaml --workdir " + work.string() +
                  " --set dataset.root=" + folder.string() +
                  " --set features.max_features=2048 --set features.first_octave=0");
   ASSERT_EQ(run.exit_code, 0) << run.output;
-  EXPECT_EQ(Contents(folder), before_files);  // nothing of the user's touched
+  EXPECT_EQ(FilesWithContents(folder), before_files);  // nothing of the user's touched
 
   const ordered_json before =
       ordered_json::parse(before_files.at((folder / "transforms.json").string()));
@@ -106,12 +106,12 @@ TEST(NerfstudioInPlace, TheFolderItselfIsRefusedAsTheWorkDirectory) {
   TempDir dir("nerfstudio_in_place_self");
   const fs::path folder = dir.path() / "capture";
   fixtures::WriteNerfstudio(fixtures::SampleCapture(), folder.string(), Rigid3());
-  const std::map<std::string, std::string> before_files = Contents(folder);
+  const std::map<std::string, std::string> before_files = FilesWithContents(folder);
   const CommandResult run = RunRaytime("run configs/nerfstudio.yaml --workdir " + folder.string() +
                                        " --set dataset.root=" + folder.string());
   EXPECT_EQ(run.exit_code, 2) << run.output;
   EXPECT_NE(run.output.find("would write over this file"), std::string::npos) << run.output;
-  EXPECT_EQ(Contents(folder), before_files);
+  EXPECT_EQ(FilesWithContents(folder), before_files);
   EXPECT_FALSE(fs::exists(folder / "summary.json"));
 }
 
