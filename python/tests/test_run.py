@@ -114,3 +114,5 @@ def test_ctrl_c_stops_the_run_as_the_cli_does(tmp_path):
     assert summary["stage"] == "features"
     assert summary["signal"] == signal.SIGINT
     assert temporary_files(workdir) == []
+    # Stopped inside the stage, not after it.
+    assert not (workdir / "features.h5").exists()
