@@ -32,11 +32,16 @@ def test_run_gives_the_cli_poses(tmp_path, small_pipeline):
         p.name for p in (SAMPLE / "images").iterdir()}
 
 
-def test_rerun_skips_every_stage(tmp_path, small_pipeline):
-    raytime.run(small_pipeline, tmp_path / "w", set={"features.max_features": 256})
+def test_rerun_skips_every_stage_and_cache_dir_shares_them(tmp_path, small_pipeline):
+    cache = tmp_path / "cache"
+    raytime.run(small_pipeline, tmp_path / "w", set={"features.max_features": 256}, cache_dir=cache)
     again = raytime.run(small_pipeline, tmp_path / "w", set=["features.max_features=256"])
     assert again["status"] == "ok"
     assert all(s["status"] == "skipped" for s in again["stages"]), again["stages"]
+    # Another work directory takes the stages from the cache (export writes folders: runs).
+    other = raytime.run(small_pipeline, tmp_path / "w2", set={"features.max_features": 256},
+                        cache_dir=cache)
+    assert [s["status"] for s in other["stages"]] == ["cached"] * 6 + ["ran"]
 
 
 @pytest.mark.parametrize("override", ["refine.orientation_weight=-1", "refine.no_such_key=1",
