@@ -574,6 +574,9 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
     }
     StopPoint();
   } catch (const std::exception& e) {
+    // A stop requested in-process (core/interrupt.h) already recorded "interrupted"; what failed
+    // after it (a temporary file its actions removed) is of the interruption, not a failure.
+    if (StopWasRequested()) throw;
     const FailureDescription failure = DescribeFailure(e);
     try {
       run.Update([&](json& summary) {
