@@ -11,6 +11,9 @@ namespace raytime {
 // wrote it last.
 inline constexpr const char* kArtifactImages = "images";
 inline std::string PoseArtifact(const std::string& pose_set) { return "poses/" + pose_set; }
+// A nerfstudio dataset's transforms.json as read, {path, text}: a JSON document of the dataset
+// stage's output, which the export writes back with the refined poses (nerfstudio_in_place).
+inline constexpr const char* kArtifactNerfstudioTransforms = "nerfstudio_transforms";
 // JSON document beside a refined pose set: per image name (every image with a prior pose), its
 // verdict {verdict: held | held_by_prior | doubted, reason, detail}
 // (refine/checks/frame_verdicts.h). Written by refine; the export leaves the doubted frames out

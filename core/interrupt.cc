@@ -18,6 +18,7 @@ namespace {
 
 int g_pipe[2] = {-1, -1};
 std::atomic<bool> g_interrupting{false};
+std::atomic<bool> g_stop_requested{false};
 
 std::mutex& ActionsMutex() {
   static std::mutex mutex;
@@ -36,13 +37,7 @@ void OnSignal(int signal) {
   errno = saved;
 }
 
-void Watch() {
-  unsigned char byte = 0;
-  while (::read(g_pipe[0], &byte, 1) != 1) {
-    if (errno != EINTR) return;
-  }
-  const int signal = byte;
-  g_interrupting = true;
+void RunActions(int signal) {
   {
     std::lock_guard<std::mutex> lock(ActionsMutex());
     for (auto it = Actions().rbegin(); it != Actions().rend(); ++it) {
@@ -54,6 +49,16 @@ void Watch() {
     }
   }
   RemovePendingTemporaryFiles();
+}
+
+void Watch() {
+  unsigned char byte = 0;
+  while (::read(g_pipe[0], &byte, 1) != 1) {
+    if (errno != EINTR) return;
+  }
+  const int signal = byte;
+  g_interrupting = true;
+  RunActions(signal);
   ::_exit(128 + signal);
 }
 
@@ -62,7 +67,27 @@ void Watch() {
 bool Interrupting() { return g_interrupting; }
 
 void AwaitInterruptExit() {
+  if (g_stop_requested) throw StopRequested{};
   for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
+}
+
+void RequestStop(int signal) {
+  // Set first: work that passes a StopPoint after the actions wrote "interrupted" would otherwise
+  // go on and record an end of its own.
+  g_stop_requested = true;
+  g_interrupting = true;
+  RunActions(signal);
+}
+
+void StopPoint() {
+  if (g_stop_requested) throw StopRequested{};
+}
+
+bool StopWasRequested() { return g_stop_requested; }
+
+void ClearStopRequest() {
+  g_stop_requested = false;
+  g_interrupting = false;
 }
 
 void InstallInterruptHandler() {

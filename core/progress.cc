@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <mutex>
 
+#include "core/interrupt.h"
+
 namespace raytime {
 namespace {
 
@@ -144,6 +146,8 @@ ProgressBar::~ProgressBar() {
 }
 
 void ProgressBar::Update(int done, const std::string& detail) {
+  // Every long loop reports here, drawn or not: where an in-process run stops (core/interrupt.h).
+  StopPoint();
   if (!drawing_) return;
   const auto now = std::chrono::steady_clock::now();
   ProgressScreen& screen = Screen();

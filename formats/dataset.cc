@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <utility>
 
 #include "core/error.h"
 #include "core/intrinsics.h"
@@ -158,8 +159,11 @@ Dataset LoadDataset(const DatasetOptions& options) {
     AddFilesBelow(model_dir, &dataset.files);
   } else if (options.format == "nerfstudio") {
     const std::string path = (fs::path(options.root) / options.transforms).string();
-    ReadTransformsJson(path, &dataset.images, &poses);
+    ReadTransformsJson(path, &dataset.images, &poses, &dataset.transforms_text);
+    dataset.transforms_path = fs::absolute(path).lexically_normal().string();
     dataset.files.push_back(path);
+    if (options.nerfstudio_poses == NerfstudioPoses::kCapture)
+      dataset.capture = std::exchange(poses, PoseSet());
   } else if (options.format == "record3d") {
     dataset = DatasetFromRecording(ReadRecord3d(options.root));
   } else if (options.format == "polycam") {

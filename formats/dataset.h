@@ -3,11 +3,13 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "core/named_enum.h"
 #include "core/options.h"
 #include "core/timestamps.h"
 #include "core/types.h"
@@ -17,6 +19,13 @@ namespace raytime {
 
 // Every dataset.format (docs/formats.md documents each one's files and conventions).
 extern const std::vector<std::string> kDatasetFormats;
+
+// What a nerfstudio transforms.json's poses are.
+enum class NerfstudioPoses { kCapture, kGroundTruth };
+constexpr std::array<EnumName<NerfstudioPoses>, 2> EnumNames(NerfstudioPoses) {
+  return {
+      {{NerfstudioPoses::kCapture, "capture"}, {NerfstudioPoses::kGroundTruth, "ground_truth"}}};
+}
 
 struct DatasetOptions {
   // "strecha" (ROOT/images + ROOT/gt_dense_cameras), "colmap" (ROOT/images + a sparse model whose
@@ -31,6 +40,10 @@ struct DatasetOptions {
   std::string model;
   // nerfstudio file relative to root.
   std::string transforms = "transforms.json";
+  // nerfstudio: what the file's poses are. A folder made by ns-process-data holds the phone's poses
+  // (record3d, polycam) or COLMAP's: a capture's poses, the prior to refine; a benchmark's file
+  // holds its reference poses.
+  NerfstudioPoses nerfstudio_poses = NerfstudioPoses::kCapture;
   // stray (a video): every stride-th frame, or num_frames spread evenly (the front end's
   // VideoFramesOptions rules).
   int stride = 1;
@@ -48,6 +61,9 @@ struct DatasetOptions {
     v("images", images, "colmap: image folder relative to root");
     v("model", model, "colmap: model folder relative to root; \"\" tries sparse/0, sparse, root");
     v("transforms", transforms, "nerfstudio, nerfcapture: transforms file relative to root");
+    v("nerfstudio_poses", nerfstudio_poses,
+      "nerfstudio: the file's poses are the capture's (pose set capture, the prior to refine) or "
+      "the ground truth (a benchmark's)");
     v("stride", stride, "stray: keep every stride-th video frame (frame 0 first)", Positive(),
       AtMost(1e6));
     v("num_frames", num_frames,
@@ -87,6 +103,10 @@ struct Dataset {
   int num_poses_without_image = 0;
   std::optional<CaptureVideo> video;
   std::vector<std::string> files;  // every file the dataset was read from (for content hashes)
+  // nerfstudio: the transforms.json read and its text, written back changed by the export
+  // (formats/nerfstudio_folder.h); empty for other formats.
+  std::string transforms_path;
+  std::string transforms_text;
   // What the readers accepted with a doubt (e.g. a negligible skew dropped); the dataset stage
   // reports them in its summary.
   Warnings warnings;

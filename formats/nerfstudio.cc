@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <stdexcept>
 
 #include "core/atomic_file.h"
@@ -193,7 +194,9 @@ std::string CommonDirectory(const std::vector<std::string>& paths) {
   return common;
 }
 
-json IntrinsicsJson(const CameraIntrinsics& intrinsics) {
+}  // namespace
+
+json TransformsIntrinsicsJson(const CameraIntrinsics& intrinsics) {
   const auto& p = intrinsics.params;
   return {{"w", intrinsics.width}, {"h", intrinsics.height}, {"fl_x", p[kFx]},
           {"fl_y", p[kFy]},        {"cx", p[kCx] + 0.5},     {"cy", p[kCy] + 0.5},
@@ -201,12 +204,10 @@ json IntrinsicsJson(const CameraIntrinsics& intrinsics) {
           {"p2", p[kP2]}};
 }
 
-}  // namespace
-
-void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses) {
+json ParseTransformsJson(const std::string& path, const std::string& text) {
   json top;
   try {
-    top = json::parse(ReadTextFile(path));
+    top = json::parse(text);
   } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e999
     ThrowInput(path, 0, std::string("not valid JSON: ") + e.what());
   }
@@ -214,6 +215,10 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
   if (!top.contains("frames") || !top["frames"].is_array() || top["frames"].empty()) {
     ThrowInput(path, 0, "expected a non-empty \"frames\" array");
   }
+  return top;
+}
+
+TransformsFrames ReadTransformsFrames(const std::string& path, const json& top) {
   const json& frames = top["frames"];
   std::vector<std::string> file_paths;
   for (size_t i = 0; i < frames.size(); ++i) {
@@ -227,30 +232,54 @@ void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* pose
     if (name.compare(0, 2, "./") == 0) name.erase(0, 2);
     file_paths.push_back(name);
   }
-  const std::string common = CommonDirectory(file_paths);
-
-  ImageSet image_set;
-  PoseSet pose_set;
+  TransformsFrames result;
+  result.common_directory = CommonDirectory(file_paths);
+  std::set<std::string> names;
   for (size_t i = 0; i < frames.size(); ++i) {
     const FrameContext frame(path, top, frames[i], i);
-    const std::string name = file_paths[i].substr(common.size());
+    const std::string name = file_paths[i].substr(result.common_directory.size());
     if (name.empty()) frame.Fail("file_path names a directory");
-    const CameraIntrinsics intrinsics = ReadIntrinsics(frame);
-    const auto same = std::find(image_set.cameras.begin(), image_set.cameras.end(), intrinsics);
+    if (!names.insert(name).second) frame.Fail("image " + name + " appears in more than one frame");
+    result.frames.push_back({name, ReadIntrinsics(frame), ReadWorldFromCam(frame)});
+  }
+  return result;
+}
+
+void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses,
+                        std::string* text) {
+  const std::string read = ReadTextFile(path);
+  const json top = ParseTransformsJson(path, read);
+  const TransformsFrames parsed = ReadTransformsFrames(path, top);
+  ImageSet image_set;
+  PoseSet pose_set;
+  for (const TransformsFrame& frame : parsed.frames) {
+    const auto same = std::find(image_set.cameras.begin(), image_set.cameras.end(), frame.camera);
     const int camera_index = static_cast<int>(same - image_set.cameras.begin());
-    if (same == image_set.cameras.end()) image_set.cameras.push_back(intrinsics);
-    if (!pose_set.world_from_cam.emplace(name, ReadWorldFromCam(frame)).second) {
-      frame.Fail("image " + name + " appears in more than one frame");
-    }
-    image_set.images.push_back({name, intrinsics.width, intrinsics.height, camera_index});
+    if (same == image_set.cameras.end()) image_set.cameras.push_back(frame.camera);
+    pose_set.world_from_cam.emplace(frame.name, frame.world_from_cam);
+    image_set.images.push_back({frame.name, frame.camera.width, frame.camera.height, camera_index});
   }
   std::sort(image_set.images.begin(), image_set.images.end(),
             [](const ImageInfo& a, const ImageInfo& b) { return a.name < b.name; });
-  std::string root = (fs::path(path).parent_path() / common).lexically_normal().string();
+  std::string root =
+      (fs::path(path).parent_path() / parsed.common_directory).lexically_normal().string();
   while (root.size() > 1 && root.back() == '/') root.pop_back();
   image_set.image_root = root;
   if (images) *images = std::move(image_set);
   if (poses) *poses = std::move(pose_set);
+  if (text) *text = read;
+}
+
+json TransformMatrixJson(const Rigid3& world_from_cam) {
+  const Eigen::Matrix3d world_from_gl =
+      world_from_cam.rotation.normalized().toRotationMatrix() * kFlipYZ;
+  json matrix = json::array();
+  for (int r = 0; r < 3; ++r) {
+    matrix.push_back({world_from_gl(r, 0), world_from_gl(r, 1), world_from_gl(r, 2),
+                      world_from_cam.translation[r]});
+  }
+  matrix.push_back({0.0, 0.0, 0.0, 1.0});
+  return matrix;
 }
 
 void WriteTransformsJson(const std::string& path, const ImageSet& images, const PoseSet& poses,
@@ -273,23 +302,16 @@ void WriteTransformsJson(const std::string& path, const ImageSet& images, const 
     return images.cameras[image->camera_index] == images.cameras[posed.front()->camera_index];
   });
 
-  json top = shared && !posed.empty() ? IntrinsicsJson(images.cameras[posed.front()->camera_index])
-                                      : json::object();
+  json top = shared && !posed.empty()
+                 ? TransformsIntrinsicsJson(images.cameras[posed.front()->camera_index])
+                 : json::object();
   top["camera_model"] = "OPENCV";
   json frames = json::array();
   for (const ImageInfo* image : posed) {
-    const Rigid3& world_from_cam = poses.world_from_cam.at(image->name);
-    const Eigen::Matrix3d world_from_gl =
-        world_from_cam.rotation.normalized().toRotationMatrix() * kFlipYZ;
-    json matrix = json::array();
-    for (int r = 0; r < 3; ++r) {
-      matrix.push_back({world_from_gl(r, 0), world_from_gl(r, 1), world_from_gl(r, 2),
-                        world_from_cam.translation[r]});
-    }
-    matrix.push_back({0.0, 0.0, 0.0, 1.0});
-    json frame = shared ? json::object() : IntrinsicsJson(images.cameras[image->camera_index]);
+    json frame =
+        shared ? json::object() : TransformsIntrinsicsJson(images.cameras[image->camera_index]);
     frame["file_path"] = image_prefix + image->name;
-    frame["transform_matrix"] = matrix;
+    frame["transform_matrix"] = TransformMatrixJson(poses.world_from_cam.at(image->name));
     const auto fields = frame_fields.find(image->name);
     if (fields != frame_fields.end()) {
       for (const auto& [key, value] : fields->items()) frame[key] = value;

@@ -11,13 +11,44 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "core/types.h"
 
 namespace raytime {
 
+// One frame of a transforms.json as read: its image name, camera and camera-to-world pose (OpenCV
+// axes, the file's world).
+struct TransformsFrame {
+  std::string name;
+  CameraIntrinsics camera;
+  Rigid3 world_from_cam;
+};
+
+struct TransformsFrames {
+  std::vector<TransformsFrame> frames;  // in the file's order
+  std::string common_directory;         // of every file_path ("images/"), removed from the names
+};
+
+// The document of `text`, read from `path` (for messages): an object with a non-empty "frames"
+// array, else an InputError.
+nlohmann::json ParseTransformsJson(const std::string& path, const std::string& text);
+
+// Every frame of a parsed document, read as ReadTransformsJson reads them; InputError naming the
+// frame when one is malformed or two name the same image.
+TransformsFrames ReadTransformsFrames(const std::string& path, const nlohmann::json& top);
+
+// A pose as nerfstudio's transform_matrix: camera-to-world in OpenGL axes, rows, last 0 0 0 1.
+nlohmann::json TransformMatrixJson(const Rigid3& world_from_cam);
+
+// A camera as nerfstudio's keys: w, h, fl_x, fl_y, cx, cy (its pixel convention), k1, k2, p1, p2.
+nlohmann::json TransformsIntrinsicsJson(const CameraIntrinsics& intrinsics);
+
 // Errors name the file, the frame index and what was expected (e.g. a 3x3 transform_matrix).
-void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses);
+// `text`, when given, receives the file's text as read (to write it back changed:
+// formats/nerfstudio_folder.h).
+void ReadTransformsJson(const std::string& path, ImageSet* images, PoseSet* poses,
+                        std::string* text = nullptr);
 
 // Writes shared intrinsics at the top level when every image uses the same camera, per-frame
 // otherwise. `image_prefix` is prepended to names in file_path (default "images/"). Images

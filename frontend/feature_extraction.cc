@@ -217,10 +217,10 @@ FeatureExtractionSummary ExtractFeatures(const ImageSet& images,
                     (*features)[i].keypoints.rows(), SecondsSince(image_start));
     if (bar.drawing()) {
       spdlog::debug(line);
-      bar.Update(done.load(), info.name);
     } else {
       spdlog::info(line);
     }
+    bar.Update(done.load(), info.name);
   });
 
   FeatureExtractionSummary summary;

@@ -80,6 +80,10 @@ class DatasetStage : public StageWithOptions<DatasetOptions> {
     if (dataset.capture) {
       writer.WritePoseSet("capture", *dataset.capture, PoseRole::kPrior, MakeProvenance(*this));
     }
+    if (!dataset.transforms_path.empty()) {
+      writer.WriteJson(kArtifactNerfstudioTransforms,
+                       {{"path", dataset.transforms_path}, {"text", dataset.transforms_text}});
+    }
     writer.Commit();
     summary["format"] = options_.format;
     summary["num_images"] = dataset.images.images.size();

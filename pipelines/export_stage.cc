@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <map>
 #include <optional>
+#include <set>
 
 #include "core/atomic_file.h"
 #include "core/error.h"
@@ -16,6 +17,7 @@
 #include "core/written_files.h"
 #include "formats/colmap_model.h"
 #include "formats/nerfstudio.h"
+#include "formats/nerfstudio_folder.h"
 #include "formats/tum.h"
 #include "pipelines/stages.h"
 #include "splat/trainer_export.h"
@@ -25,14 +27,16 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
-const std::vector<std::string> kExportFormats = {"colmap_text", "colmap_binary", "transforms_json",
-                                                 "tum", "3dgs"};
+const std::vector<std::string> kExportFormats = {
+    "colmap_text", "colmap_binary", "transforms_json", "tum", "3dgs", "nerfstudio_in_place"};
 
 struct ExportStageOptions {
   std::vector<std::string> poses = {"prior"};
   // colmap_text -> WORKDIR/<poses>/ ; colmap_binary -> WORKDIR/<poses>_bin/ ;
   // transforms_json -> WORKDIR/<poses>_transforms.json ; tum -> WORKDIR/<poses>_tum.txt ;
-  // 3dgs -> WORKDIR/3dgs/<poses>/ (trainer-ready: images, sparse/0, transforms.json, test.txt)
+  // 3dgs -> WORKDIR/3dgs/<poses>/ (trainer-ready: images, sparse/0, transforms.json, test.txt);
+  // nerfstudio_in_place -> WORKDIR/transforms.json: a nerfstudio dataset's own file with only its
+  // poses changed, in place of the user's (formats/nerfstudio_folder.h)
   std::vector<std::string> formats = {"colmap_text", "transforms_json"};
   // 3dgs: whose ray times become the initial points. "auto": the first of `poses` a refine stage
   // wrote them for (none: no points, with a warning); "none": no points (the paper's Table 4
@@ -56,7 +60,8 @@ struct ExportStageOptions {
     v("formats", formats,
       "colmap_text -> DIR/<poses>/, colmap_binary -> <poses>_bin/, transforms_json -> "
       "<poses>_transforms.json, tum -> <poses>_tum.txt, 3dgs -> 3dgs/<poses>/ (undistorted "
-      "images, PINHOLE model, points, split)",
+      "images, PINHOLE model, points, split), nerfstudio_in_place -> transforms.json (the "
+      "nerfstudio dataset's own file, only the poses changed; one pose set)",
       NonEmpty(), OneOf(kExportFormats));
     v("points_from", points_from,
       "3dgs: pose set whose refine ray times give the initial points3D; auto = the first listed "
@@ -64,11 +69,17 @@ struct ExportStageOptions {
       NonEmpty());
     trainer.VisitFields(v);  // flat keys: undistort_blank_pixels, test_every, ...
   }
-  void CheckRelations(const Requirement& require) const { trainer.CheckRelations(require); }
-
-  bool Has3dgs() const {
-    return std::find(formats.begin(), formats.end(), "3dgs") != formats.end();
+  void CheckRelations(const Requirement& require) const {
+    trainer.CheckRelations(require);
+    require(!HasFormat("nerfstudio_in_place") || poses.size() == 1,
+            "format nerfstudio_in_place writes one transforms.json in place of the dataset's: "
+            "list one pose set in 'poses' (e.g. [refined])");
   }
+
+  bool HasFormat(const std::string& format) const {
+    return std::find(formats.begin(), formats.end(), format) != formats.end();
+  }
+  bool Has3dgs() const { return HasFormat("3dgs"); }
 };
 
 std::string ExportPath(const std::string& poses, const std::string& format) {
@@ -76,6 +87,7 @@ std::string ExportPath(const std::string& poses, const std::string& format) {
   if (format == "colmap_binary") return poses + "_bin";
   if (format == "transforms_json") return poses + "_transforms.json";
   if (format == "3dgs") return "3dgs/" + poses;
+  if (format == "nerfstudio_in_place") return "transforms.json";
   return poses + "_tum.txt";
 }
 
@@ -252,6 +264,53 @@ void MoveTrainerDerivedAside(const std::string& workdir, const std::string& set)
   }
 }
 
+// A self-calibrating refine's cameras of pose set `name` by image name (the images it wrote beside
+// the poses); empty when the set's cameras are the dataset's.
+std::map<std::string, CameraIntrinsics> RefinedCameras(const StageContext& context,
+                                                       const std::string& name) {
+  const Hdf5Reader reader(context.Require(PoseArtifact(name)));
+  std::map<std::string, CameraIntrinsics> cameras;
+  if (!reader.HasJson("refined_intrinsics") || !reader.HasImages()) return cameras;
+  const ImageSet images = reader.ReadImages();
+  for (const ImageInfo& image : images.images) {
+    cameras[image.name] = images.cameras.at(image.camera_index);
+  }
+  return cameras;
+}
+
+// nerfstudio_in_place: the dataset's transforms.json with pose set `name`'s poses (and cameras,
+// self-calibrated) written to WORKDIR/transforms.json, with the links its paths need. Names the
+// work directory's own entries never linked over.
+void WriteInPlace(const StageContext& context, const std::string& name, const PoseSet& poses,
+                  const nlohmann::json& frame_fields, Warnings* warnings, nlohmann::json* result) {
+  const nlohmann::json source = Hdf5Reader(context.Require(kArtifactNerfstudioTransforms))
+                                    .ReadJson(kArtifactNerfstudioTransforms);
+  NerfstudioUpdate update;
+  update.poses = poses;
+  update.cameras = RefinedCameras(context, name);
+  update.frame_fields = frame_fields;
+  const std::set<std::string> reserved = {"summary.json", "report.html",   "transforms.json",
+                                          "stale",        "3dgs",          "splat",
+                                          "refined",      "dataset_frames"};
+  const NerfstudioWriteSummary written = WriteNerfstudioFolder(source.at("path").get<std::string>(),
+                                                               source.at("text").get<std::string>(),
+                                                               context.workdir, update, reserved);
+  if (!written.absolute.empty()) {
+    warnings->push_back({"nerfstudio_paths_absolute",
+                         "the work directory already holds '" + written.absolute.front() +
+                             "' (or it lies above the dataset's folder): paths starting with it "
+                             "are written absolute in " +
+                             written.path,
+                         {},
+                         {},
+                         {{"entries", written.absolute}}});
+    spdlog::warn(fmt::format("export: {}", warnings->back().message));
+  }
+  *result = {{"path", written.path},         {"frames_updated", written.frames_updated},
+             {"left_out", written.left_out}, {"links", written.links},
+             {"absolute", written.absolute}, {"intrinsics_updated", written.intrinsics_updated}};
+}
+
 class ExportStage : public StageWithOptions<ExportStageOptions> {
  public:
   std::string type() const override { return "export"; }
@@ -263,6 +322,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
   std::vector<std::string> Inputs() const override {
     std::vector<std::string> inputs = {kArtifactImages};
     for (const auto& name : options_.poses) inputs.push_back(PoseArtifact(name));
+    if (options_.HasFormat("nerfstudio_in_place")) inputs.push_back(kArtifactNerfstudioTransforms);
     // A named source of points outside `poses` (its ray times live beside its pose set).
     const std::string& source = options_.points_from;
     if (options_.Has3dgs() && source != "auto" && source != "none" &&
@@ -308,6 +368,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
     std::map<std::string, PoseSet> exportable;
     std::map<std::string, nlohmann::json> uncertainty_of;  // per pose set, null when it has none
     std::map<std::string, nlohmann::json> verdicts_of;     // per pose set, {} when it has none
+    nlohmann::json result_in_place;
     for (const auto& name : options_.poses) {
       nlohmann::json& verdicts = verdicts_of[name];
       const PoseSet poses =
@@ -326,6 +387,9 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
           WriteColmapModelBinary(ToColmapModel(images, poses), path);
           WriteUncertaintyInto(path, uncertainty);
           WriteVerdictsInto(path, verdicts);
+        } else if (format == "nerfstudio_in_place") {
+          WriteInPlace(context, name, poses, RaytimeFrameFields(uncertainty, verdicts), &warnings,
+                       &result_in_place);
         } else if (format == "transforms_json") {
           std::string prefix = "images/";
           if (images.image_root.empty()) {
@@ -351,6 +415,7 @@ class ExportStage : public StageWithOptions<ExportStageOptions> {
       }
     }
     nlohmann::json result = {{"written", written}};
+    if (!result_in_place.is_null()) result["nerfstudio_in_place"] = result_in_place;
     if (options_.Has3dgs()) {
       std::map<std::string, nlohmann::json> frame_fields;
       for (const auto& [name, poses] : exportable) {

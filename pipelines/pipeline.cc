@@ -99,6 +99,38 @@ void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& wor
   }
 }
 
+// A stage would write over a file the pipeline reads (a nerfstudio dataset's transforms.json,
+// which export nerfstudio_in_place writes in the work directory, when the work directory is the
+// dataset's folder): refused before anything runs, since a failed run's stale outputs are moved
+// aside and the user's file would go with them.
+void RefuseOutputsOverInputs(const PipelineSpec& spec, const std::string& workdir) {
+  std::vector<std::pair<std::string, std::string>> outputs;  // path, stage id
+  std::vector<std::string> inputs;
+  for (const PipelineStageSpec& stage_spec : spec.stages) {
+    const std::unique_ptr<Stage> stage =
+        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
+    if (!stage) continue;  // said by the stage when it runs
+    for (const std::string& output : stage->ExtraOutputs()) {
+      outputs.emplace_back((fs::path(workdir) / output).string(), stage_spec.id);
+    }
+    try {
+      const std::vector<std::string> files = stage->ExternalFiles();
+      inputs.insert(inputs.end(), files.begin(), files.end());
+    } catch (const std::exception&) {
+      // An input that does not load is said by its stage when it runs.
+    }
+  }
+  std::error_code error;
+  for (const auto& [output, stage_id] : outputs) {
+    for (const std::string& input : inputs) {
+      if (!fs::equivalent(output, input, error)) continue;
+      throw InputError(input + ": stage " + stage_id + " would write over this file, which the " +
+                       "pipeline reads (the work directory " + workdir +
+                       " is the dataset's folder); give another --workdir");
+    }
+  }
+}
+
 }  // namespace
 
 nlohmann::json RunPipeline(const PipelineSpec& spec, const RunOptions& options) {
@@ -117,6 +149,7 @@ nlohmann::json RunPipeline(const PipelineSpec& spec, const RunOptions& options) 
   }
   ValidatePipeline(spec);
   RefuseWorkdirInInputFolder(spec, workdir);
+  RefuseOutputsOverInputs(spec, workdir);
   const WorkdirLock lock(workdir);
   return RunStages(spec, workdir, options);
 }

@@ -46,6 +46,9 @@ std::vector<std::string> ArtifactsIn(const std::string& path) {
   for (const auto& name : reader.PoseSetNames()) artifacts.push_back(PoseArtifact(name));
   if (reader.HasFeatures()) artifacts.push_back("features");
   if (reader.HasMatches()) artifacts.push_back("matches");
+  if (reader.HasJson(kArtifactNerfstudioTransforms)) {
+    artifacts.push_back(kArtifactNerfstudioTransforms);
+  }
   return artifacts;
 }
 
@@ -565,13 +568,18 @@ json RunStages(const PipelineSpec& spec, const std::string& workdir, const RunOp
   try {
     bool names_checked = false;
     for (size_t i = 0; i < spec.stages.size(); ++i) {
+      StopPoint();  // an in-process run's Ctrl-C: the actions above wrote "interrupted"
       StepStage(spec, i, workdir, options, &run, &artifacts);
       if (!names_checked && artifacts.count(kArtifactImages) > 0) {
         names_checked = true;
         CheckImageNamesAhead(spec, i + 1, artifacts.at(kArtifactImages).file);
       }
     }
+    StopPoint();
   } catch (const std::exception& e) {
+    // A stop requested in-process (core/interrupt.h) already recorded "interrupted"; what failed
+    // after it (a temporary file its actions removed) is of the interruption, not a failure.
+    if (StopWasRequested()) throw;
     const FailureDescription failure = DescribeFailure(e);
     try {
       run.Update([&](json& summary) {

@@ -4,7 +4,8 @@
 Layers (README "How we write code"): core <- formats <- stages (frontend, bootstrap, refine,
 evaluate, splat) <- report <- pipelines <- cli. Stages never include one another (evaluate and
 splat may read formats); report/ reads what the stages wrote through core's names and evaluate's
-pose errors, never a stage adapter; cli reaches everything through pipelines/ (and report/); refine/'s rooms point one way (solve <- checks <-
+pose errors, never a stage adapter; cli reaches everything through pipelines/ (and report/); python/ (the
+Python module) is a top layer beside cli; refine/'s rooms point one way (solve <- checks <-
 recipes <- the entry at refine/'s top, REFINE_ROOMS); inside refine/ only refine.cc and the scene step above
 it (scene.cc, the stage's work by image name) include the entry header refine/refine.h (the
 others include refine/refine_types.h), so no arrow runs up.
@@ -32,6 +33,10 @@ ALLOWED = {
     "pipelines": {"core", "formats", "frontend", "bootstrap", "refine", "evaluate", "splat",
                   "report"},
     "cli": {"core", "pipelines", "report"},
+    # The Python module is a top layer beside cli: it runs pipelines and calls the refine stage's
+    # entry (refine/scene.h) and formats/ on arrays.
+    "python": {"core", "formats", "frontend", "bootstrap", "refine", "evaluate", "splat", "report",
+               "pipelines"},
     "testing": {"core", "refine", "evaluate"},
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([a-z_]+)/([^"]+)"')

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Test suite: install dependencies (with chromium, for the run page's browser test); a Release build
-# runs the tests that drive the binary, COLMAP, headless Chromium and a one-node Slurm cluster
-# (labels integration, colmap, slurm); the unit tests and fuzz corpus
-# replays are built and run once, with AddressSanitizer + UndefinedBehaviorSanitizer (building
-# them at -O3 as well was a sixth of CI).
+# runs the tests that drive the binary, COLMAP, headless Chromium, a one-node Slurm cluster and the
+# Python module with Debian's python3 (labels integration, colmap, slurm, python); the unit tests
+# and fuzz corpus replays are built and run once, with AddressSanitizer + UndefinedBehaviorSanitizer
+# (building them at -O3 as well was a sixth of CI).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 jobs=$(nproc)

@@ -234,6 +234,59 @@ void WriteNerfCapture(const Capture& capture, const std::string& root) {
   WriteText(root + "/transforms.json", top.dump(2));
 }
 
+std::string NerfstudioName(int index) {
+  char name[32];
+  std::snprintf(name, sizeof(name), "frame_%05d.jpg", index + 1);
+  return name;
+}
+
+void WriteNerfstudio(const Capture& capture, const std::string& root,
+                     const Rigid3& applied_from_world) {
+  const Eigen::Matrix3d applied = applied_from_world.rotation.toRotationMatrix();
+  json applied_transform = json::array();
+  for (int r = 0; r < 3; ++r) {
+    applied_transform.push_back(
+        {applied(r, 0), applied(r, 1), applied(r, 2), applied_from_world.translation[r]});
+  }
+  json frames = json::array();
+  for (size_t i = 0; i < capture.frames.size(); ++i) {
+    const Frame& frame = capture.frames[i];
+    const std::string name = NerfstudioName(static_cast<int>(i));
+    const std::string stem = name.substr(0, name.size() - 4);
+    Copy(frame.image, root + "/images/" + name);
+    Copy(frame.image, root + "/images_2/" + name);
+    WriteText(root + "/depths/" + stem + ".png", "depth " + stem);
+    WriteText(root + "/masks/" + stem + ".png", "mask " + stem);
+    const Eigen::Matrix3d rotation = applied * WorldFromArkit(frame.world_from_cam);
+    const Eigen::Vector3d centre =
+        applied * frame.world_from_cam.translation + applied_from_world.translation;
+    json matrix = json::array();
+    for (int r = 0; r < 3; ++r) {
+      matrix.push_back({rotation(r, 0), rotation(r, 1), rotation(r, 2), centre[r]});
+    }
+    matrix.push_back({0.0, 0.0, 0.0, 1.0});
+    frames.push_back({{"file_path", "images/" + name},
+                      {"transform_matrix", matrix},
+                      {"colmap_im_id", i + 1},
+                      {"fl_x", frame.K(0, 0)},
+                      {"fl_y", frame.K(1, 1)},
+                      {"cx", ArkitK(frame.K)(0, 2)},
+                      {"cy", ArkitK(frame.K)(1, 2)},
+                      {"w", capture.width},
+                      {"h", capture.height},
+                      {"depth_file_path", "depths/" + stem + ".png"},
+                      {"mask_path", "masks/" + stem + ".png"},
+                      {"my_tag", "frame " + std::to_string(i)}});
+  }
+  WriteText(root + "/sparse_pc.ply", "ply\nformat ascii 1.0\nelement vertex 0\nend_header\n");
+  const json top = {{"camera_model", "OPENCV"},
+                    {"frames", frames},
+                    {"applied_transform", applied_transform},
+                    {"ply_file_path", "sparse_pc.ply"},
+                    {"my_note", "written by capture_fixtures"}};
+  WriteText(root + "/transforms.json", top.dump(4));
+}
+
 // A ZIP archive of stored (uncompressed) entries, as np.savez writes .npz files.
 std::string Crc32Zip(const std::vector<std::pair<std::string, std::string>>& entries) {
   const auto crc32 = [](const std::string& data) {

@@ -55,6 +55,18 @@ std::string Scanner3dName(int index);
 // ROOT/images/<i>.jpg.
 void WriteNerfCapture(const Capture& capture, const std::string& root);
 
+// nerfstudio, as `ns-process-data` lays out a folder: ROOT/images/frame_NNNNN.jpg (and
+// images_2/ with the same files, standing for its downscaled copies), depths/ and masks/ (one file
+// per frame), sparse_pc.ply and ROOT/transforms.json: camera_model, per-frame intrinsics
+// (nerfstudio's pixel convention: OpenCV's + 0.5), transform_matrix (camera-to-world, OpenGL axes)
+// in the world of `applied_from_world` (written as applied_transform, as ns-process-data writes the
+// transform it applied), colmap_im_id, depth_file_path, mask_path, and keys of the user's own per
+// frame ("my_tag") and at the top level ("my_note").
+void WriteNerfstudio(const Capture& capture, const std::string& root,
+                     const Rigid3& applied_from_world);
+// The name of capture frame i in a WriteNerfstudio fixture.
+std::string NerfstudioName(int index);
+
 // MobileBrick: ROOT/image/NNNNNN.jpg, intrinsic/NNNNNN.txt, pose/NNNNNN.txt (the capture's poses
 // written as the ground truth) and, when `arkit_from_world` is given, PoRF's cameras_arkit.npz
 // (as np.savez writes it) with world_mat_<i> = K inv(arkit_from_world * pose_i) and a scale_mat.

@@ -148,6 +148,10 @@ std::vector<FormatCase> Formats() {
   const Rigid3 lamar_rig_from_cam(
       Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitY())),
       Eigen::Vector3d(0.01, -0.02, 0.005));
+  // nerfstudio's applied_transform for COLMAP's world (z up), and a shift.
+  const Rigid3 nerfstudio_world(
+      Eigen::Quaterniond(Eigen::AngleAxisd(-M_PI / 2, Eigen::Vector3d::UnitX())),
+      Eigen::Vector3d(0.25, 0, -1));
   const auto microseconds = [](int i) {
     return std::to_string(std::llround((100.0 + 0.1 * i) * 1e6)) + ".jpg";  // SampleCapture times
   };
@@ -160,6 +164,12 @@ std::vector<FormatCase> Formats() {
        [](int i) { return fixtures::Scanner3dName(i); }, Rigid3()},
       {"nerfcapture", [](const auto& c, const auto& root) { fixtures::WriteNerfCapture(c, root); },
        [](int i) { return std::to_string(i) + ".jpg"; }, Rigid3()},
+      // A folder ns-process-data made: its poses after the applied_transform it states.
+      {"nerfstudio",
+       [=](const auto& c, const auto& root) {
+         fixtures::WriteNerfstudio(c, root, nerfstudio_world);
+       },
+       [](int i) { return fixtures::NerfstudioName(i); }, nerfstudio_world},
       // MobileBrick's capture poses are PoRF's ARKit copy (cameras_arkit.npz); its ground truth
       // (pose/) is in the folder too.
       {"mobilebrick",

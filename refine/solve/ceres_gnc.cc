@@ -5,6 +5,8 @@
 
 #include <algorithm>
 
+#include "core/interrupt.h"
+
 namespace raytime {
 namespace {
 
@@ -16,6 +18,8 @@ class CeresProgressCallback : public ceres::IterationCallback {
     // A rejected step's summary carries the candidate's (higher) cost; the solve is at the last
     // accepted one.
     if (summary.iteration == 0 || summary.step_is_successful) accepted_cost_ = summary.cost;
+    // Not thrown through Ceres: the solve is aborted and the driver stops after it (gnc.cc).
+    if (StopWasRequested()) return ceres::SOLVER_ABORT;
     progress_->Report(summary.iteration, accepted_cost_);
     return ceres::SOLVER_CONTINUE;
   }

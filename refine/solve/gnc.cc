@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/interrupt.h"
 #include "core/timing.h"
 
 namespace raytime {
@@ -18,6 +19,7 @@ GncProgress::GncProgress(int stage, int num_stages, double scale_px2)
            0) {}
 
 void GncProgress::Report(int iteration, double cost) {
+  StopPoint();  // an in-process run's Ctrl-C ends the solve here (core/interrupt.h)
   if (bar_.drawing()) {
     bar_.Update(iteration, fmt::format("cost {:.6g}", cost));
     return;
@@ -52,6 +54,7 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
   std::vector<GncStageSummary> stages;
   const int num_stages = static_cast<int>(settings.scales.size());
   for (int s = 0; s < num_stages; ++s) {
+    StopPoint();
     const double scale = settings.scales[s];
     GncStageSummary stage;
     {
@@ -59,6 +62,8 @@ std::vector<GncStageSummary> SolveGnc(GncBackend* backend, const GncSettings& se
       GncProgress progress(s + 1, num_stages, scale);
       stage = backend->SolveStage(scale, settings.StageTolerance(s), settings, &progress);
     }
+    // A Ceres stage aborted by a stop request ends here (ceres_gnc.cc).
+    StopPoint();
     stage.function_tolerance = settings.StageTolerance(s);
     if (settings.residual_norms) {
       backend->Publish();
