@@ -57,7 +57,11 @@ for deb in "$tmp"/deb/raytime_*.deb "$tmp"/deb/raytime-dev_*.deb; do
   echo "$(basename "$deb"): $(du -h "$deb" | cut -f1)"
   dpkg-deb -f "$deb" Depends | tee "$tmp/depends"
   case $(basename "$deb") in
-    raytime_*) expected="libopencv-core406 libhdf5 libtbb12 libyaml-cpp libspdlog libcholmod3" ;;
+    raytime_*)
+      expected="libopencv-core406 libhdf5 libtbb12 libyaml-cpp libspdlog libcholmod3"
+      # The module's own (python/CMakeLists.txt, RAYTIME_DEBIAN_DEPENDS).
+      if [[ -d "$python_dir/raytime" ]]; then expected+=" python3-numpy"; fi
+      ;;
     *) expected="raytime libceres-dev libopencv-dev libhdf5-dev libopengv-dev libxxhash-dev" ;;
   esac
   for package in $expected; do
