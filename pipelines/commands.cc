@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/process.h"
+#include "core/shipped_files.h"
 #include "core/timing.h"
 #include "evaluate/pose_errors.h"
 #include "formats/dataset.h"
@@ -28,15 +29,11 @@ namespace fs = std::filesystem;
 namespace raytime {
 namespace {
 
-// Campaign plots are drawn by scripts/plot_campaign.py (matplotlib), found in RAYTIME_SCRIPT_DIR
-// or, by default, in the source tree this binary was built from.
+// Campaign plots are drawn by scripts/plot_campaign.py (matplotlib), found in RAYTIME_SCRIPT_DIR,
+// the installed share/raytime/scripts or the source tree this binary was built from
+// (core/shipped_files.h).
 constexpr const char* kPython = "/usr/bin/python3";
 constexpr int kPlotExitNoMatplotlib = 3;  // plot_campaign.py: matplotlib is not installed
-
-fs::path ScriptDirectory() {
-  const char* env = std::getenv("RAYTIME_SCRIPT_DIR");
-  return env != nullptr && *env != '\0' ? env : RAYTIME_DEFAULT_SCRIPT_DIR;
-}
 
 // Reads the poses of `path` in `format`; "hdf5" reads pose set `set` (or the only one there).
 PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& format,
@@ -189,14 +186,16 @@ int RunReportCommand(const std::string& sweep_dir, std::string out_dir,
     spdlog::info(fmt::format("report: downstream 3DGS (Table 4) cells: {}", splat_path));
   }
 
-  const std::string script = (ScriptDirectory() / "plot_campaign.py").string();
   if (!fs::exists(kPython)) {
     spdlog::warn(fmt::format("report: {} not found, no plots written", kPython));
     return 0;
   }
-  if (!fs::exists(script)) {
-    spdlog::warn(fmt::format(
-        "report: plot script {} not found (set RAYTIME_SCRIPT_DIR), no plots written", script));
+  const ShippedDirectory scripts = FindShippedDirectory("RAYTIME_SCRIPT_DIR", "scripts");
+  const std::string script = (scripts.path / "plot_campaign.py").string();
+  if (scripts.path.empty() || !fs::exists(script)) {
+    spdlog::warn(
+        fmt::format("report: plot script plot_campaign.py not found in {}, no plots written",
+                    scripts.Searched()));
     return 0;
   }
   const ProcessStatus status = RunProcess({kPython, script, cells_path, out_dir});

@@ -7,8 +7,9 @@
 // stages such as export use them, and /json/refined_intrinsics).
 //
 // Named presets are YAML files configs/presets/refine/<name>.yaml (directory RAYTIME_PRESET_DIR
-// in the environment, else the source tree's configs/presets); a key given explicitly in the
-// pipeline, in --set or on the command line always overrides the preset's, whatever its value.
+// in the environment, else the installed share/raytime/configs/presets, else the source tree's:
+// core/shipped_files.h); a key given explicitly in the pipeline, in --set or on the command line
+// always overrides the preset's, whatever its value.
 #include <fmt/ranges.h>
 #include <spdlog/spdlog.h>
 
@@ -24,6 +25,7 @@
 #include "core/error.h"
 #include "core/hdf5_store.h"
 #include "core/json_fields.h"
+#include "core/shipped_files.h"
 #include "core/warnings.h"
 #include "pipelines/stages.h"
 #include "refine/scene.h"
@@ -67,9 +69,14 @@ struct RefineStageOptions {
   void CheckRelations(const Requirement& require) const { refine.CheckRelations(require); }
 };
 
+// InputError naming every place it looked when none holds the presets (an installed binary
+// without its share/raytime, a moved build tree).
 fs::path PresetDirectory() {
-  const char* env = std::getenv("RAYTIME_PRESET_DIR");
-  return fs::path(env != nullptr && *env != '\0' ? env : RAYTIME_DEFAULT_PRESET_DIR) / "refine";
+  const ShippedDirectory presets = FindShippedDirectory("RAYTIME_PRESET_DIR", "configs/presets");
+  if (presets.path.empty()) {
+    throw InputError("refine.preset: no preset folder found; looked in " + presets.Searched());
+  }
+  return presets.path / "refine";
 }
 
 std::vector<std::string> PresetNames() {
