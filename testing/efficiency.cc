@@ -141,7 +141,8 @@ Eigen::MatrixXd ReducedInformation(const SyntheticScene& scene,
       const std::unique_ptr<ceres::CostFunction> cost(ReprojectionAboutTruth::Create(
           scene.ground_truth[i], scene.input.CameraOf(i), Eigen::Vector2d::Zero()));
       const double* parameters[3] = {zero, zero, track.point.data()};
-      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> J_phi, J_centre, J_point;
+      Eigen::Matrix<double, 2, 3, Eigen::RowMajor> J_phi = Eigen::Matrix<double, 2, 3>::Zero(),
+                                                   J_centre = J_phi, J_point = J_phi;
       double* jacobians[3] = {J_phi.data(), J_centre.data(), J_point.data()};
       double residual[2];
       cost->Evaluate(parameters, residual, jacobians);
