@@ -134,6 +134,7 @@ struct ArmResult {
 
 int Main(int argc, char** argv) {
   EfficiencyOptions bench;
+  if (argc % 2 == 0) throw InputError(std::string(argv[argc - 1]) + ": an option without a value");
   for (int a = 1; a + 1 < argc; a += 2) {
     const std::string key = argv[a];
     const std::string value = argv[a + 1];
