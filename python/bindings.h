@@ -3,6 +3,10 @@
 #pragma once
 
 #include <pybind11/pybind11.h>
+// The STL conversions in every source of the module: a source without them binds
+// std::vector<std::string> as an opaque type, which a unity build hid (pybind11 asks for one
+// choice per type across the module).
+#include <pybind11/stl.h>
 
 #include <functional>
 

@@ -1,7 +1,6 @@
 // _raytime.read_poses / write_poses: the pose files formats/ reads (those of `raytime evaluate
 // --est-format`, a raytime HDF5 file's pose set too) and writes (a COLMAP model, nerfstudio's
 // transforms.json, a TUM trajectory), as names and (N, 4, 4) camera-to-world arrays.
-#include <pybind11/stl.h>
 
 #include <algorithm>
 #include <string>

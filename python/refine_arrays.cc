@@ -2,7 +2,6 @@
 // elsewhere (pycolmap, hloc, a synthetic scene), given as arrays instead of a work directory's
 // HDF5 files. The options are read as the stage reads a pipeline's (pipelines/refine_stage.cc:
 // the preset, then the given keys, then one validation), so a key means the same in both.
-#include <pybind11/stl.h>
 
 #include <algorithm>
 #include <nlohmann/json.hpp>
