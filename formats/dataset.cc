@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "core/error.h"
+#include "core/hdf5_store.h"
 #include "core/intrinsics.h"
 #include "core/options.h"
 #include "formats/arkitscenes.h"
@@ -242,6 +243,22 @@ PoseSet ReadPoseFile(const std::string& format, const std::string& path, const I
   }
   RequireUtf8Names(Names(poses), path);
   return poses;
+}
+
+PoseSet ReadPoseFileOrSet(const std::string& format, const std::string& path,
+                          const std::string& pose_set, const std::string& choose) {
+  if (format != "hdf5") return ReadPoseFile(format, path);
+  const Hdf5Reader reader(path);
+  std::string name = pose_set;
+  if (name.empty()) {
+    const std::vector<std::string> names = reader.PoseSetNames();
+    if (names.size() != 1) {
+      ThrowInput(path, 0,
+                 "holds " + std::to_string(names.size()) + " pose sets: choose one " + choose);
+    }
+    name = names.front();
+  }
+  return reader.ReadPoseSet(name);
 }
 
 }  // namespace raytime

@@ -135,4 +135,10 @@ extern const std::vector<std::string> kPoseFileFormats;
 PoseSet ReadPoseFile(const std::string& format, const std::string& path,
                      const ImageSet* images = nullptr);
 
+// ReadPoseFile, or for format "hdf5" a pose set of a raytime HDF5 file: `pose_set`, or the only
+// one there; with several and none named, an InputError ending "choose one `choose`" (how the
+// caller names a set: "with --est-set/--gt-set", "(pose_set=)").
+PoseSet ReadPoseFileOrSet(const std::string& format, const std::string& path,
+                          const std::string& pose_set, const std::string& choose);
+
 }  // namespace raytime

@@ -12,7 +12,6 @@
 
 #include "core/atomic_file.h"
 #include "core/error.h"
-#include "core/hdf5_store.h"
 #include "core/process.h"
 #include "core/shipped_files.h"
 #include "core/timing.h"
@@ -34,24 +33,8 @@ namespace {
 // (core/shipped_files.h).
 constexpr const char* kPython = "/usr/bin/python3";
 constexpr int kPlotExitNoMatplotlib = 3;  // plot_campaign.py: matplotlib is not installed
-
-// Reads the poses of `path` in `format`; "hdf5" reads pose set `set` (or the only one there).
-PoseSet ReadPosesForEvaluation(const std::string& path, const std::string& format,
-                               const std::string& set) {
-  if (format != "hdf5") return ReadPoseFile(format, path);
-  const Hdf5Reader reader(path);
-  std::string name = set;
-  if (name.empty()) {
-    const auto names = reader.PoseSetNames();
-    if (names.size() != 1) {
-      ThrowInput(path, 0,
-                 "holds " + std::to_string(names.size()) +
-                     " pose sets: choose one with --est-set/--gt-set");
-    }
-    name = names.front();
-  }
-  return reader.ReadPoseSet(name);
-}
+// How `raytime evaluate` names one pose set of an HDF5 file holding several.
+constexpr const char* kChooseSet = "with --est-set/--gt-set";
 
 }  // namespace
 
@@ -63,8 +46,8 @@ int RunEvaluateCommand(const std::string& est, const std::string& est_format,
   options.alignment = align;
   options.success_rotation_deg = success_deg;
   const PoseErrorSummary errors =
-      ComputePoseErrors(ReadPosesForEvaluation(est, est_format, est_set),
-                        ReadPosesForEvaluation(gt, gt_format, gt_set), options);
+      ComputePoseErrors(ReadPoseFileOrSet(est_format, est, est_set, kChooseSet),
+                        ReadPoseFileOrSet(gt_format, gt, gt_set, kChooseSet), options);
   if (as_json) {
     std::cout << errors.ToJson().dump(2) << "\n";
     return 0;

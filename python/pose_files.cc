@@ -7,7 +7,6 @@
 #include <vector>
 
 #include "core/error.h"
-#include "core/hdf5_store.h"
 #include "core/options.h"
 #include "formats/colmap_model.h"
 #include "formats/dataset.h"
@@ -23,26 +22,9 @@ namespace {
 
 const std::vector<std::string> kWritableFormats = {"colmap", "colmap_binary", "nerfstudio", "tum"};
 
-// The poses of `path`; "hdf5" reads pose set `pose_set` (or the only one there).
-PoseSet ReadAnyPoses(const std::string& path, const std::string& format,
-                     const std::string& pose_set) {
-  if (format != "hdf5") return ReadPoseFile(format, path);
-  const Hdf5Reader reader(path);
-  std::string name = pose_set;
-  if (name.empty()) {
-    const std::vector<std::string> names = reader.PoseSetNames();
-    if (names.size() != 1) {
-      ThrowInput(path, 0,
-                 "holds " + std::to_string(names.size()) + " pose sets: choose one (pose_set=)");
-    }
-    name = names.front();
-  }
-  return reader.ReadPoseSet(name);
-}
-
 py::tuple ReadPoses(const std::string& path, const std::string& format,
                     const std::string& pose_set) {
-  const PoseSet poses = ReadAnyPoses(path, format, pose_set);
+  const PoseSet poses = ReadPoseFileOrSet(format, path, pose_set, "(pose_set=)");
   std::vector<std::string> names;
   std::vector<Rigid3> world_from_cam;
   for (const auto& [name, pose] : poses.world_from_cam) {
