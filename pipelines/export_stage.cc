@@ -20,6 +20,7 @@
 #include "formats/nerfstudio_folder.h"
 #include "formats/tum.h"
 #include "pipelines/stages.h"
+#include "refine/scene.h"
 #include "splat/trainer_export.h"
 
 namespace fs = std::filesystem;
@@ -106,12 +107,6 @@ std::string ImagePrefixFor(const std::string& path, const std::string& image_roo
   return prefix.back() == '/' ? prefix : prefix + "/";
 }
 
-// Verdict reasons of frames no solve refined: their pose, if any, is the prior's.
-bool NotRefined(const std::string& reason) {
-  return reason == "returned_prior" || reason == "unmatched" || reason == "not_solved" ||
-         reason == "non_finite";
-}
-
 // The refine stage's frame verdicts beside pose set `name` (kFrameVerdictsJson), by image name;
 // empty for a set without them (not refined).
 nlohmann::json VerdictsOf(const Hdf5Reader& reader) {
@@ -140,9 +135,9 @@ PoseSet ExportablePoses(const StageContext& context, const std::string& name,
   for (const auto& [image, verdict] : verdicts->items()) {
     const std::string reason = verdict.value("reason", "");
     const bool left_out =
-        NotRefined(reason) || (leave_out_doubted && verdict.value("verdict", "") == "doubted");
+        !RefinedBySolve(reason) || (leave_out_doubted && verdict.value("verdict", "") == "doubted");
     if (!left_out || !poses.world_from_cam.erase(image)) continue;
-    Warning& warning = NotRefined(reason) ? unrefined : doubted;
+    Warning& warning = !RefinedBySolve(reason) ? unrefined : doubted;
     warning.images.push_back(image);
     warning.details["reasons"][image] = reason;
   }

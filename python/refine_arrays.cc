@@ -178,11 +178,12 @@ py::tuple Refine(const std::vector<py::dict>& cameras, const PoseArray& poses,
   for (size_t i = 0; i < names.size(); ++i) {
     const auto found = scene.refined.world_from_cam.find(names[i]);
     if (found == scene.refined.world_from_cam.end()) continue;
+    // The refined pose set keeps a frame a guardrail returned as the prior, or whose pose is not
+    // finite: not refined, so the caller's pose stays.
+    const nlohmann::json verdict = scene.frame_verdicts.value(names[i], nlohmann::json::object());
+    if (!RefinedBySolve(verdict.value("reason", ""))) continue;
     refined_poses[i] = found->second;
-    // The refined pose set keeps a frame a guardrail returned as the prior; it was not refined.
-    refined[i] =
-        scene.frame_verdicts.value(names[i], nlohmann::json::object()).value("reason", "") !=
-        "returned_prior";
+    refined[i] = true;
   }
   nlohmann::json summary = scene.summary.ToJson();
   summary["preset"] = options.preset;

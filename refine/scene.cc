@@ -298,6 +298,11 @@ EarlierSolution EarlierSolutionOf(const nlohmann::json& pass_poses,
   return earlier;
 }
 
+bool RefinedBySolve(const std::string& reason) {
+  return reason != "returned_prior" && reason != "unmatched" && reason != "not_solved" &&
+         reason != "non_finite";
+}
+
 SceneResult RefineScene(const SceneInput& input, const RefineOptions& options) {
   SceneResult result;
   const ImageSet& images = *input.images;

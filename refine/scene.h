@@ -73,6 +73,12 @@ struct SceneResult {
   nlohmann::json refined_intrinsics;
 };
 
+// Whether a frame whose verdict gives `reason` was refined by a solve: not when no solve took it
+// (unmatched, not_solved), a guardrail returned the prior's pose (returned_prior) or the solve's
+// pose is not finite (non_finite). Its pose in SceneResult::refined, if any, is then no refined
+// pose.
+bool RefinedBySolve(const std::string& reason);
+
 // Steps 1-5 above. InputError when the prior is refused (its convention) or no verified pair joins
 // two images with a prior pose, and as RefinePoses on inconsistent input.
 SceneResult RefineScene(const SceneInput& input, const RefineOptions& options);
