@@ -74,17 +74,27 @@ class WorkdirLock {
   int fd_ = -1;
 };
 
+// The pipeline's stages configured once for the checks below, with their ids; a stage whose
+// options do not configure is left out (said by the stage when it runs).
+using ConfiguredStageList = std::vector<std::pair<std::string, std::unique_ptr<Stage>>>;
+ConfiguredStageList ConfiguredStages(const PipelineSpec& spec) {
+  ConfiguredStageList stages;
+  for (const PipelineStageSpec& stage_spec : spec.stages) {
+    std::unique_ptr<Stage> stage =
+        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
+    if (stage) stages.emplace_back(stage_spec.id, std::move(stage));
+  }
+  return stages;
+}
+
 // The work directory is refused where it is, or lies inside, a folder a stage reads whole (the
 // dataset's image folder): raytime would write summary.json among the images and read it back as
 // one. Resolved as the operating system resolves paths (links followed).
-void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& workdir) {
+void RefuseWorkdirInInputFolder(const ConfiguredStageList& stages, const std::string& workdir) {
   std::error_code error;
   const fs::path work = fs::weakly_canonical(fs::absolute(workdir), error);
   if (error) return;
-  for (const PipelineStageSpec& stage_spec : spec.stages) {
-    const std::unique_ptr<Stage> stage =
-        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
-    if (!stage) continue;  // said by the stage when it runs
+  for (const auto& [stage_id, stage] : stages) {
     for (const std::string& folder : stage->InputFolders()) {
       const fs::path input = fs::weakly_canonical(fs::absolute(folder), error);
       if (error) continue;
@@ -92,7 +102,7 @@ void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& wor
       if (inside.empty() || *inside.begin() == "..") continue;
       throw InputError(workdir + ": the work directory is " +
                        (inside == "." ? std::string("") : "inside ") + "the folder " +
-                       input.string() + " that stage " + stage_spec.id +
+                       input.string() + " that stage " + stage_id +
                        " reads whole (the dataset's images): raytime would write its files among "
                        "them and read them back as images; give a --workdir outside it");
     }
@@ -103,15 +113,12 @@ void RefuseWorkdirInInputFolder(const PipelineSpec& spec, const std::string& wor
 // which export nerfstudio_in_place writes in the work directory, when the work directory is the
 // dataset's folder): refused before anything runs, since a failed run's stale outputs are moved
 // aside and the user's file would go with them.
-void RefuseOutputsOverInputs(const PipelineSpec& spec, const std::string& workdir) {
+void RefuseOutputsOverInputs(const ConfiguredStageList& stages, const std::string& workdir) {
   std::vector<std::pair<std::string, std::string>> outputs;  // path, stage id
   std::vector<std::string> inputs;
-  for (const PipelineStageSpec& stage_spec : spec.stages) {
-    const std::unique_ptr<Stage> stage =
-        ConfiguredStageOrNull(stage_spec.type, stage_spec.options, spec.path);
-    if (!stage) continue;  // said by the stage when it runs
+  for (const auto& [stage_id, stage] : stages) {
     for (const std::string& output : stage->ExtraOutputs()) {
-      outputs.emplace_back((fs::path(workdir) / output).string(), stage_spec.id);
+      outputs.emplace_back((fs::path(workdir) / output).string(), stage_id);
     }
     try {
       const std::vector<std::string> files = stage->ExternalFiles();
@@ -148,8 +155,9 @@ nlohmann::json RunPipeline(const PipelineSpec& spec, const RunOptions& options) 
     return RunSweep(spec, workdir, options);
   }
   ValidatePipeline(spec);
-  RefuseWorkdirInInputFolder(spec, workdir);
-  RefuseOutputsOverInputs(spec, workdir);
+  const ConfiguredStageList stages = ConfiguredStages(spec);
+  RefuseWorkdirInInputFolder(stages, workdir);
+  RefuseOutputsOverInputs(stages, workdir);
   const WorkdirLock lock(workdir);
   return RunStages(spec, workdir, options);
 }
