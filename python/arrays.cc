@@ -11,8 +11,8 @@ namespace py = pybind11;
 namespace raytime::python {
 
 PixelConvention PixelConventionFromName(const std::string& name) {
-  if (name == "opencv") return PixelConvention::kOpenCv;
-  if (name == "colmap") return PixelConvention::kColmap;
+  PixelConvention convention = PixelConvention::kOpenCv;
+  if (EnumFromName(name, &convention)) return convention;
   throw InputError("pixel_convention '" + name + "': expected 'opencv' or 'colmap'");
 }
 

@@ -7,10 +7,13 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <array>
+
 #include <string>
 #include <vector>
 
 #include "core/camera.h"
+#include "core/named_enum.h"
 #include "core/types.h"
 
 namespace raytime::python {
@@ -21,6 +24,9 @@ using PoseArray = pybind11::array_t<double, pybind11::array::c_style | pybind11:
 // top-left pixel at (0, 0), raytime's own) or COLMAP's (at (0.5, 0.5): pycolmap's cameras and
 // keypoints).
 enum class PixelConvention { kOpenCv, kColmap };
+constexpr std::array<EnumName<PixelConvention>, 2> EnumNames(PixelConvention) {
+  return {{{PixelConvention::kOpenCv, "opencv"}, {PixelConvention::kColmap, "colmap"}}};
+}
 PixelConvention PixelConventionFromName(const std::string& name);
 
 // {"model": COLMAP model name, "width", "height", "params": in COLMAP's order} as intrinsics.
