@@ -3,7 +3,8 @@
 // (a bundle adjustment with one point per track, the maximum-likelihood estimator under Gaussian
 // pixel noise) and against that bundle adjustment started at the truth. Not a test; no timings.
 //
-//   efficiency_bench [--draws N] [--seed S] [--level DEG] [--scenes calibration|long|all|tracks]
+//   efficiency_bench [--draws N] [--seed S] [--level DEG]
+//                    [--scenes calibration|long|all|tracks|outliers]
 //                    [--experiments 0|1]
 //
 // Every number is an error after the standard Sim(3) alignment on camera centres
@@ -58,7 +59,9 @@ SyntheticSceneOptions Calibrated(int cameras, int points, bool distortion) {
 // 3, pairs up to 2 apart; its two 8-camera 0.5 px cases differ only in λR, one scene here).
 // "long": more cameras and longer tracks. "tracks": one scene, one noise, the pairs matched up to
 // 1, 2, 3 apart and all of them: the same points and cameras with ever longer, more connected
-// tracks (the track-length experiment).
+// tracks (the track-length experiment). "outliers": a fraction of every pair's matches replaced by
+// a random keypoint (SyntheticSceneOptions::outlier_fraction); the bound and the bundle adjustment
+// from the truth are the oracle's, on the right matches only (the same scene without them).
 std::vector<SceneCase> Scenes(const std::string& which) {
   std::vector<SceneCase> scenes;
   if (which == "calibration" || which == "all") {
@@ -83,8 +86,22 @@ std::vector<SceneCase> Scenes(const std::string& which) {
           {gap == 0 ? "12 cams, all pairs" : "12 cams, gap " + std::to_string(gap), options, 0.5});
     }
   }
+  if (which == "outliers") {
+    for (const double fraction : {0.1, 0.3}) {
+      SyntheticSceneOptions options = Calibrated(8, 300, false);
+      options.outlier_fraction = fraction;
+      scenes.push_back({"8 cams, " + std::to_string(static_cast<int>(100 * fraction)) +
+                            " % wrong matches",
+                        options, 0.5});
+    }
+    SyntheticSceneOptions arc = Calibrated(24, 600, false);
+    arc.arc_span_deg = 150.0;
+    arc.max_pair_gap = 3;
+    arc.outlier_fraction = 0.2;
+    scenes.push_back({"24 cams, 150° arc, gap 3, 20 % wrong matches", arc, 0.5});
+  }
   if (scenes.empty()) {
-    throw InputError("--scenes " + which + ": one of calibration, long, all, tracks");
+    throw InputError("--scenes " + which + ": one of calibration, long, all, tracks, outliers");
   }
   return scenes;
 }
@@ -108,6 +125,9 @@ struct Arm {
 std::vector<Arm> Arms(bool experiments) {
   const RefineOptions preset = AutoPreset();
   std::vector<Arm> arms = {{"auto", preset}};
+  // The before column: the ray-time solution the track finish starts from (issue 50).
+  arms.push_back({"no track finish (before)", preset});
+  arms.back().options.track_finish = false;
   if (!experiments) return arms;
   arms.push_back({"λR 0 (no orientation prior)", preset});
   arms.back().options.orientation_weight = 0.0;
@@ -130,6 +150,7 @@ std::vector<Arm> Arms(bool experiments) {
 struct ArmResult {
   RmsPoseErrorSum errors;
   int prior_kept = 0;
+  int finish_accepted = 0;
 };
 
 int Main(int argc, char** argv) {
@@ -167,16 +188,20 @@ int Main(int argc, char** argv) {
       bench.draws, static_cast<unsigned long long>(bench.seed), bench.level_deg,
       bench.scenes.c_str(), bench.level_deg, 1.25 * bench.level_deg);
   std::printf(
-      "| scene | images | tracks | mean track | noise px | draws | auto rot / centre | prior kept "
-      "| BA from truth rot / centre | bound rot / centre | auto / bound rot, centre | BA / bound "
-      "rot, centre |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "| scene | images | tracks | mean track | noise px | draws | before: no track finish rot / "
+      "centre | auto rot / centre | finish kept | prior kept | BA from truth rot / centre | bound "
+      "rot / centre | before / bound rot, centre | auto / bound rot, centre | BA / bound rot, "
+      "centre |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   std::vector<std::string> experiment_rows;
   for (const SceneCase& scene_case : scenes) {
     const SyntheticScene scene = MakeSyntheticScene(scene_case.options);
-    const std::vector<SceneTrack> tracks = MatchedTracks(scene);
+    SyntheticSceneOptions without_outliers = scene_case.options;
+    without_outliers.outlier_fraction = 0.0;
+    const SyntheticScene clean = MakeSyntheticScene(without_outliers);
+    const std::vector<SceneTrack> tracks = MatchedTracks(clean);
     size_t observations = 0;
     for (const SceneTrack& track : tracks) observations += track.observations.size();
-    const RmsPoseError bound = CramerRaoBound(scene, tracks, scene_case.sigma_px);
+    const RmsPoseError bound = CramerRaoBound(clean, tracks, scene_case.sigma_px);
     std::vector<ArmResult> results(arms.size());
     RmsPoseErrorSum ba;
     for (int d = 0; d < bench.draws; ++d) {
@@ -189,27 +214,31 @@ int Main(int argc, char** argv) {
       input.prior_world_from_cam =
           FromPoseSet(PerturbPoses(ToPoseSet(scene.ground_truth), perturbation),
                       static_cast<int>(scene.ground_truth.size()));
-      ba.Add(BundleAdjustFromTruth(scene, tracks, input.keypoints), scene.ground_truth);
+      ba.Add(BundleAdjustFromTruth(clean, tracks, input.keypoints), scene.ground_truth);
       for (size_t a = 0; a < arms.size(); ++a) {
         RefineOutput output;
         const RefineSummary summary = RefinePoses(input, arms[a].options, &output);
         results[a].errors.Add(output.world_from_cam, scene.ground_truth);
         if (summary.orientation_prior.kept) ++results[a].prior_kept;
+        if (summary.track_finish.accepted) ++results[a].finish_accepted;
       }
     }
     const RmsPoseError ba_rms = ba.Rms();
     const RmsPoseError auto_rms = results[0].errors.Rms();
+    const RmsPoseError before_rms = results[1].errors.Rms();
     std::printf(
-        "| %s | %zu | %zu | %.2f | %.2f | %d | %.4f° / %.4f | %d/%d | %.4f° / %.4f | %.4f° / "
-        "%.4f | %.2f, %.2f | %.2f, %.2f |\n",
+        "| %s | %zu | %zu | %.2f | %.2f | %d | %.4f° / %.4f | %.4f° / %.4f | %d/%d | %d/%d | "
+        "%.4f° / %.4f | %.4f° / %.4f | %.2f, %.2f | %.2f, %.2f | %.2f, %.2f |\n",
         scene_case.name.c_str(), scene.ground_truth.size(), tracks.size(),
         static_cast<double>(observations) / static_cast<double>(tracks.size()), scene_case.sigma_px,
-        bench.draws, auto_rms.rotation_deg, auto_rms.centre, results[0].prior_kept, bench.draws,
-        ba_rms.rotation_deg, ba_rms.centre, bound.rotation_deg, bound.centre,
+        bench.draws, before_rms.rotation_deg, before_rms.centre, auto_rms.rotation_deg,
+        auto_rms.centre, results[0].finish_accepted, bench.draws, results[0].prior_kept,
+        bench.draws, ba_rms.rotation_deg, ba_rms.centre, bound.rotation_deg, bound.centre,
+        before_rms.rotation_deg / bound.rotation_deg, before_rms.centre / bound.centre,
         auto_rms.rotation_deg / bound.rotation_deg, auto_rms.centre / bound.centre,
         ba_rms.rotation_deg / bound.rotation_deg, ba_rms.centre / bound.centre);
     std::fflush(stdout);
-    for (size_t a = 1; a < arms.size(); ++a) {
+    for (size_t a = 2; a < arms.size(); ++a) {
       const RmsPoseError rms = results[a].errors.Rms();
       char row[512];
       std::snprintf(row, sizeof(row), "| %s | %s | %.4f° / %.4f | %d/%d | %.2f, %.2f |",

@@ -235,6 +235,16 @@ struct RefineOptions {
   // of the match term costs them nothing); a weaker one lets the matches move what they do
   // constrain (measured for 0.01 and 1: docs/refine_options.md).
   double finish_anneal_hold_ratio = 1.0;
+  // The track finish (issue 50, refine/recipes/track_finish.h): after the last pass, a bundle
+  // adjustment with one point per track (the maximum-likelihood estimator under keypoint noise)
+  // over the matches the ray-time solution explains, returned only when its residuals imply the
+  // same keypoint noise and no frame moves more than track_finish_max_move_sigma of its ray-time
+  // σ; otherwise the ray-time solution stands and the summary says why. Fixed intrinsics only.
+  // Two right estimators differ by less than either's spread under the noise model, but the σ is
+  // the model's and real scenes' errors exceed it (correct finishes' moves on the Strecha scenes:
+  // docs/efficiency.md), while a finish pulled by wrong tracks moves frames by far more.
+  bool track_finish = false;
+  double track_finish_max_move_sigma = 5.0;
 
   // Frame checks after the solve (issue 46, refine/checks/frame_verdicts.h): a frame that moved far
   // more than the others and fits worse (refine/checks/frame_doubt.h; not for a prior whose
@@ -367,6 +377,12 @@ struct RefineOptions {
     v("finish_anneal_hold_ratio", finish_anneal_hold_ratio,
       "The finish anneal's λR towards the finish's rotations, as a multiple of the finish's λR",
       NonNegative(), AtMost(1e6));
+    v("track_finish", track_finish,
+      "After the last pass, a bundle adjustment with one point per track on the matches the "
+      "solution explains, kept only when its own check passes (fixed intrinsics)");
+    v("track_finish_max_move_sigma", track_finish_max_move_sigma,
+      "The track finish is rejected when a frame moves more than this many of its ray-time σ",
+      Positive(), AtMost(1e6));
     v("check_frame_doubts", check_frame_doubts,
       "Doubt frames that moved far more than the others and fit their matches worse (wrong "
       "intrinsics, a frame the solve could not place); not for a prior made from the match graph");

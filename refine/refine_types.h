@@ -322,6 +322,41 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(OrientationPriorProbe, enabled, weight, free_
                                    prior_match_cost_px2, increase, max_increase,
                                    max_rotation_change_deg, kept, prior_from_matches)
 
+// The track finish (RefineOptions::track_finish, refine/recipes/track_finish.h): a bundle
+// adjustment with one point per track from the ray-time solution, returned only when its own check
+// passes.
+struct TrackFinishSummary {
+  bool enabled = false;
+  bool ran = false;
+  bool accepted = false;  // its poses were returned (else the ray-time solution's)
+  // Why it did not run, or was rejected; "accepted" when it was returned.
+  std::string reason;
+  int num_matches = 0;       // the last pass's used matches
+  int num_inliers = 0;       // those both of whose residuals were within inlier_threshold_px
+  int num_tracks = 0;        // their union-find components, one observation per image
+  int num_conflicting = 0;   // components left out: two keypoints of one image
+  int num_observations = 0;  // of the adjusted tracks
+  int num_rejected = 0;      // observations the rejection round took
+  double inlier_threshold_px = 0.0;
+  double loss_scale_px2 = 0.0;
+  int iterations = 0;
+  // The keypoint noise each estimator's residuals imply (PoseUncertaintySummary::sigma_px), px.
+  double ray_time_sigma_px = 0.0;
+  double adjusted_sigma_px = 0.0;
+  // The largest per-frame move from the ray-time solution, in degrees and prior length units and
+  // as multiples of that frame's ray-time σ, and the frame it was.
+  double max_rotation_move_deg = 0.0;
+  double max_centre_move = 0.0;
+  double max_move_sigma = 0.0;
+  int max_move_image = -1;
+  double seconds = 0.0;
+};
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrackFinishSummary, enabled, ran, accepted, reason, num_matches,
+                                   num_inliers, num_tracks, num_conflicting, num_observations,
+                                   num_rejected, inlier_threshold_px, loss_scale_px2, iterations,
+                                   ray_time_sigma_px, adjusted_sigma_px, max_rotation_move_deg,
+                                   max_centre_move, max_move_sigma, max_move_image, seconds)
+
 // The basin-first solve's wrong-pair removal (RefineOptions::max_pair_removal_rounds).
 struct PairRemovalSummary {
   bool enabled = false;
@@ -426,6 +461,7 @@ struct RefineSummary {
   RefineGuardrails guardrails;
   // How well the last pass's solution determines each camera (refine/checks/pose_uncertainty.h).
   PoseUncertaintySummary uncertainty;
+  TrackFinishSummary track_finish;
   // The bins of every GNC stage's residual_histogram (ResidualHistogramEdgesPx()).
   std::vector<double> residual_histogram_edges_px = ResidualHistogramEdgesPx();
   // D, the prior's depth scale the position prior is measured in (λp/N Σ|ΔO|²/D²; prior length
@@ -449,8 +485,9 @@ struct RefineSummary {
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(RefineSummary, passes, cameras, total_iterations, initial_cost,
                                    final_cost, timings, orientation_prior, pair_removal, decision,
-                                   guardrails, uncertainty, residual_histogram_edges_px,
-                                   prior_depth, components, frame_doubts, frame_intrinsics,
-                                   frame_verdicts, prior_trust, warnings)
+                                   guardrails, uncertainty, track_finish,
+                                   residual_histogram_edges_px, prior_depth, components,
+                                   frame_doubts, frame_intrinsics, frame_verdicts, prior_trust,
+                                   warnings)
 
 }  // namespace raytime

@@ -19,6 +19,7 @@
 #include "refine/solve/ray_time_lm_solver.h"
 #include "refine/solve/reduced_camera_system.h"
 #include "refine/solve/similarity_retraction.h"
+#include "refine/solve/track_adjustment.h"
 
 namespace raytime {
 namespace {
@@ -341,17 +342,17 @@ struct GaugeFit {
   Eigen::MatrixXd fit;         // F, 7 × 6n
 };
 
-GaugeFit LinearizedGaugePolish(const RayTimeLmProblem& problem, const ReducedCameraPattern& pattern,
+GaugeFit LinearizedGaugePolish(const std::vector<Rigid3>& world_from_cam,
+                               const std::vector<int>& variable, int num_variables,
                                const PoseUncertaintySettings& settings) {
-  const std::vector<int>& variable = pattern.variables();
-  const int n = 6 * pattern.num_variables();
-  const Eigen::Vector3d pivot = SimilarityPivot(problem.world_from_cam, variable);
+  const int n = 6 * num_variables;
+  const Eigen::Vector3d pivot = SimilarityPivot(world_from_cam, variable);
   Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, 7);
   Eigen::VectorXd w(n);
   for (size_t i = 0; i < variable.size(); ++i) {
     const int c = variable[i];
     if (c < 0) continue;
-    G.middleRows<6>(6 * c) = SimilarityTangent(problem.world_from_cam[i].translation - pivot);
+    G.middleRows<6>(6 * c) = SimilarityTangent(world_from_cam[i].translation - pivot);
     w.segment<3>(6 * c).setConstant(settings.gauge_orientation_weight);
     w.segment<3>(6 * c + 3).setConstant(settings.gauge_position_weight);
   }
@@ -360,6 +361,49 @@ GaugeFit LinearizedGaugePolish(const RayTimeLmProblem& problem, const ReducedCam
   out.fit = (G.transpose() * WG).completeOrthogonalDecomposition().solve(WG.transpose());
   out.generators = std::move(G);
   return out;
+}
+
+// Each variable camera's covariance σ² A M Aᵀ with A = P S⁻¹ (P the gauge polish's projection),
+// into summary->cameras (per image; `variable` maps an image to its camera block or -1) and the
+// medians. False, with summary->reason, when S is not positive definite.
+bool CovarianceOnTheGauge(const Eigen::MatrixXd& S, const Eigen::MatrixXd& M,
+                          const std::vector<Rigid3>& world_from_cam,
+                          const std::vector<int>& variable, int num_variables,
+                          const PoseUncertaintySettings& settings,
+                          PoseUncertaintySummary* summary) {
+  const int n = 6 * num_variables;
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success) {
+    summary->reason = "the reduced camera matrix is not positive definite";
+    return false;
+  }
+  // Cov = σ² A M Aᵀ with A = P S⁻¹ = S⁻¹ − G (F S⁻¹); only its diagonal blocks are needed.
+  Eigen::MatrixXd A = llt.solve(Eigen::MatrixXd::Identity(n, n));
+  const GaugeFit gauge = LinearizedGaugePolish(world_from_cam, variable, num_variables, settings);
+  A -= gauge.generators * (gauge.fit * A);
+  // M is block-sparse (cameras that share observations): A·M costs n·nnz(M), not n³ (the
+  // 457-frame desk: most of the estimate's time when dense).
+  const Eigen::SparseMatrix<double> sparse_M = M.sparseView();
+  const Eigen::MatrixXd AM = A * sparse_M;
+  const double variance = summary->sigma_px * summary->sigma_px;
+
+  std::vector<double> rotations, centres;
+  for (size_t i = 0; i < variable.size(); ++i) {
+    const int c = variable[i];
+    if (c < 0) continue;
+    PoseUncertainty& u = summary->cameras[i];
+    const Eigen::Matrix<double, 6, 6> covariance =
+        variance * AM.middleRows<6>(6 * c) * A.middleRows<6>(6 * c).transpose();
+    u.rotation_deg =
+        DegreesFromRadians(std::sqrt(std::max(0.0, covariance.topLeftCorner<3, 3>().trace())));
+    u.centre = std::sqrt(std::max(0.0, covariance.bottomRightCorner<3, 3>().trace()));
+    rotations.push_back(u.rotation_deg);
+    centres.push_back(u.centre);
+  }
+  summary->median_rotation_deg = Median(rotations, 0.0);
+  summary->median_centre = Median(centres, 0.0);
+  summary->computed = true;
+  return true;
 }
 
 }  // namespace
@@ -402,38 +446,120 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
                                          (1.0 - static_cast<double>(num_parameters) / num_scalar)));
   summary.sigma_px = settings.sigma_px > 0.0 ? settings.sigma_px : summary.sigma_px_estimated;
 
-  const int n = 6 * num_variable;
-  const Eigen::LLT<Eigen::MatrixXd> llt(system.S);
-  if (llt.info() != Eigen::Success) {
-    summary.reason = "the reduced camera matrix is not positive definite";
+  CovarianceOnTheGauge(system.S, system.M, problem.world_from_cam, pattern.variables(),
+                       num_variable, settings, &summary);
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+namespace {
+
+// The bundle adjustment's reduction at its solution: per track, the point's curvature H_pp, the
+// cameras' couplings K_j = H_cjp H_pp⁻¹, S −= K H_pc and the observations' noise blocks
+// N_o = a (e_o J_coᵀ − K J_poᵀ) into M (a the match term's weight 1/K), and Σ |r|².
+struct TrackSystem {
+  Eigen::MatrixXd S, M;
+  double squares = 0.0;  // Σ |r|²
+};
+
+void ReduceTrack(const TrackAdjustmentProblem& problem, const std::vector<int>& observations,
+                 const std::vector<int>& variable, double weight, TrackSystem* system) {
+  const size_t m = observations.size();
+  std::vector<Eigen::Matrix<double, 2, 6>> Jc(m);
+  std::vector<Eigen::Matrix<double, 2, 3>> Jp(m);
+  std::vector<double> a(m);
+  std::vector<int> camera(m);
+  Eigen::Matrix3d Hpp = Eigen::Matrix3d::Zero();
+  for (size_t j = 0; j < m; ++j) {
+    const int o = observations[j];
+    system->squares += TrackResidual(problem, o).squaredNorm();
+    TrackResidualJacobians(problem, o, &Jc[j], &Jp[j]);
+    a[j] = weight;
+    camera[j] = variable[problem.observation_image[o]];
+    Hpp += a[j] * Jp[j].transpose() * Jp[j];
+  }
+  const Eigen::Matrix3d Hpp_inverse = Hpp.inverse();
+  std::vector<Eigen::Matrix<double, 6, 3>> K(m);
+  for (size_t j = 0; j < m; ++j) K[j] = a[j] * Jc[j].transpose() * Jp[j] * Hpp_inverse;
+  for (size_t j = 0; j < m; ++j) {
+    if (camera[j] < 0) continue;
+    system->S.block<6, 6>(6 * camera[j], 6 * camera[j]) += a[j] * Jc[j].transpose() * Jc[j];
+    for (size_t l = 0; l < m; ++l) {
+      if (camera[l] < 0) continue;
+      system->S.block<6, 6>(6 * camera[j], 6 * camera[l]) -=
+          K[j] * (a[l] * Jp[l].transpose() * Jc[l]);
+    }
+  }
+  for (size_t o = 0; o < m; ++o) {
+    std::vector<Eigen::Matrix<double, 6, 2>> N(m);
+    for (size_t j = 0; j < m; ++j) {
+      N[j] = -K[j] * (a[o] * Jp[o].transpose());
+      if (j == o) N[j] += a[o] * Jc[o].transpose();
+    }
+    for (size_t j = 0; j < m; ++j) {
+      if (camera[j] < 0) continue;
+      for (size_t l = 0; l < m; ++l) {
+        if (camera[l] >= 0) {
+          system->M.block<6, 6>(6 * camera[j], 6 * camera[l]) += N[j] * N[l].transpose();
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+
+PoseUncertaintySummary EstimateTrackPoseUncertainty(const TrackAdjustmentProblem& problem,
+                                                    const PoseUncertaintySettings& settings) {
+  const auto start = std::chrono::steady_clock::now();
+  PoseUncertaintySummary summary;
+  summary.estimator = "track_adjustment";
+  const int num_images = static_cast<int>(problem.world_from_cam.size());
+  summary.cameras.resize(num_images);
+  const int num_observations = static_cast<int>(problem.observation_track.size());
+  std::vector<int> variable(num_images, -1);
+  for (const int image : problem.observation_image) variable[image] = 0;
+  int num_variable = 0;
+  for (int& v : variable) v = v < 0 ? -1 : num_variable++;
+  if (num_variable < 2) {
+    summary.reason = "fewer than two cameras reached by residuals";
     return summary;
   }
-  // Cov = σ² A M Aᵀ with A = P S⁻¹ = S⁻¹ − G (F S⁻¹); only its diagonal blocks are needed.
-  Eigen::MatrixXd A = llt.solve(Eigen::MatrixXd::Identity(n, n));
-  const GaugeFit gauge = LinearizedGaugePolish(problem, pattern, settings);
-  A -= gauge.generators * (gauge.fit * A);
-  // M is block-sparse (cameras that share observations): A·M costs n·nnz(M), not n³ (the
-  // 457-frame desk: most of the estimate's time when dense).
-  const Eigen::SparseMatrix<double> sparse_M = system.M.sparseView();
-  const Eigen::MatrixXd AM = A * sparse_M;
-  const double variance = summary.sigma_px * summary.sigma_px;
-
-  std::vector<double> rotations, centres;
-  for (size_t i = 0; i < pattern.variables().size(); ++i) {
-    const int c = pattern.variable(static_cast<int>(i));
-    if (c < 0) continue;
-    PoseUncertainty& u = summary.cameras[i];
-    const Eigen::Matrix<double, 6, 6> covariance =
-        variance * AM.middleRows<6>(6 * c) * A.middleRows<6>(6 * c).transpose();
-    u.rotation_deg =
-        DegreesFromRadians(std::sqrt(std::max(0.0, covariance.topLeftCorner<3, 3>().trace())));
-    u.centre = std::sqrt(std::max(0.0, covariance.bottomRightCorner<3, 3>().trace()));
-    rotations.push_back(u.rotation_deg);
-    centres.push_back(u.centre);
+  if (num_variable > settings.max_cameras) {
+    summary.reason = std::to_string(num_variable) + " cameras, above max_cameras " +
+                     std::to_string(settings.max_cameras) + " (dense covariance)";
+    return summary;
   }
-  summary.median_rotation_deg = Median(rotations, 0.0);
-  summary.median_centre = Median(centres, 0.0);
-  summary.computed = true;
+  const int num_scalar = 2 * num_observations;
+  const int num_parameters = 6 * num_variable + 3 * static_cast<int>(problem.points.size());
+  if (num_scalar <= num_parameters) {
+    summary.reason = "no redundancy: " + std::to_string(num_scalar) + " scalar residuals for " +
+                     std::to_string(num_parameters) + " parameters";
+    return summary;
+  }
+  std::vector<std::vector<int>> by_track(problem.points.size());
+  for (int o = 0; o < num_observations; ++o) by_track[problem.observation_track[o]].push_back(o);
+  TrackSystem system;
+  system.S = Eigen::MatrixXd::Zero(6 * num_variable, 6 * num_variable);
+  system.M = system.S;
+  for (const std::vector<int>& track : by_track) {
+    if (track.size() >= 2) ReduceTrack(problem, track, variable, 1.0 / num_observations, &system);
+  }
+  // The pose priors' curvature (noise-free: they hold the gauge the solve holds).
+  for (int i = 0; i < num_images; ++i) {
+    if (variable[i] < 0) continue;
+    Eigen::Matrix<double, 6, 1> residual;
+    Eigen::Matrix<double, 6, 6> jacobian;
+    PosePriorJacobian(problem.world_from_cam[i], problem.anchor[i],
+                      std::sqrt(2.0 * problem.orientation_weight / num_images),
+                      std::sqrt(2.0 * problem.position_weight / num_images), &residual, &jacobian);
+    system.S.block<6, 6>(6 * variable[i], 6 * variable[i]) += jacobian.transpose() * jacobian;
+  }
+  summary.sigma_px_estimated =
+      std::sqrt(system.squares / (num_scalar - static_cast<double>(num_parameters)));
+  summary.sigma_px = settings.sigma_px > 0.0 ? settings.sigma_px : summary.sigma_px_estimated;
+  CovarianceOnTheGauge(system.S, system.M, problem.world_from_cam, variable, num_variable, settings,
+                       &summary);
   summary.seconds = SecondsSince(start);
   return summary;
 }

@@ -27,7 +27,8 @@
 
 namespace raytime {
 
-struct RayTimeLmProblem;  // refine/solve/ray_time_lm_solver.h
+struct RayTimeLmProblem;        // refine/solve/ray_time_lm_solver.h
+struct TrackAdjustmentProblem;  // refine/solve/track_adjustment.h
 
 struct PoseUncertainty {
   static constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
@@ -48,6 +49,10 @@ void from_json(const nlohmann::json& json, PoseUncertainty& uncertainty);
 
 struct PoseUncertaintySummary {
   bool computed = false;
+  // The estimator whose poses were returned and whose covariance this is: "ray_time" (the
+  // solve's), or "track_adjustment" (the track finish's bundle adjustment, one point per track,
+  // refine/recipes/track_finish.h).
+  std::string estimator = "ray_time";
   std::string reason;     // why not, when not computed
   double sigma_px = 0.0;  // the keypoint noise used (estimated unless given)
   double sigma_px_estimated = 0.0;
@@ -56,7 +61,7 @@ struct PoseUncertaintySummary {
   std::vector<PoseUncertainty> cameras;  // per image
   double seconds = 0.0;
 };
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PoseUncertaintySummary, computed, reason, sigma_px,
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(PoseUncertaintySummary, computed, estimator, reason, sigma_px,
                                    sigma_px_estimated, median_rotation_deg, median_centre, cameras,
                                    seconds)
 
@@ -73,5 +78,13 @@ struct PoseUncertaintySettings {
 // not: the projection does not depend on it).
 PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
                                                const PoseUncertaintySettings& settings);
+
+// The same for the track finish's bundle adjustment at its solution (`problem` after AdjustTracks,
+// plain least squares): the points eliminated instead of the ray times, each observation's
+// residual moving with its own keypoint only (r = π(X) − û: the noise block is −I), σ² from
+// Σ |r|² / (2K − p), p = 6 cameras + 3 points. estimator "track_adjustment"; settings.scale_px2
+// unused.
+PoseUncertaintySummary EstimateTrackPoseUncertainty(const TrackAdjustmentProblem& problem,
+                                                    const PoseUncertaintySettings& settings);
 
 }  // namespace raytime

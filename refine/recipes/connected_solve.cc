@@ -16,6 +16,7 @@
 #include "refine/checks/guardrails.h"
 #include "refine/recipes/basin_first.h"
 #include "refine/recipes/refine_pass.h"
+#include "refine/recipes/track_finish.h"
 #include "refine/solve/camera_blocks.h"
 #include "refine/solve/ray_time_init.h"
 
@@ -210,6 +211,48 @@ void LogGuardrailMeasures(const RefineSummary& summary) {
                         : fmt::format(" ({} inconsistent pair(s) kept to hold the graph together)",
                                       removal.kept.size())));
   }
+}
+
+// The track finish (track_finish.h) on a solve the guardrails did not question; its solution is
+// kept only when the guardrails judge it as they judged the ray-time one (the same decision, the
+// same checks fired), else the ray-time solution stands and the summary says why. *pairs: the
+// solved pairs' residuals, at the returned solution.
+void RunTrackFinish(const RefineInput& input, const RefineInput& active,
+                    const RefineOptions& options, const std::vector<Rigid3>& prior,
+                    PassState* state, RefineSummary* summary, std::vector<PairResidual>* pairs) {
+  TrackFinishSummary& finish = summary->track_finish;
+  if (!options.track_finish) return;
+  if (summary->decision != "accepted" && summary->decision != "re_solved") {
+    finish.enabled = true;
+    finish.reason =
+        "the guardrails questioned the ray-time solution (decision " + summary->decision + ")";
+    spdlog::info("refine: track finish not run: " + finish.reason);
+    return;
+  }
+  const PassState ray_time_state = *state;
+  const PoseUncertaintySummary ray_time_uncertainty = summary->uncertainty;
+  finish = FinishOnTracks(active, options, summary->passes.back(), state, &summary->uncertainty);
+  if (!finish.accepted) return;
+  std::vector<PairResidual> adjusted_pairs = SolvedPairResiduals(active, *state);
+  RefineSummary judged;
+  judged.guardrails.solver_failed = summary->guardrails.solver_failed;
+  judged.pair_removal = summary->pair_removal;
+  ApplyGuardrails(input, options, prior, *state, adjusted_pairs, &judged);
+  if (judged.decision == summary->decision &&
+      judged.guardrails.fired == summary->guardrails.fired) {
+    summary->guardrails = judged.guardrails;
+    *pairs = std::move(adjusted_pairs);
+    return;
+  }
+  finish.accepted = false;
+  finish.reason = fmt::format(
+      "the guardrails judge its solution otherwise (decision {}, fired [{}]; the ray-time "
+      "solution's {}, [{}])",
+      judged.decision, fmt::join(judged.guardrails.fired, ", "), summary->decision,
+      fmt::join(summary->guardrails.fired, ", "));
+  spdlog::warn("refine: track finish rejected, the ray-time solution stands: " + finish.reason);
+  *state = ray_time_state;
+  summary->uncertainty = ray_time_uncertainty;
 }
 
 // The loose parts (the outermost of nested ones: the others are in the summary), the decision and
@@ -435,6 +478,8 @@ RefineSummary SolveConnected(const RefineInput& input, const RefineOptions& give
   output->diagnostics.pairs = SolvedPairResiduals(pruned ? *pruned : input, state);
   output->diagnostics.image_residual_median_px = state.image_residual_median_px;
   ApplyGuardrails(input, options, prior, state, output->diagnostics.pairs, &summary);
+  RunTrackFinish(input, pruned ? *pruned : input, options, prior, &state, &summary,
+                 &output->diagnostics.pairs);
 
   output->solved_world_from_cam = state.world_from_cam;
   output->solved_cameras = InputCameras(input, state.cameras);

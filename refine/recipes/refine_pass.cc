@@ -396,6 +396,7 @@ RefinePassSummary RunPass(const RefineInput& input, const RefineOptions& options
   }
   MeasureResiduals(input, options, solved_ray_times, state, &pass);
   state->pass_world_from_cam[settings.name] = state->world_from_cam;
+  state->anchor = anchor;
   return pass;
 }
 

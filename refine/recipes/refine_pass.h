@@ -44,7 +44,8 @@ struct PassSettings {
 // layout (its used matches) for the inconsistent-pairs test.
 struct PassState {
   std::vector<Rigid3> world_from_cam;
-  CameraBlocks cameras;  // the intrinsics blocks, at their current values
+  std::vector<Rigid3> anchor;  // the last pass's prior terms' anchor (its gauge polish's too)
+  CameraBlocks cameras;        // the intrinsics blocks, at their current values
   std::unordered_map<uint64_t, double> ray_time_by_observation;  // keyed by (image, keypoint)
   // Per image, the median residual norm landing in it at the pass's solution (SolveDiagnostics).
   std::vector<double> image_residual_median_px;
