@@ -238,11 +238,12 @@ struct RefineOptions {
   // The track finish (issue 50, refine/recipes/track_finish.h): after the last pass, a bundle
   // adjustment with one point per track (the maximum-likelihood estimator under keypoint noise)
   // over the matches the ray-time solution explains, returned only when its residuals imply the
-  // same keypoint noise and no frame moves more than track_finish_max_move_sigma of its ray-time
-  // σ; otherwise the ray-time solution stands and the summary says why. Fixed intrinsics only.
-  // Two right estimators differ by less than either's spread under the noise model, but the σ is
-  // the model's and real scenes' errors exceed it (correct finishes' moves on the Strecha scenes:
-  // docs/efficiency.md), while a finish pulled by wrong tracks moves frames by far more.
+  // same keypoint noise and no frame moves more than track_finish_max_move_sigma times its
+  // ray-time σ, the σ scaled up by the median frame's move (in σ) where that is above 1;
+  // otherwise the ray-time solution stands and the summary says why. Fixed intrinsics only.
+  // Two right estimators differ by less than either's spread under the noise model; on a phone
+  // capture the model's σ is optimistic and every frame moves several of it (docs/efficiency.md),
+  // while a frame pulled by wrong tracks moves far more than the others.
   bool track_finish = false;
   double track_finish_max_move_sigma = 5.0;
 
@@ -381,7 +382,8 @@ struct RefineOptions {
       "After the last pass, a bundle adjustment with one point per track on the matches the "
       "solution explains, kept only when its own check passes (fixed intrinsics)");
     v("track_finish_max_move_sigma", track_finish_max_move_sigma,
-      "The track finish is rejected when a frame moves more than this many of its ray-time σ",
+      "The track finish is rejected when a frame moves more than this many of its ray-time σ "
+      "(times the median frame's move in σ, when above 1)",
       Positive(), AtMost(1e6));
     v("check_frame_doubts", check_frame_doubts,
       "Doubt frames that moved far more than the others and fit their matches worse (wrong "

@@ -349,13 +349,15 @@ struct TrackFinishSummary {
   double max_centre_move = 0.0;
   double max_move_sigma = 0.0;
   int max_move_image = -1;
+  double median_move_sigma = 0.0;  // the median frame's move, in its ray-time σ
   double seconds = 0.0;
 };
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrackFinishSummary, enabled, ran, accepted, reason, num_matches,
                                    num_inliers, num_tracks, num_conflicting, num_observations,
                                    num_rejected, inlier_threshold_px, loss_scale_px2, iterations,
                                    ray_time_sigma_px, adjusted_sigma_px, max_rotation_move_deg,
-                                   max_centre_move, max_move_sigma, max_move_image, seconds)
+                                   max_centre_move, max_move_sigma, max_move_image,
+                                   median_move_sigma, seconds)
 
 // The basin-first solve's wrong-pair removal (RefineOptions::max_pair_removal_rounds).
 struct PairRemovalSummary {

@@ -771,6 +771,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "track_finish.max_centre_move",
       "track_finish.max_move_sigma",
       "track_finish.max_move_image",
+      "track_finish.median_move_sigma",
       "track_finish.seconds",
       "residual_histogram_edges_px",
       "components",

@@ -2,6 +2,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <chrono>
@@ -462,6 +463,8 @@ struct TrackSystem {
   double squares = 0.0;  // Σ |r|²
 };
 
+constexpr double kRelativeCurvatureFloor = 1e-9;
+
 void ReduceTrack(const TrackAdjustmentProblem& problem, const std::vector<int>& observations,
                  const std::vector<int>& variable, double weight, TrackSystem* system) {
   const size_t m = observations.size();
@@ -478,7 +481,17 @@ void ReduceTrack(const TrackAdjustmentProblem& problem, const std::vector<int>& 
     camera[j] = variable[problem.observation_image[o]];
     Hpp += a[j] * Jp[j].transpose() * Jp[j];
   }
-  const Eigen::Matrix3d Hpp_inverse = Hpp.inverse();
+  // A distant point's depth is barely constrained (its curvature there some 1e-12 of the others):
+  // inverted as it is, the rounding of that direction broke S's positive definiteness on a phone
+  // capture. Its couplings along it are as small, so it is left out (the pseudo-inverse).
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(Hpp);
+  const Eigen::Vector3d& values = eigen.eigenvalues();
+  Eigen::Vector3d inverse_values = Eigen::Vector3d::Zero();
+  for (int d = 0; d < 3; ++d) {
+    if (values(d) > kRelativeCurvatureFloor * values(2)) inverse_values(d) = 1.0 / values(d);
+  }
+  const Eigen::Matrix3d Hpp_inverse =
+      eigen.eigenvectors() * inverse_values.asDiagonal() * eigen.eigenvectors().transpose();
   std::vector<Eigen::Matrix<double, 6, 3>> K(m);
   for (size_t j = 0; j < m; ++j) K[j] = a[j] * Jc[j].transpose() * Jp[j] * Hpp_inverse;
   for (size_t j = 0; j < m; ++j) {

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/graph.h"
+#include "core/statistics.h"
 #include "core/timing.h"
 #include "refine/solve/gauge_polish.h"
 #include "refine/solve/problem_layout.h"
@@ -128,6 +129,7 @@ std::string CheckFinish(const RefineOptions& options, const TrackAdjustmentSumma
                         const std::vector<Rigid3>& before, const std::vector<Rigid3>& after,
                         const PoseUncertaintySummary& ray_time,
                         const PoseUncertaintySummary& adjusted, TrackFinishSummary* summary) {
+  std::vector<double> moves;
   for (size_t i = 0; i < before.size(); ++i) {
     const PoseUncertainty& sigma = ray_time.cameras[i];
     if (!(sigma.rotation_deg > 0.0) || !(sigma.centre > 0.0)) continue;
@@ -136,12 +138,13 @@ std::string CheckFinish(const RefineOptions& options, const TrackAdjustmentSumma
     const double centre = (before[i].translation - after[i].translation).norm();
     summary->max_rotation_move_deg = std::max(summary->max_rotation_move_deg, rotation);
     summary->max_centre_move = std::max(summary->max_centre_move, centre);
-    const double move = std::max(rotation / sigma.rotation_deg, centre / sigma.centre);
-    if (!(move <= summary->max_move_sigma)) {
-      summary->max_move_sigma = move;
+    moves.push_back(std::max(rotation / sigma.rotation_deg, centre / sigma.centre));
+    if (!(moves.back() <= summary->max_move_sigma)) {
+      summary->max_move_sigma = moves.back();
       summary->max_move_image = static_cast<int>(i);
     }
   }
+  summary->median_move_sigma = Median(moves, 0.0);
   if (!adjustment.converged) return "the adjustment did not converge: " + adjustment.message;
   if (!adjusted.computed) return "no uncertainty at its solution: " + adjusted.reason;
   if (!(summary->adjusted_sigma_px <= kTrackFinishMaxNoiseRatio * summary->ray_time_sigma_px)) {
@@ -150,10 +153,14 @@ std::string CheckFinish(const RefineOptions& options, const TrackAdjustmentSumma
         "{:g}x): tracks the noise does not explain",
         summary->adjusted_sigma_px, summary->ray_time_sigma_px, kTrackFinishMaxNoiseRatio);
   }
-  if (!(summary->max_move_sigma <= options.track_finish_max_move_sigma)) {
-    return fmt::format("it moved frame {} by {:.3g} σ of its ray-time pose (at most {:g} σ)",
-                       summary->max_move_image, summary->max_move_sigma,
-                       options.track_finish_max_move_sigma);
+  const double allowed =
+      options.track_finish_max_move_sigma * std::max(1.0, summary->median_move_sigma);
+  if (!(summary->max_move_sigma <= allowed)) {
+    return fmt::format(
+        "it moved frame {} by {:.3g} σ of its ray-time pose, the median frame {:.3g} σ (at most "
+        "{:g} x the median frame's, at least 1 σ)",
+        summary->max_move_image, summary->max_move_sigma, summary->median_move_sigma,
+        options.track_finish_max_move_sigma);
   }
   return "";
 }
@@ -312,11 +319,12 @@ TrackFinishSummary FinishOnTracks(const RefineInput& input, const RefineOptions&
   spdlog::info(fmt::format(
       "refine: track finish accepted: {} tracks ({} observations, {} of {} matches within {:.3g} "
       "px, {} observations rejected), keypoint noise {:.3g} px (ray-time {:.3g} px), frames "
-      "moved up to {:.3g}° / {:.3g} ({:.2f} σ), {} iterations, {:.2f} s",
+      "moved up to {:.3g}° / {:.3g} ({:.2f} σ, the median frame {:.2f} σ), {} iterations, {:.2f} "
+      "s",
       summary.num_tracks, summary.num_observations, summary.num_inliers, summary.num_matches,
       summary.inlier_threshold_px, summary.num_rejected, summary.adjusted_sigma_px,
       summary.ray_time_sigma_px, summary.max_rotation_move_deg, summary.max_centre_move,
-      summary.max_move_sigma, summary.iterations, summary.seconds));
+      summary.max_move_sigma, summary.median_move_sigma, summary.iterations, summary.seconds));
   return summary;
 }
 
