@@ -1,7 +1,9 @@
 #include "pipelines/pipeline_spec.h"
 
+#include <algorithm>
 #include <cctype>
 #include <filesystem>
+#include <map>
 
 #include "core/error.h"
 #include "core/options.h"
@@ -42,10 +44,43 @@ std::string ScalarText(const YAML::Node& node, const std::string& path, const st
   return text;
 }
 
-// "prior.level_deg" -> "level_deg=4"; a path value -> its last component.
-std::string RunLabelPart(const std::string& key, const YAML::Node& value) {
-  std::string text = value.IsScalar() ? value.Scalar() : YAML::Dump(value);
-  if (text.find('/') != std::string::npos) text = fs::path(text).filename().string();
+// The last `count` components of a path, joined by '_'.
+std::string LastComponents(const std::string& path, size_t count) {
+  std::vector<std::string> parts;
+  for (const fs::path& part : fs::path(path).lexically_normal()) {
+    if (!part.empty() && part != "/") parts.push_back(part.string());
+  }
+  std::string text;
+  for (size_t i = parts.size() - std::min(count, parts.size()); i < parts.size(); ++i) {
+    text += (text.empty() ? "" : "_") + parts[i];
+  }
+  return text;
+}
+
+// Each value of one sweep axis as its run labels show it: a path by its last component, or as
+// many last components as tell the axis's paths apart (two datasets both named fountain-P11 in
+// different folders wrote their runs into one directory, the second read as the first, done).
+std::vector<std::string> AxisLabelTexts(const std::vector<YAML::Node>& values) {
+  std::vector<std::string> full;
+  for (const YAML::Node& value : values) {
+    full.push_back(value.IsScalar() ? value.Scalar() : YAML::Dump(value));
+  }
+  for (size_t count = 1;; ++count) {
+    std::vector<std::string> texts;
+    bool longest = true;
+    for (const std::string& text : full) {
+      const bool path = text.find('/') != std::string::npos;
+      texts.push_back(path ? LastComponents(text, count) : text);
+      longest = longest && (!path || LastComponents(text, count + 1) == texts.back());
+    }
+    std::vector<std::string> sorted = texts;
+    std::sort(sorted.begin(), sorted.end());
+    if (std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end() || longest) return texts;
+  }
+}
+
+// "prior.level_deg" -> "level_deg=4" (`text`: the value as AxisLabelTexts shows it).
+std::string RunLabelPart(const std::string& key, const std::string& text) {
   std::string label = key.substr(key.find('.') + 1) + "=" + text;
   for (char& c : label) {
     if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '-' && c != '_' &&
@@ -225,6 +260,8 @@ std::vector<SweepRun> ExpandSweep(const PipelineSpec& spec) {
     }
     combinations = std::move(expanded);
   }
+  std::vector<std::vector<std::string>> label_texts;
+  for (const auto& [key, values] : spec.sweep) label_texts.push_back(AxisLabelTexts(values));
   std::vector<SweepRun> runs;
   for (const auto& combination : combinations) {
     SweepRun run;
@@ -234,7 +271,8 @@ std::vector<SweepRun> ExpandSweep(const PipelineSpec& spec) {
       const auto& [key, values] = spec.sweep[axis];
       const YAML::Node& value = values[combination[axis]];
       SetStageOption(&run.spec, key, value, "sweep");
-      run.label += (run.label.empty() ? "" : ",") + RunLabelPart(key, value);
+      run.label +=
+          (run.label.empty() ? "" : ",") + RunLabelPart(key, label_texts[axis][combination[axis]]);
       run.swept.emplace_back(key, value.IsScalar() ? value.Scalar() : YAML::Dump(value));
     }
     try {
@@ -243,6 +281,15 @@ std::vector<SweepRun> ExpandSweep(const PipelineSpec& spec) {
       throw InputError("sweep run " + run.label + ": " + e.what());
     }
     runs.push_back(std::move(run));
+  }
+  std::map<std::string, size_t> seen;
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const auto [it, inserted] = seen.emplace(runs[r].label, r);
+    if (!inserted) {
+      throw InputError("sweep: runs " + std::to_string(it->second + 1) + " and " +
+                       std::to_string(r + 1) + " are both '" + runs[r].label +
+                       "' (a value listed twice?): each run needs its own directory");
+    }
   }
   return runs;
 }

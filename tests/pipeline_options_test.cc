@@ -103,6 +103,29 @@ TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
   EXPECT_EQ(runs[1].swept, (std::vector<std::pair<std::string, std::string>>{{"prior.path", "b"}}));
 }
 
+// Each run has its own directory: paths that end alike are labelled by as many last components as
+// tell them apart (two scenes both named fountain-P11 in different folders shared one run
+// directory, the second run read as the first's, done), and a value listed twice is refused.
+TEST(PipelineOptionsTest, SweepRunsWithPathsEndingAlikeGetTheirOwnLabels) {
+  TempDir dir("options");
+  const std::string path = WritePipeline(
+      dir, "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: "
+           "[../shared/strecha/fountain-P11, data/sample/fountain-P11, other/entry-P10]\n");
+  const std::vector<SweepRun> runs = ExpandSweep(LoadPipeline(path));
+  ASSERT_EQ(runs.size(), 3u);
+  EXPECT_EQ(runs[0].label, "path=strecha_fountain-P11");
+  EXPECT_EQ(runs[1].label, "path=sample_fountain-P11");
+  EXPECT_EQ(runs[2].label, "path=other_entry-P10");
+  const std::string unique = WritePipeline(
+      dir, "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: [a/x, b/y]\n");
+  EXPECT_EQ(ExpandSweep(LoadPipeline(unique))[1].label, "path=y");
+
+  const std::string twice = WritePipeline(
+      dir, "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: [a/x, a/x]\n");
+  const std::string message = InputErrorOf([&] { ExpandSweep(LoadPipeline(twice)); });
+  EXPECT_NE(message.find("runs 1 and 2 are both 'path=a_x'"), std::string::npos) << message;
+}
+
 // Options, names and paths end up in JSON (provenance, content hashes, summary.json), which holds
 // only UTF-8: other bytes are refused where they are read, naming the file, line and byte.
 TEST(PipelineOptionsTest, TextThatIsNotUtf8IsRefusedWhereItIsRead) {
