@@ -481,9 +481,9 @@ void ReduceTrack(const TrackAdjustmentProblem& problem, const std::vector<int>& 
     camera[j] = variable[problem.observation_image[o]];
     Hpp += a[j] * Jp[j].transpose() * Jp[j];
   }
-  // A distant point's depth is barely constrained (its curvature there some 1e-12 of the others):
-  // inverted as it is, the rounding of that direction broke S's positive definiteness on a phone
-  // capture. Its couplings along it are as small, so it is left out (the pseudo-inverse).
+  // A distant point's depth is barely constrained: inverted as it is, the rounding of that
+  // direction can break S's positive definiteness (it did on a phone capture's low-parallax
+  // points). Its couplings along it are as small, so it is left out (the pseudo-inverse).
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(Hpp);
   const Eigen::Vector3d& values = eigen.eigenvalues();
   Eigen::Vector3d inverse_values = Eigen::Vector3d::Zero();

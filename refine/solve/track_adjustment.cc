@@ -180,8 +180,8 @@ TrackAdjustmentSummary AdjustTracks(TrackAdjustmentProblem* problem) {
     if (observed[i])
       options.linear_solver_ordering->AddElementToGroup(poses.data() + kPoseBlockSize * i, 1);
   }
-  // The reduced camera system is small for captures of up to a few hundred frames: dense there
-  // (SuiteSparse's symbolic work was most of the linear solver's time on 8-19 cameras).
+  // The reduced camera system (6 unknowns per camera) is factorized dense while small, sparse
+  // beyond.
   options.linear_solver_type =
       num_images <= kMaxDenseCameras ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   options.sparse_linear_algebra_library_type = ceres::SUITE_SPARSE;
@@ -191,8 +191,8 @@ TrackAdjustmentSummary AdjustTracks(TrackAdjustmentProblem* problem) {
   // from the first iteration, where the default radius damped the first few.
   options.initial_trust_region_radius = 1e8;
   // A relative decrease of 1e-7 of the mean squared residual is far below what moves a pose by a
-  // fraction of its σ; below it, a phone capture's low-parallax points crept out along their rays
-  // for tens of iterations with the cost unchanged in its seventh digit.
+  // fraction of its σ; below it, low-parallax points creep out along their rays with the poses and
+  // the cost unchanged (docs/efficiency.md, "The track finish").
   options.function_tolerance = 1e-7;
   options.gradient_tolerance = 1e-14;
   options.parameter_tolerance = 1e-10;

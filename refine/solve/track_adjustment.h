@@ -6,10 +6,10 @@
 // r = π_i(X_k) − û_ik for every observation of a track (the pinhole on undistorted pixels, as in
 // every residual of the solve), as a mean of squares over observations, plus the same pose prior
 // terms as a pass (λp/N, λR/N, §3.3). Plain least squares: the caller chooses the observations
-// (the robust part: which matches the ray-time solution explains, and a rejection round on this
-// solve's own residuals). Under a robust loss Ceres' LM converged linearly here (the reweighted
-// model overstates the curvature of every down-weighted residual, its steps came out about half
-// the way, step quality ~2 for 100 iterations), where the plain problem converges in a few.
+// (the robust part: which matches the ray-time solution explains, and a rejection round on the
+// points' own residuals). Under a robust loss Ceres' LM converges only linearly here: the
+// reweighted model overstates the curvature of every down-weighted residual, so each step goes
+// about half the way.
 #pragma once
 
 #include <Eigen/Core>
