@@ -342,6 +342,7 @@ struct TrackFinishSummary {
   int iterations = 0;
   // The keypoint noise each estimator's residuals imply (PoseUncertaintySummary::sigma_px), px.
   double ray_time_sigma_px = 0.0;
+  double points_sigma_px = 0.0;  // the tracks' points at the ray-time poses, before adjusting
   double adjusted_sigma_px = 0.0;
   // The largest per-frame move from the ray-time solution, in degrees and prior length units and
   // as multiples of that frame's ray-time σ, and the frame it was.
@@ -355,9 +356,9 @@ struct TrackFinishSummary {
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TrackFinishSummary, enabled, ran, accepted, reason, num_matches,
                                    num_inliers, num_tracks, num_conflicting, num_observations,
                                    num_rejected, inlier_threshold_px, loss_scale_px2, iterations,
-                                   ray_time_sigma_px, adjusted_sigma_px, max_rotation_move_deg,
-                                   max_centre_move, max_move_sigma, max_move_image,
-                                   median_move_sigma, seconds)
+                                   ray_time_sigma_px, points_sigma_px, adjusted_sigma_px,
+                                   max_rotation_move_deg, max_centre_move, max_move_sigma,
+                                   max_move_image, median_move_sigma, seconds)
 
 // The basin-first solve's wrong-pair removal (RefineOptions::max_pair_removal_rounds).
 struct PairRemovalSummary {

@@ -766,6 +766,7 @@ TEST(RefineSolveTest, SummaryJsonKeysArePinned) {
       "track_finish.loss_scale_px2",
       "track_finish.iterations",
       "track_finish.ray_time_sigma_px",
+      "track_finish.points_sigma_px",
       "track_finish.adjusted_sigma_px",
       "track_finish.max_rotation_move_deg",
       "track_finish.max_centre_move",

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <string>
 #include <utility>
@@ -212,6 +213,16 @@ int RejectObservations(TrackAdjustmentProblem* problem, std::vector<std::vector<
   return rejected;
 }
 
+// The keypoint noise the tracks' residuals imply at the problem's poses and points: Σ |r|² over
+// its degrees of freedom, 2 per observation less 3 per point (the poses held).
+double NoiseOfPoints(const TrackAdjustmentProblem& problem) {
+  const int n = static_cast<int>(problem.observation_track.size());
+  double squares = 0.0;
+  for (int o = 0; o < n; ++o) squares += TrackResidual(problem, o).squaredNorm();
+  const double freedom = 2.0 * n - 3.0 * static_cast<double>(problem.points.size());
+  return freedom > 0.0 ? std::sqrt(squares / freedom) : std::numeric_limits<double>::infinity();
+}
+
 // Why the finish does not run on this solve, or an empty string.
 std::string NotRunReason(const RefinePassSummary& last, const PoseUncertaintySummary& uncertainty) {
   if (last.self_calibration) return "the last pass self-calibrated (fixed intrinsics only)";
@@ -285,10 +296,25 @@ TrackFinishSummary FinishOnTracks(const RefineInput& input, const RefineOptions&
   // gauge polish of the last pass.
   AdjustPointsAtFixedPoses(&problem, kPointIterations);
   if (!problem.points.empty()) summary.num_rejected = RejectObservations(&problem, &tracks);
-  const TrackAdjustmentSummary adjustment = AdjustTracks(&problem);
-  summary.iterations = adjustment.iterations;
   summary.num_tracks = static_cast<int>(problem.points.size());
   summary.num_observations = static_cast<int>(problem.observation_track.size());
+  // The noise test before the adjustment too: the points at the ray-time poses imply a little more
+  // noise than the adjustment's solution, and tracks the noise does not explain show already (a
+  // long video sweep's adjustment ran tens of iterations to be rejected).
+  summary.points_sigma_px = NoiseOfPoints(problem);
+  if (!(summary.points_sigma_px <= kTrackFinishMaxNoiseRatio * summary.ray_time_sigma_px)) {
+    summary.reason = fmt::format(
+        "its tracks imply {:.3g} px keypoint noise at the ray-time poses, the ray-time solve's "
+        "{:.3g} px (at most {:g}x): tracks the noise does not explain; not adjusted",
+        summary.points_sigma_px, summary.ray_time_sigma_px, kTrackFinishMaxNoiseRatio);
+    summary.seconds = SecondsSince(start);
+    spdlog::warn(fmt::format(
+        "refine: track finish rejected, the ray-time solution stands: {} ({} tracks, {:.2f} s)",
+        summary.reason, summary.num_tracks, summary.seconds));
+    return summary;
+  }
+  const TrackAdjustmentSummary adjustment = AdjustTracks(&problem);
+  summary.iterations = adjustment.iterations;
   PoseUncertaintySettings settings;
   settings.gauge_position_weight = options.position_weight;
   settings.gauge_orientation_weight = options.gauge_orientation_weight;

@@ -12,7 +12,8 @@
 //   3. Points: each track's observations' ray points averaged (the ray-time structure, no new
 //      triangulation from the prior); a point behind one of its cameras leaves its track out.
 //   4. Rejection: each point adjusted alone at the ray-time poses, the observations it leaves
-//      above 4 σ (σ from their median) go, and a track left with one observation.
+//      above 4 σ (σ from their median) go, and a track left with one observation. The noise the
+//      rest implies is tested already here (as in 6), before the adjustment's cost.
 //   5. The adjustment (refine/solve/track_adjustment.h, plain least squares on what is left) with
 //      the last pass's prior terms, then the same gauge polish.
 //   6. The check: converged, every frame within track_finish_max_move_sigma of its ray-time σ (the
