@@ -90,9 +90,9 @@ std::vector<SceneCase> Scenes(const std::string& which) {
     for (const double fraction : {0.1, 0.3}) {
       SyntheticSceneOptions options = Calibrated(8, 300, false);
       options.outlier_fraction = fraction;
-      scenes.push_back({"8 cams, " + std::to_string(static_cast<int>(100 * fraction)) +
-                            " % wrong matches",
-                        options, 0.5});
+      scenes.push_back(
+          {"8 cams, " + std::to_string(static_cast<int>(100 * fraction)) + " % wrong matches",
+           options, 0.5});
     }
     SyntheticSceneOptions arc = Calibrated(24, 600, false);
     arc.arc_span_deg = 150.0;

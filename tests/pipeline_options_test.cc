@@ -109,8 +109,9 @@ TEST(PipelineOptionsTest, SweepCombinationsAreValidatedAsAWhole) {
 TEST(PipelineOptionsTest, SweepRunsWithPathsEndingAlikeGetTheirOwnLabels) {
   TempDir dir("options");
   const std::string path = WritePipeline(
-      dir, "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: "
-           "[../shared/strecha/fountain-P11, data/sample/fountain-P11, other/entry-P10]\n");
+      dir,
+      "  - prior: {source: file, format: colmap}\nsweep:\n  prior.path: "
+      "[../shared/strecha/fountain-P11, data/sample/fountain-P11, other/entry-P10]\n");
   const std::vector<SweepRun> runs = ExpandSweep(LoadPipeline(path));
   ASSERT_EQ(runs.size(), 3u);
   EXPECT_EQ(runs[0].label, "path=strecha_fountain-P11");

@@ -132,9 +132,8 @@ TEST(PoseUncertaintyTest, PredictedSigmaMatchesTheSpreadOverNoiseDraws) {
     scene.num_points = test.num_points;
     scene.distortion = test.distortion;
     scene.seed = 3;
-    const Calibration c =
-        Calibrate(scene, test.sigma_px, 40, test.orientation_weight, test.parameterization,
-                  test.track_finish);
+    const Calibration c = Calibrate(scene, test.sigma_px, 40, test.orientation_weight,
+                                    test.parameterization, test.track_finish);
     const double rotation = MedianRatio(c.predicted_rotation_deg, c.observed_rotation_deg);
     const double centre = MedianRatio(c.predicted_centre, c.observed_centre);
     std::printf(
