@@ -303,20 +303,37 @@ Eigen::MatrixXd NoiseCovariance(const RayTimeLmProblem& problem,
   return out;
 }
 
-// The pose priors' curvature (noise-free: they hold the gauge the solve holds).
-void AddPriorCurvature(const RayTimeLmProblem& problem, const ReducedCameraPattern& pattern,
-                       Eigen::MatrixXd* S) {
-  const double rotation_scale = std::sqrt(2.0 * problem.orientation_weight);
-  const double centre_scale = std::sqrt(2.0 * problem.position_weight);
-  for (size_t i = 0; i < problem.world_from_cam.size(); ++i) {
-    const int c = pattern.variable(static_cast<int>(i));
+// The pose priors' curvature (noise-free: they hold the gauge the solve holds), per image with
+// weights λp/N and λR/N towards `anchor`, into the blocks of the images `variable` maps to one.
+void AddPriorCurvature(const std::vector<Rigid3>& world_from_cam, const std::vector<Rigid3>& anchor,
+                       const std::vector<int>& variable, double position_weight,
+                       double orientation_weight, Eigen::MatrixXd* S) {
+  const double rotation_scale = std::sqrt(2.0 * orientation_weight);
+  const double centre_scale = std::sqrt(2.0 * position_weight);
+  for (size_t i = 0; i < world_from_cam.size(); ++i) {
+    const int c = variable[i];
     if (c < 0) continue;
     Eigen::Matrix<double, 6, 1> residual;
     Eigen::Matrix<double, 6, 6> jacobian;
-    PosePriorJacobian(problem.world_from_cam[i], problem.prior_world_from_cam[i], rotation_scale,
-                      centre_scale, &residual, &jacobian);
+    PosePriorJacobian(world_from_cam[i], anchor[i], rotation_scale, centre_scale, &residual,
+                      &jacobian);
     S->block<6, 6>(6 * c, 6 * c) += jacobian.transpose() * jacobian;
   }
+}
+
+// Why the covariance is not computed for `num_variable` cameras, or an empty string.
+std::string CameraCountRefusal(int num_variable, int max_cameras) {
+  if (num_variable < 2) return "fewer than two cameras reached by residuals";
+  if (num_variable > max_cameras) {
+    return std::to_string(num_variable) + " cameras, above max_cameras " +
+           std::to_string(max_cameras) + " (dense covariance)";
+  }
+  return "";
+}
+
+std::string NoRedundancy(int num_scalar, int num_parameters) {
+  return "no redundancy: " + std::to_string(num_scalar) + " scalar residuals for " +
+         std::to_string(num_parameters) + " parameters";
 }
 
 // The reduction of the ray-time LM (reduced_camera_system.h) at the solution, undamped, over its
@@ -331,7 +348,8 @@ ReducedNoiseSystem BuildReducedNoiseSystem(const RayTimeLmProblem& problem,
   RayTimeElimination elimination;
   ReduceCameraMatrix(problem, rotation, pattern, loss, num_threads, &elimination, &out);
   out.M = NoiseCovariance(problem, rotation, pattern, loss, elimination, num_threads);
-  AddPriorCurvature(problem, pattern, &out.S);
+  AddPriorCurvature(problem.world_from_cam, problem.prior_world_from_cam, pattern.variables(),
+                    problem.position_weight, problem.orientation_weight, &out.S);
   return out;
 }
 
@@ -416,15 +434,8 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
   summary.cameras.resize(problem.world_from_cam.size());
   const int num_variable =
       static_cast<int>(std::count(problem.held.begin(), problem.held.end(), false));
-  if (num_variable < 2) {
-    summary.reason = "fewer than two cameras reached by residuals";
-    return summary;
-  }
-  if (num_variable > settings.max_cameras) {
-    summary.reason = std::to_string(num_variable) + " cameras, above max_cameras " +
-                     std::to_string(settings.max_cameras) + " (dense covariance)";
-    return summary;
-  }
+  summary.reason = CameraCountRefusal(num_variable, settings.max_cameras);
+  if (!summary.reason.empty()) return summary;
   for (const RayTimeLmResidual& r : problem.residuals) {
     if (r.source_observation < 0 || r.target_observation < 0) {
       summary.reason = "residuals without their observations";
@@ -438,8 +449,7 @@ PoseUncertaintySummary EstimatePoseUncertainty(const RayTimeLmProblem& problem,
   const int num_scalar = 2 * sums.num_residuals;
   const int num_parameters = 6 * num_variable + sums.num_ray_times;
   if (num_scalar <= num_parameters || !(sums.weighted_expected > 0.0)) {
-    summary.reason = "no redundancy: " + std::to_string(num_scalar) + " scalar residuals for " +
-                     std::to_string(num_parameters) + " parameters";
+    summary.reason = NoRedundancy(num_scalar, num_parameters);
     return summary;
   }
   summary.sigma_px_estimated =
@@ -475,8 +485,7 @@ void ReduceTrack(const TrackAdjustmentProblem& problem, const std::vector<int>& 
   Eigen::Matrix3d Hpp = Eigen::Matrix3d::Zero();
   for (size_t j = 0; j < m; ++j) {
     const int o = observations[j];
-    system->squares += TrackResidual(problem, o).squaredNorm();
-    TrackResidualJacobians(problem, o, &Jc[j], &Jp[j]);
+    system->squares += TrackResidualJacobians(problem, o, &Jc[j], &Jp[j]).squaredNorm();
     a[j] = weight;
     camera[j] = variable[problem.observation_image[o]];
     Hpp += a[j] * Jp[j].transpose() * Jp[j];
@@ -534,20 +543,12 @@ PoseUncertaintySummary EstimateTrackPoseUncertainty(const TrackAdjustmentProblem
   for (const int image : problem.observation_image) variable[image] = 0;
   int num_variable = 0;
   for (int& v : variable) v = v < 0 ? -1 : num_variable++;
-  if (num_variable < 2) {
-    summary.reason = "fewer than two cameras reached by residuals";
-    return summary;
-  }
-  if (num_variable > settings.max_cameras) {
-    summary.reason = std::to_string(num_variable) + " cameras, above max_cameras " +
-                     std::to_string(settings.max_cameras) + " (dense covariance)";
-    return summary;
-  }
+  summary.reason = CameraCountRefusal(num_variable, settings.max_cameras);
+  if (!summary.reason.empty()) return summary;
   const int num_scalar = 2 * num_observations;
   const int num_parameters = 6 * num_variable + 3 * static_cast<int>(problem.points.size());
   if (num_scalar <= num_parameters) {
-    summary.reason = "no redundancy: " + std::to_string(num_scalar) + " scalar residuals for " +
-                     std::to_string(num_parameters) + " parameters";
+    summary.reason = NoRedundancy(num_scalar, num_parameters);
     return summary;
   }
   std::vector<std::vector<int>> by_track(problem.points.size());
@@ -558,16 +559,9 @@ PoseUncertaintySummary EstimateTrackPoseUncertainty(const TrackAdjustmentProblem
   for (const std::vector<int>& track : by_track) {
     if (track.size() >= 2) ReduceTrack(problem, track, variable, 1.0 / num_observations, &system);
   }
-  // The pose priors' curvature (noise-free: they hold the gauge the solve holds).
-  for (int i = 0; i < num_images; ++i) {
-    if (variable[i] < 0) continue;
-    Eigen::Matrix<double, 6, 1> residual;
-    Eigen::Matrix<double, 6, 6> jacobian;
-    PosePriorJacobian(problem.world_from_cam[i], problem.anchor[i],
-                      std::sqrt(2.0 * problem.orientation_weight / num_images),
-                      std::sqrt(2.0 * problem.position_weight / num_images), &residual, &jacobian);
-    system.S.block<6, 6>(6 * variable[i], 6 * variable[i]) += jacobian.transpose() * jacobian;
-  }
+  AddPriorCurvature(problem.world_from_cam, problem.anchor, variable,
+                    problem.position_weight / num_images, problem.orientation_weight / num_images,
+                    &system.S);
   summary.sigma_px_estimated =
       std::sqrt(system.squares / (num_scalar - static_cast<double>(num_parameters)));
   summary.sigma_px = settings.sigma_px > 0.0 ? settings.sigma_px : summary.sigma_px_estimated;

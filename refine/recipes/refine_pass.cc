@@ -38,11 +38,8 @@ std::vector<double> ResidualNorms(const RefineInput& input, const ProblemLayout&
                                   const CameraBlocks& cameras,
                                   const std::vector<double>& ray_times) {
   std::vector<std::array<double, kPoseBlockSize>> poses(world_from_cam.size());
-  for (size_t i = 0; i < world_from_cam.size(); ++i) {
-    const Eigen::Quaterniond q = world_from_cam[i].rotation.normalized();
-    const Eigen::Vector3d& c = world_from_cam[i].translation;
-    poses[i] = {q.x(), q.y(), q.z(), q.w(), c.x(), c.y(), c.z()};
-  }
+  for (size_t i = 0; i < world_from_cam.size(); ++i)
+    ToPoseBlock(world_from_cam[i], poses[i].data());
   const auto undistorted = [&](const LayoutObservation& obs) {
     const double pixel[2] = {input.keypoints[obs.image](obs.keypoint, 0),
                              input.keypoints[obs.image](obs.keypoint, 1)};

@@ -9,6 +9,7 @@
 #pragma once
 
 #include "core/camera.h"
+#include "core/geometry.h"
 
 namespace raytime {
 
@@ -16,6 +17,24 @@ inline constexpr int kPoseBlockSize = 7;     // quaternion x, y, z, w + centre
 inline constexpr int kPoseCentreOffset = 4;  // index of O_i in the pose block
 // Paper §3.3: a ray time is a positive depth, bounded below at 1e-9 (both solvers).
 inline constexpr double kRayTimeLowerBound = 1e-9;
+
+// A pose as a pose block (its rotation normalized) and back.
+inline void ToPoseBlock(const Rigid3& pose, double* block) {
+  const Eigen::Quaterniond q = pose.rotation.normalized();
+  block[0] = q.x();
+  block[1] = q.y();
+  block[2] = q.z();
+  block[3] = q.w();
+  for (int r = 0; r < 3; ++r) block[kPoseCentreOffset + r] = pose.translation[r];
+}
+
+inline Rigid3 FromPoseBlock(const double* block) {
+  Rigid3 pose;
+  pose.rotation = Eigen::Quaterniond(block[3], block[0], block[1], block[2]).normalized();
+  pose.translation = Eigen::Vector3d(block[kPoseCentreOffset], block[kPoseCentreOffset + 1],
+                                     block[kPoseCentreOffset + 2]);
+  return pose;
+}
 
 // Row-major rotation matrix of a unit quaternion (x, y, z, w), the formula Eigen's
 // toRotationMatrix uses. Written out so the analytic derivative in the cached residual

@@ -73,17 +73,7 @@ void RayTimeProblem::CopyStartingValues(const CameraBlocks& cameras,
   }
   const int num_cameras = static_cast<int>(initial_world_from_cam.size());
   poses_.resize(kPoseBlockSize * num_cameras);
-  for (int i = 0; i < num_cameras; ++i) {
-    const Eigen::Quaterniond q = initial_world_from_cam[i].rotation.normalized();
-    double* pose = pose_block(i);
-    pose[0] = q.x();
-    pose[1] = q.y();
-    pose[2] = q.z();
-    pose[3] = q.w();
-    for (int r = 0; r < 3; ++r) {
-      pose[kPoseCentreOffset + r] = initial_world_from_cam[i].translation[r];
-    }
-  }
+  for (int i = 0; i < num_cameras; ++i) ToPoseBlock(initial_world_from_cam[i], pose_block(i));
 }
 
 void RayTimeProblem::CreateCache(const RefineInput& input, const ProblemLayout& layout,
@@ -222,9 +212,7 @@ std::vector<Rigid3> RayTimeProblem::WorldFromCam() const {
   const int num_cameras = static_cast<int>(poses_.size()) / kPoseBlockSize;
   std::vector<Rigid3> poses(num_cameras);
   for (int i = 0; i < num_cameras; ++i) {
-    const double* pose = poses_.data() + kPoseBlockSize * i;
-    poses[i].rotation = Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]).normalized();
-    poses[i].translation = Eigen::Vector3d(pose[4], pose[5], pose[6]);
+    poses[i] = FromPoseBlock(poses_.data() + kPoseBlockSize * i);
   }
   return poses;
 }

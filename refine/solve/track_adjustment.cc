@@ -28,12 +28,36 @@ constexpr int kMaxDenseCameras = 200;
 using PoseManifold =
     ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
 
-// r = π(Rᵀ(X − O)) − û for a pose block (quaternion, centre) and a point, with closed-form
-// Jacobians (automatic differentiation was two thirds of the adjustment's time): ∂r/∂X from
-// DifferentiateTargetResidual, ∂r/∂O = −∂r/∂X, and the rotation's through the quaternion
-// manifold's tangent (a left increment δ turns R into Exp(2δ)·R), written in the ambient
-// quaternion as 2·(∂r/∂φ)·Pᵀ, P the manifold's PlusJacobian (orthonormal columns), so that Ceres'
-// product with P gives the tangent's Jacobian exactly.
+// r = π(Rᵀ(X − O)) − û at a rotation R (row-major, camera to world), centre O and point X, with
+// its Jacobians in the pose's local parameters (φ, δO), R ← Exp(φ)·R and O ← O + δO, and in X:
+// ∂r/∂X from DifferentiateTargetResidual, ∂r/∂O = −∂r/∂X, and R ← Exp(φ)·R turns Rᵀ(X − O) into
+// Rᵀ(X − O + (X − O) × φ) to first order. The one linearization of the Ceres cost below and of
+// TrackResidualJacobians (the uncertainty's).
+struct ReprojectionLinearization {
+  Eigen::Vector2d residual;
+  Eigen::Matrix<double, 2, 6> pose;
+  Eigen::Matrix<double, 2, 3> point;
+};
+
+ReprojectionLinearization LinearizeReprojection(const double* R, const double* centre,
+                                                const double* pinhole, const double* point,
+                                                const double* pixel) {
+  ReprojectionLinearization lin;
+  double offset[3], p_cam[3];
+  TargetResidual(R, centre, pinhole, point, pixel, offset, p_cam, lin.residual.data());
+  const TargetResidualDerivative d = DifferentiateTargetResidual(R, pinhole, p_cam);
+  lin.point = Eigen::Map<const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>>(&d.du_dX[0][0]);
+  lin.pose.leftCols<3>() =
+      lin.point * CrossMatrix(Eigen::Vector3d(offset[0], offset[1], offset[2]));
+  lin.pose.rightCols<3>() = -lin.point;
+  return lin;
+}
+
+// The residual above for a pose block (quaternion, centre) and a point block, with closed-form
+// Jacobians (automatic differentiation was two thirds of the adjustment's time): the rotation's
+// through the quaternion manifold's tangent (a left increment δ turns R into Exp(2δ)·R), written
+// in the ambient quaternion as 2·(∂r/∂φ)·Pᵀ, P the manifold's PlusJacobian (orthonormal columns),
+// so that Ceres' product with P gives the tangent's Jacobian exactly.
 class ReprojectionCost : public ceres::SizedCostFunction<2, kPoseBlockSize, 3> {
  public:
   ReprojectionCost(const Eigen::Vector4d& pinhole, const Eigen::Vector2d& pixel)
@@ -45,24 +69,26 @@ class ReprojectionCost : public ceres::SizedCostFunction<2, kPoseBlockSize, 3> {
     const double* point = parameters[1];
     double R[9];
     RotationFromQuaternion(pose, R);
-    double offset[3], p_cam[3];
-    TargetResidual(R, pose + kPoseCentreOffset, pinhole_.data(), point, pixel_.data(), offset,
-                   p_cam, residuals);
-    if (jacobians == nullptr) return true;
-    const TargetResidualDerivative d = DifferentiateTargetResidual(R, pinhole_.data(), p_cam);
-    const Eigen::Map<const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> dr_dX(&d.du_dX[0][0]);
+    if (jacobians == nullptr) {
+      double offset[3], p_cam[3];
+      TargetResidual(R, pose + kPoseCentreOffset, pinhole_.data(), point, pixel_.data(), offset,
+                     p_cam, residuals);
+      return true;
+    }
+    const ReprojectionLinearization lin =
+        LinearizeReprojection(R, pose + kPoseCentreOffset, pinhole_.data(), point, pixel_.data());
+    residuals[0] = lin.residual[0];
+    residuals[1] = lin.residual[1];
     if (jacobians[0] != nullptr) {
       Eigen::Map<Eigen::Matrix<double, 2, kPoseBlockSize, Eigen::RowMajor>> J(jacobians[0]);
       Eigen::Matrix<double, 4, 3, Eigen::RowMajor> P;
       ceres::EigenQuaternionManifold().PlusJacobian(pose, P.data());
-      const Eigen::Matrix<double, 2, 3> dr_dphi =
-          dr_dX * CrossMatrix(Eigen::Vector3d(offset[0], offset[1], offset[2]));
-      J.leftCols<4>() = 2.0 * dr_dphi * P.transpose();
-      J.rightCols<3>() = -dr_dX;
+      J.leftCols<4>() = 2.0 * lin.pose.leftCols<3>() * P.transpose();
+      J.rightCols<3>() = lin.pose.rightCols<3>();
     }
     if (jacobians[1] != nullptr) {
       Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> J(jacobians[1]);
-      J = dr_dX;
+      J = lin.point;
     }
     return true;
   }
@@ -82,12 +108,8 @@ class StopCallback : public ceres::IterationCallback {
 
 std::vector<double> PoseBlocks(const std::vector<Rigid3>& poses) {
   std::vector<double> blocks(kPoseBlockSize * poses.size());
-  for (size_t i = 0; i < poses.size(); ++i) {
-    const Eigen::Quaterniond q = poses[i].rotation.normalized();
-    double* b = blocks.data() + kPoseBlockSize * i;
-    b[0] = q.x(), b[1] = q.y(), b[2] = q.z(), b[3] = q.w();
-    for (int r = 0; r < 3; ++r) b[kPoseCentreOffset + r] = poses[i].translation[r];
-  }
+  for (size_t i = 0; i < poses.size(); ++i)
+    ToPoseBlock(poses[i], blocks.data() + kPoseBlockSize * i);
   return blocks;
 }
 
@@ -209,10 +231,7 @@ TrackAdjustmentSummary AdjustTracks(TrackAdjustmentProblem* problem) {
   summary.converged = solver_summary.termination_type == ceres::CONVERGENCE;
   summary.message = solver_summary.message;
   for (int i = 0; i < num_images; ++i) {
-    const double* b = poses.data() + kPoseBlockSize * i;
-    problem->world_from_cam[i].rotation = Eigen::Quaterniond(b[3], b[0], b[1], b[2]).normalized();
-    problem->world_from_cam[i].translation =
-        Eigen::Vector3d(b[kPoseCentreOffset], b[kPoseCentreOffset + 1], b[kPoseCentreOffset + 2]);
+    problem->world_from_cam[i] = FromPoseBlock(poses.data() + kPoseBlockSize * i);
   }
   for (size_t k = 0; k < problem->points.size(); ++k) {
     problem->points[k] = Eigen::Vector3d(points[3 * k], points[3 * k + 1], points[3 * k + 2]);
@@ -222,44 +241,36 @@ TrackAdjustmentSummary AdjustTracks(TrackAdjustmentProblem* problem) {
 
 namespace {
 
-struct AtObservation {
-  Eigen::Matrix<double, 3, 3, Eigen::RowMajor> R;
-  double offset[3], p_cam[3];
-  Eigen::Vector2d residual;
-};
-
-AtObservation Evaluate(const TrackAdjustmentProblem& problem, int o) {
-  const int image = problem.observation_image[o];
-  const Rigid3& pose = problem.world_from_cam[image];
-  AtObservation at;
-  at.R = pose.rotation.normalized().toRotationMatrix();
-  const Eigen::Vector3d& X = problem.points[problem.observation_track[o]];
-  TargetResidual(at.R.data(), pose.translation.data(), problem.pinhole[image].data(), X.data(),
-                 problem.observation_pixel[o].data(), at.offset, at.p_cam, at.residual.data());
-  return at;
+Eigen::Matrix<double, 3, 3, Eigen::RowMajor> RotationOf(const Rigid3& pose) {
+  return pose.rotation.normalized().toRotationMatrix();
 }
 
 }  // namespace
 
 Eigen::Vector2d TrackResidual(const TrackAdjustmentProblem& problem, int observation) {
-  return Evaluate(problem, observation).residual;
+  const int image = problem.observation_image[observation];
+  const Rigid3& pose = problem.world_from_cam[image];
+  const Eigen::Matrix<double, 3, 3, Eigen::RowMajor> R = RotationOf(pose);
+  double offset[3], p_cam[3];
+  Eigen::Vector2d residual;
+  TargetResidual(R.data(), pose.translation.data(), problem.pinhole[image].data(),
+                 problem.points[problem.observation_track[observation]].data(),
+                 problem.observation_pixel[observation].data(), offset, p_cam, residual.data());
+  return residual;
 }
 
-void TrackResidualJacobians(const TrackAdjustmentProblem& problem, int observation,
-                            Eigen::Matrix<double, 2, 6>* pose_jacobian,
-                            Eigen::Matrix<double, 2, 3>* point_jacobian) {
-  const AtObservation at = Evaluate(problem, observation);
-  const TargetResidualDerivative d = DifferentiateTargetResidual(
-      at.R.data(), problem.pinhole[problem.observation_image[observation]].data(), at.p_cam);
-  Eigen::Matrix<double, 2, 3> dr_dX;
-  for (int a = 0; a < 2; ++a) {
-    for (int r = 0; r < 3; ++r) dr_dX(a, r) = d.du_dX[a][r];
-  }
-  // R ← Exp(φ)·R turns Rᵀ(X − O) into Rᵀ(X − O + (X − O) × φ) to first order.
-  const Eigen::Vector3d offset(at.offset[0], at.offset[1], at.offset[2]);
-  pose_jacobian->leftCols<3>() = dr_dX * CrossMatrix(offset);
-  pose_jacobian->rightCols<3>() = -dr_dX;
-  *point_jacobian = dr_dX;
+Eigen::Vector2d TrackResidualJacobians(const TrackAdjustmentProblem& problem, int observation,
+                                       Eigen::Matrix<double, 2, 6>* pose_jacobian,
+                                       Eigen::Matrix<double, 2, 3>* point_jacobian) {
+  const int image = problem.observation_image[observation];
+  const Rigid3& pose = problem.world_from_cam[image];
+  const ReprojectionLinearization lin = LinearizeReprojection(
+      RotationOf(pose).data(), pose.translation.data(), problem.pinhole[image].data(),
+      problem.points[problem.observation_track[observation]].data(),
+      problem.observation_pixel[observation].data());
+  *pose_jacobian = lin.pose;
+  *point_jacobian = lin.point;
+  return lin.residual;
 }
 
 void AdjustPointsAtFixedPoses(TrackAdjustmentProblem* problem, int iterations) {
@@ -270,10 +281,11 @@ void AdjustPointsAtFixedPoses(TrackAdjustmentProblem* problem, int iterations) {
     for (int o = 0; o < n; ++o) {
       Eigen::Matrix<double, 2, 6> pose_jacobian;
       Eigen::Matrix<double, 2, 3> point_jacobian;
-      TrackResidualJacobians(*problem, o, &pose_jacobian, &point_jacobian);
+      const Eigen::Vector2d residual =
+          TrackResidualJacobians(*problem, o, &pose_jacobian, &point_jacobian);
       const int k = problem->observation_track[o];
       H[k] += point_jacobian.transpose() * point_jacobian;
-      g[k] += point_jacobian.transpose() * TrackResidual(*problem, o);
+      g[k] += point_jacobian.transpose() * residual;
     }
     for (size_t k = 0; k < problem->points.size(); ++k) {
       const Eigen::LDLT<Eigen::Matrix3d> ldlt(H[k]);

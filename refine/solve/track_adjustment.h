@@ -63,9 +63,10 @@ void AdjustPointsAtFixedPoses(TrackAdjustmentProblem* problem, int iterations);
 Eigen::Vector2d TrackResidual(const TrackAdjustmentProblem& problem, int observation);
 
 // ∂r/∂(φ, δO) of observation o in the local parameters of its pose (R ← Exp(φ)·R, O ← O + δO, as
-// the ray-time LM's) and ∂r/∂X in its point, at the current state.
-void TrackResidualJacobians(const TrackAdjustmentProblem& problem, int observation,
-                            Eigen::Matrix<double, 2, 6>* pose_jacobian,
-                            Eigen::Matrix<double, 2, 3>* point_jacobian);
+// the ray-time LM's) and ∂r/∂X in its point, at the current state; returns the residual
+// (TrackResidual's value).
+Eigen::Vector2d TrackResidualJacobians(const TrackAdjustmentProblem& problem, int observation,
+                                       Eigen::Matrix<double, 2, 6>* pose_jacobian,
+                                       Eigen::Matrix<double, 2, 3>* point_jacobian);
 
 }  // namespace raytime
